@@ -1,0 +1,72 @@
+// Scene: what the solver trains on, read from a COLMAP workspace or a Blender/NeRF-synthetic folder.
+//
+// COLMAP workspace:  images/, optional masks/<stem>.png|jpg (or <name>.png), sparse/0/ or sparse/
+//                    (binary or text), optional split.txt / test.txt listing test image names.
+// Blender folder:    transforms_train.json, transforms_test.json, images referenced by file_path
+//                    (RGBA), masks from the frame's mask_path, masks/<basename>.png, or alpha.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "mgsr/core/camera.h"
+#include "mgsr/core/image.h"
+#include "mgsr/core/status.h"
+
+namespace mgsr {
+
+struct View {
+  std::string name;  // image file name (as listed in the model / json)
+  Camera camera;
+  Image image;  // RGB in [0, 1]; straight colour where alpha exists (not composited)
+  Image alpha;  // 1 channel, empty when the file had no alpha
+  Image mask;   // 1 channel in [0, 1] (foreground = 1), empty when the scene has no masks
+  bool is_test = false;
+};
+
+struct SceneOptions {
+  int downscale = 1;        // divide the resolution by this factor
+  int max_width = 1600;     // then cap the width (0 = no cap), as the reference loader does
+  int test_every = 8;       // without a split file, every Nth image (by name) is a test view; 0 = none
+  bool load_images = true;  // false: cameras and points only
+  int random_points = 100000;  // points drawn when the model has none
+  uint64_t seed = 0;
+};
+
+struct Scene {
+  std::string root;
+  std::string source;  // "colmap" or "blender"
+  std::vector<View> views;
+  std::vector<Eigen::Vector3f> points;        // initialisation points
+  std::vector<Eigen::Vector3f> point_colors;  // in [0, 1]
+  bool random_points = false;                 // true when the points were drawn, not read
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();
+  double extent = 1.0;  // 1.1 x max distance of training cameras from their centroid (ref. 1.8)
+  std::vector<std::string> warnings;
+
+  std::vector<int> TrainIndices() const;
+  std::vector<int> TestIndices() const;
+  bool has_masks() const;
+};
+
+// Detects the layout and loads. Every error names the file and the problem.
+Status LoadScene(const std::string& path, const SceneOptions& options, Scene* scene);
+
+// Loaders for one layout each (LoadScene dispatches to them).
+Status LoadColmapScene(const std::string& root, const SceneOptions& options, Scene* scene);
+Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Scene* scene);
+
+// Shared steps, exposed for the loaders and tests.
+// Reads an image (and its mask, when mask_path is non-empty), checks the size against the camera,
+// splits off alpha and resizes image, mask and camera per the options.
+Status LoadViewImages(const std::string& image_path, const std::string& mask_path,
+                      const SceneOptions& options, View* view);
+// Centre and extent from the training cameras (reference getNerfppNorm).
+void ComputeSceneExtent(Scene* scene);
+// Uniform points inside the volume that all training cameras see (relaxed to most cameras if
+// that volume is too small to sample); used when the model has no points.
+void SampleRandomPoints(int count, uint64_t seed, Scene* scene);
+
+}  // namespace mgsr

@@ -1,0 +1,358 @@
+#include "mgsr/synth/synthetic_scene.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "mgsr/core/rng.h"
+#include "mgsr/io/colmap_model.h"
+#include "mgsr/io/file_util.h"
+#include "mgsr/io/image_io.h"
+#include "mgsr/io/ply.h"
+#include "mgsr/synth/ray_caster.h"
+#include "mgsr/synth/shapes.h"
+
+namespace mgsr {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+double Smoothstep(double a, double b, double x) {
+  const double t = std::min(1.0, std::max(0.0, (x - a) / (b - a)));
+  return t * t * (3 - 2 * t);
+}
+
+// Hash-based 3-D value noise in [0, 1]: a solid texture, so it is consistent across views.
+double Hash3(long x, long y, long z) {
+  uint64_t h = static_cast<uint64_t>(x) * 0x8DA6B343ull ^ static_cast<uint64_t>(y) * 0xD8163841ull ^
+               static_cast<uint64_t>(z) * 0xCB1AB31Full;
+  h ^= h >> 29;
+  h *= 0xBF58476D1CE4E5B9ull;
+  h ^= h >> 32;
+  return (h & 0xFFFFFF) / static_cast<double>(0xFFFFFF);
+}
+
+double ValueNoise(const Eigen::Vector3d& p) {
+  const Eigen::Vector3d f(std::floor(p.x()), std::floor(p.y()), std::floor(p.z()));
+  const Eigen::Vector3d t = p - f;
+  const Eigen::Vector3d s(Smoothstep(0, 1, t.x()), Smoothstep(0, 1, t.y()), Smoothstep(0, 1, t.z()));
+  const long x = static_cast<long>(f.x()), y = static_cast<long>(f.y()), z = static_cast<long>(f.z());
+  double v = 0;
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    const double w = (dx ? s.x() : 1 - s.x()) * (dy ? s.y() : 1 - s.y()) * (dz ? s.z() : 1 - s.z());
+    v += w * Hash3(x + dx, y + dy, z + dz);
+  }
+  return v;
+}
+
+// Diffuse albedo (linear): two colours mixed by multi-scale noise, with fine dark speckles so
+// feature matchers (SIFT) find texture.
+Eigen::Vector3d Albedo(const Eigen::Vector3d& p) {
+  const double n = 0.6 * ValueNoise(p * 4.0 + Eigen::Vector3d(3.1, 7.7, 1.3)) +
+                   0.4 * ValueNoise(p * 11.0 + Eigen::Vector3d(5.2, 0.4, 9.9));
+  const Eigen::Vector3d a(0.75, 0.32, 0.12), b(0.15, 0.45, 0.70);
+  Eigen::Vector3d c = a + (b - a) * Smoothstep(0.35, 0.65, n);
+  const double speck = ValueNoise(p * 28.0);
+  c *= 0.45 + 0.55 * Smoothstep(0.25, 0.45, speck);
+  return c;
+}
+
+// A simple environment: blue sky brightening to the horizon, a dark checkered ground, and the key
+// light's colour as a bright disk around its direction.
+Eigen::Vector3d Environment(const Eigen::Vector3d& d, const ViewLight& light) {
+  Eigen::Vector3d c;
+  if (d.z() >= 0) {
+    const double t = std::pow(d.z(), 0.5);
+    c = Eigen::Vector3d(0.95, 0.92, 0.85) * (1 - t) + Eigen::Vector3d(0.25, 0.45, 0.9) * t;
+  } else {
+    const double s = 1.0 / std::max(1e-3, -d.z());
+    const bool check = (static_cast<long>(std::floor(d.x() * s * 2)) + static_cast<long>(std::floor(d.y() * s * 2))) & 1;
+    c = check ? Eigen::Vector3d(0.12, 0.11, 0.10) : Eigen::Vector3d(0.30, 0.28, 0.26);
+  }
+  c *= light.environment;
+  if (d.dot(light.direction) > 0.995) c += 6.0 * light.intensity * light.color;
+  return c;
+}
+
+double LinearToSrgb(double x) {
+  x = std::min(1.0, std::max(0.0, x));
+  return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1.0 / 2.4) - 0.055;
+}
+
+Eigen::Vector3d Shade(const RayCaster& caster, const Eigen::Vector3d& p, const Eigen::Vector3d& n_in,
+                      const Eigen::Vector3d& view_dir, const ViewLight& light, const SynthOptions& o) {
+  // view_dir points from the camera to the surface.
+  Eigen::Vector3d n = n_in;
+  if (n.dot(view_dir) > 0) n = -n;  // inside faces of open parts
+  const Eigen::Vector3d albedo = Albedo(p);
+  const Eigen::Vector3d sky(0.55, 0.65, 0.85), ground(0.25, 0.23, 0.2);
+  const Eigen::Vector3d ambient = 0.35 * light.environment * (ground + (sky - ground) * (0.5 + 0.5 * n.z()));
+  const double ndotl = n.dot(light.direction);
+  double visible = 0;
+  if (ndotl > 0) visible = caster.Occluded(p + 1e-6 * n, light.direction, 1e-6, 1e3) ? 0.0 : 1.0;
+  Eigen::Vector3d c = albedo.cwiseProduct(ambient + light.intensity * std::max(0.0, ndotl) * visible * light.color);
+  if (visible > 0) {
+    const Eigen::Vector3d h = (light.direction - view_dir).normalized();
+    const double spec = std::pow(std::max(0.0, n.dot(h)), o.shininess);
+    // Normalised so the peak is bright enough to clip: a highlight that moves with the light.
+    c += o.specular * light.intensity * spec * (o.shininess + 8) / 8.0 * light.color * 0.25;
+  }
+  if (o.mirror > 0) {
+    const Eigen::Vector3d r = view_dir - 2 * view_dir.dot(n) * n;
+    const double cos_theta = std::max(0.0, -view_dir.dot(n));
+    const double fresnel = 0.04 + 0.96 * std::pow(1 - cos_theta, 5.0);
+    const double w = o.mirror * (0.6 + 0.4 * fresnel);
+    c = (1 - w) * c + w * Environment(r, light);
+  }
+  return c * std::pow(2.0, light.exposure_stops);
+}
+
+ViewLight FixedLight() {
+  ViewLight l;
+  l.direction = Eigen::Vector3d(0.5, -0.4, 0.8).normalized();
+  l.intensity = 1.1;
+  return l;
+}
+
+}  // namespace
+
+Status SynthOptions::Validate() const {
+  TriangleMesh unused;
+  if (!MakeShape(shape, 0, &unused)) {
+    std::string names;
+    for (const auto& n : ShapeNames()) names += (names.empty() ? "" : ", ") + n;
+    return Status::Error("unknown shape '" + shape + "' (choose one of: " + names + ")");
+  }
+  if (num_views < 3) return Status::Error("--num_views must be >= 3");
+  if (width < 8 || height < 8 || width > 8192 || height > 8192) return Status::Error("--width/--height must be in [8, 8192]");
+  if (!(fov_x > 0.05 && fov_x < 3.0)) return Status::Error("--fov_x must be in (0.05, 3) radians");
+  if (!(distance > 1.2)) return Status::Error("--distance must be > 1.2 (the object has radius 1)");
+  if (supersampling < 1 || supersampling > 8) return Status::Error("--supersampling must be in [1, 8]");
+  if (test_every < 0) return Status::Error("--test_every must be >= 0");
+  if (!(mirror >= 0 && mirror <= 1)) return Status::Error("--mirror must be in [0, 1]");
+  if (!(exposure_stops >= 0 && exposure_stops <= 6)) return Status::Error("--exposure_stops must be in [0, 6]");
+  return Status::Ok();
+}
+
+Status MakeSyntheticScene(const SynthOptions& o, SyntheticScene* s) {
+  MGSR_RETURN_IF_ERROR(o.Validate());
+  *s = SyntheticScene();
+  MakeShape(o.shape, o.detail, &s->mesh);
+  Rng rng(o.seed);
+  const double fx = 0.5 * o.width / std::tan(0.5 * o.fov_x);
+  const double lo = std::sin(o.min_elevation_deg * kPi / 180), hi = std::sin(o.max_elevation_deg * kPi / 180);
+  for (int i = 0; i < o.num_views; ++i) {
+    // A Fibonacci spiral over the elevation band gives even coverage; a little jitter avoids symmetry.
+    const double z = lo + (hi - lo) * (i + 0.5) / o.num_views;
+    const double azimuth = i * kPi * (3 - std::sqrt(5.0)) + rng.Uniform(-0.05, 0.05);
+    const double r = std::sqrt(std::max(0.0, 1 - z * z));
+    const double dist = o.distance * (1 + rng.Uniform(-0.03, 0.03));
+    const Eigen::Vector3d center = dist * Eigen::Vector3d(r * std::cos(azimuth), r * std::sin(azimuth), z);
+    const Eigen::Vector3d target(rng.Uniform(-0.03, 0.03), rng.Uniform(-0.03, 0.03), rng.Uniform(-0.03, 0.03));
+    s->cameras.push_back(LookAtCamera(center, target, Eigen::Vector3d::UnitZ(), o.width, o.height, fx, fx));
+    char name[32];
+    std::snprintf(name, sizeof(name), "v%03d.png", i);
+    s->names.push_back(name);
+    s->is_test.push_back(o.test_every > 0 && i % o.test_every == 0);
+
+    ViewLight l = FixedLight();
+    if (o.varying_light) {
+      const double elev = rng.Uniform(10, 80) * kPi / 180, az = rng.Uniform(0, 2 * kPi);
+      l.direction = Eigen::Vector3d(std::cos(elev) * std::cos(az), std::cos(elev) * std::sin(az), std::sin(elev));
+      l.intensity = rng.Uniform(0.7, 1.6);
+      const int tint = static_cast<int>(rng.UniformInt(3));
+      l.color = tint == 0 ? Eigen::Vector3d(1, 1, 1) : tint == 1 ? Eigen::Vector3d(1.0, 0.85, 0.65)
+                                                                  : Eigen::Vector3d(0.75, 0.85, 1.0);
+      l.environment = rng.Uniform(0.6, 1.3);
+      l.exposure_stops = rng.Uniform(-o.exposure_stops, o.exposure_stops);
+    }
+    s->lights.push_back(l);
+  }
+  return Status::Ok();
+}
+
+void RenderSyntheticView(const RayCaster& caster, const TriangleMesh& mesh, const Camera& cam,
+                         const ViewLight& light, const SynthOptions& o, Image* rgba, Image* depth,
+                         Image* normal) {
+  (void)mesh;
+  const int w = cam.width, h = cam.height, ss = o.supersampling;
+  *rgba = Image(w, h, 4);
+  *depth = Image(w, h, 1);
+  *normal = Image(w, h, 3);
+  const Eigen::Vector3d origin = cam.Center();
+  const Eigen::Matrix3d Rt = cam.R.transpose();
+#pragma omp parallel for schedule(dynamic, 4)
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      int hits = 0;
+      for (int sy = 0; sy < ss; ++sy) {
+        for (int sx = 0; sx < ss; ++sx) {
+          // Unnormalised direction with camera-space z = 1: the hit distance t is the z-depth.
+          const Eigen::Vector3d d = Rt * cam.PixelToRay(x + (sx + 0.5) / ss, y + (sy + 0.5) / ss);
+          RayHit hit;
+          if (!caster.Intersect(origin, d, 1e-9, 1e9, &hit)) continue;
+          const Eigen::Vector3d p = origin + hit.t * d;
+          sum += Shade(caster, p, caster.ShadingNormal(hit), d.normalized(), light, o);
+          ++hits;
+        }
+      }
+      if (hits > 0) {
+        sum /= hits;  // straight (not premultiplied) colour
+        for (int c = 0; c < 3; ++c) rgba->at(c, y, x) = static_cast<float>(LinearToSrgb(sum[c]));
+      }
+      rgba->at(3, y, x) = static_cast<float>(hits) / (ss * ss);
+      const Eigen::Vector3d d = Rt * cam.PixelToRay(x + 0.5, y + 0.5);
+      RayHit hit;
+      if (caster.Intersect(origin, d, 1e-9, 1e9, &hit)) {
+        depth->at(0, y, x) = static_cast<float>(hit.t);
+        Eigen::Vector3d n = caster.ShadingNormal(hit);
+        if (n.dot(d) > 0) n = -n;
+        for (int c = 0; c < 3; ++c) normal->at(c, y, x) = static_cast<float>(n[c]);
+      }
+    }
+  }
+}
+
+Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
+  SyntheticScene s;
+  MGSR_RETURN_IF_ERROR(MakeSyntheticScene(o, &s));
+  for (const char* d : {"images", "masks", "sparse/0", "gt/depth", "gt/normal"}) {
+    MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, d)));
+  }
+  if (o.constant_light_copy) MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, "images_constant")));
+  const RayCaster caster(s.mesh);
+
+  for (size_t i = 0; i < s.cameras.size(); ++i) {
+    Image rgba, depth, normal;
+    RenderSyntheticView(caster, s.mesh, s.cameras[i], s.lights[i], o, &rgba, &depth, &normal);
+    Image mask(rgba.width(), rgba.height(), 1);
+    for (size_t k = 0; k < mask.size(); ++k) mask.data()[k] = rgba.plane(3)[k] >= 0.5f ? 1.0f : 0.0f;
+    const std::string stem = FileStem(s.names[i]);
+    MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "images/" + s.names[i]), rgba));
+    MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "masks/" + stem + ".png"), mask));
+    MGSR_RETURN_IF_ERROR(WritePfm(JoinPath(out, "gt/depth/" + stem + ".pfm"), depth));
+    MGSR_RETURN_IF_ERROR(WritePfm(JoinPath(out, "gt/normal/" + stem + ".pfm"), normal));
+    if (o.constant_light_copy) {
+      RenderSyntheticView(caster, s.mesh, s.cameras[i], FixedLight(), o, &rgba, &depth, &normal);
+      MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "images_constant/" + s.names[i]), rgba));
+    }
+  }
+  MGSR_RETURN_IF_ERROR(WriteTriangleMesh(JoinPath(out, "gt/mesh.ply"), s.mesh));
+
+  // COLMAP model: one shared PINHOLE camera, every view, and surface points seen by >= 2 training
+  // views with exact projections as their observations (test views carry no observations).
+  ColmapModel model;
+  ColmapCamera cam;
+  cam.camera_id = 1;
+  cam.model_id = 1;
+  cam.width = o.width;
+  cam.height = o.height;
+  cam.params = {s.cameras[0].fx, s.cameras[0].fy, s.cameras[0].cx, s.cameras[0].cy};
+  model.cameras.push_back(cam);
+  for (size_t i = 0; i < s.cameras.size(); ++i) {
+    ColmapImage im;
+    im.image_id = static_cast<uint32_t>(i + 1);
+    im.qvec = s.cameras[i].RotationQuaternion();
+    im.tvec = s.cameras[i].t;
+    im.camera_id = 1;
+    im.name = s.names[i];
+    model.images.push_back(im);
+  }
+  Rng rng(o.seed ^ 0xC0FFEEull);
+  std::vector<double> cumulative;
+  double total = 0;
+  for (const auto& f : s.mesh.triangles) {
+    total += 0.5 * (s.mesh.vertices[f[1]] - s.mesh.vertices[f[0]]).cross(s.mesh.vertices[f[2]] - s.mesh.vertices[f[0]]).norm();
+    cumulative.push_back(total);
+  }
+  TriangleMesh cloud;
+  for (int attempt = 0; attempt < o.num_points * 4 && static_cast<int>(model.points.size()) < o.num_points; ++attempt) {
+    const int tri = static_cast<int>(std::lower_bound(cumulative.begin(), cumulative.end(), rng.Uniform() * total) - cumulative.begin());
+    const auto& f = s.mesh.triangles[std::min<size_t>(tri, s.mesh.triangles.size() - 1)];
+    double a = rng.Uniform(), b = rng.Uniform();
+    if (a + b > 1) { a = 1 - a; b = 1 - b; }
+    const Eigen::Vector3d X = s.mesh.vertices[f[0]] + a * (s.mesh.vertices[f[1]] - s.mesh.vertices[f[0]]) +
+                              b * (s.mesh.vertices[f[2]] - s.mesh.vertices[f[0]]);
+    ColmapPoint3D p;
+    p.point3D_id = model.points.size() + 1;
+    p.xyz = X;
+    for (size_t i = 0; i < s.cameras.size(); ++i) {
+      if (s.is_test[i]) continue;
+      const Camera& c = s.cameras[i];
+      const Eigen::Vector3d Xc = c.WorldToCamera(X);
+      if (Xc.z() <= 0.1) continue;
+      const Eigen::Vector2d uv = c.CameraToPixel(Xc);
+      if (uv.x() < 0 || uv.y() < 0 || uv.x() >= c.width || uv.y() >= c.height) continue;
+      const Eigen::Vector3d center = c.Center();
+      if (caster.Occluded(center, X - center, 1e-9, 1 - 1e-6)) continue;
+      p.track_image_ids.push_back(static_cast<uint32_t>(i + 1));
+      p.track_point2D_idxs.push_back(static_cast<uint32_t>(model.images[i].xys.size()));
+      model.images[i].xys.push_back(uv);
+      model.images[i].point3D_ids.push_back(static_cast<int64_t>(p.point3D_id));
+    }
+    if (p.track_image_ids.size() < 2) {  // undo the observations of a point we do not keep
+      for (uint32_t id : p.track_image_ids) {
+        model.images[id - 1].xys.pop_back();
+        model.images[id - 1].point3D_ids.pop_back();
+      }
+      continue;
+    }
+    const Eigen::Vector3d albedo = Albedo(X);
+    for (int k = 0; k < 3; ++k) p.rgb[k] = static_cast<uint8_t>(std::lround(255 * LinearToSrgb(albedo[k])));
+    p.error = 0;
+    cloud.vertices.push_back(X);
+    cloud.vertex_colors.push_back(Eigen::Vector3f(p.rgb[0], p.rgb[1], p.rgb[2]) / 255.0f);
+    model.points.push_back(std::move(p));
+  }
+  MGSR_RETURN_IF_ERROR(WriteColmapModel(JoinPath(out, "sparse/0"), model,
+                                        o.write_text_model ? ColmapFormat::kText : ColmapFormat::kBinary));
+  MGSR_RETURN_IF_ERROR(WriteTriangleMesh(JoinPath(out, "points3d.ply"), cloud));
+
+  // Split, Blender json pair and the light log.
+  std::string split;
+  nlohmann::json train, test, lights = nlohmann::json::array();
+  for (nlohmann::json* j : {&train, &test}) {
+    (*j)["camera_angle_x"] = s.cameras[0].FovX();
+    (*j)["fl_x"] = s.cameras[0].fx;
+    (*j)["fl_y"] = s.cameras[0].fy;
+    (*j)["cx"] = s.cameras[0].cx;
+    (*j)["cy"] = s.cameras[0].cy;
+    (*j)["w"] = o.width;
+    (*j)["h"] = o.height;
+    (*j)["frames"] = nlohmann::json::array();
+  }
+  for (size_t i = 0; i < s.cameras.size(); ++i) {
+    const std::string stem = FileStem(s.names[i]);
+    if (s.is_test[i]) split += s.names[i] + "\n";
+    // COLMAP world-to-camera -> OpenGL camera-to-world (y up, looking down -z).
+    Eigen::Matrix4d c2w = s.cameras[i].WorldToCameraMatrix().inverse();
+    c2w.col(1) *= -1;
+    c2w.col(2) *= -1;
+    nlohmann::json m = nlohmann::json::array();
+    for (int r = 0; r < 4; ++r) m.push_back({c2w(r, 0), c2w(r, 1), c2w(r, 2), c2w(r, 3)});
+    nlohmann::json frame = {{"file_path", "./images/" + stem}, {"mask_path", "./masks/" + stem + ".png"},
+                            {"transform_matrix", m}};
+    (s.is_test[i] ? test : train)["frames"].push_back(frame);
+    const ViewLight& l = s.lights[i];
+    lights.push_back({{"name", s.names[i]},
+                      {"test", static_cast<bool>(s.is_test[i])},
+                      {"direction", {l.direction.x(), l.direction.y(), l.direction.z()}},
+                      {"intensity", l.intensity},
+                      {"color", {l.color.x(), l.color.y(), l.color.z()}},
+                      {"environment", l.environment},
+                      {"exposure_stops", l.exposure_stops}});
+  }
+  MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(JoinPath(out, "split.txt"), split));
+  MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(JoinPath(out, "transforms_train.json"), train.dump(2)));
+  MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(JoinPath(out, "transforms_test.json"), test.dump(2)));
+  nlohmann::json info = {{"shape", o.shape}, {"seed", o.seed}, {"num_views", o.num_views},
+                         {"width", o.width}, {"height", o.height}, {"specular", o.specular},
+                         {"mirror", o.mirror}, {"varying_light", o.varying_light},
+                         {"exposure_stops", o.exposure_stops}, {"views", lights}};
+  return WriteStringToFileAtomic(JoinPath(out, "lights.json"), info.dump(2));
+}
+
+}  // namespace mgsr

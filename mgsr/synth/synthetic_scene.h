@@ -1,0 +1,74 @@
+// Synthetic scenes with exact ground truth: a built-in mesh ray-cast from cameras on a sphere, with a
+// textured diffuse surface, strong specular highlights and optional mirror-like reflection of a simple
+// environment, under light that changes per view (direction, intensity, colour, environment
+// strength, exposure). Written as a COLMAP workspace and a Blender folder at once (they share images/).
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "mgsr/core/camera.h"
+#include "mgsr/core/image.h"
+#include "mgsr/core/status.h"
+#include "mgsr/core/triangle_mesh.h"
+
+namespace mgsr {
+
+class RayCaster;
+
+struct SynthOptions {
+  std::string shape = "sphere";  // see ShapeNames()
+  int detail = 1;                // mesh detail 0..2
+  int num_views = 48;
+  int width = 128, height = 128;
+  double fov_x = 0.6911112;  // radians (as the shared suzanne scene)
+  double distance = 3.5;     // camera distance from the origin
+  double min_elevation_deg = -20, max_elevation_deg = 70;
+  int test_every = 8;        // views i with i % test_every == 0 are test views (0: none)
+  uint64_t seed = 1;
+  int supersampling = 2;     // samples per pixel per axis (anti-aliased edges and alpha)
+  double specular = 0.7;     // highlight strength (Blinn-Phong)
+  double shininess = 80;
+  double mirror = 0.0;       // 0..1: weight of the reflected environment (Fresnel-scaled)
+  bool varying_light = true;
+  double exposure_stops = 1.0;  // per-view exposure drawn from [-s, +s] when the light varies
+  int num_points = 2000;        // surface points written to points3D (seen by >= 2 train views)
+  bool write_text_model = false;   // sparse/0 as text instead of binary
+  bool constant_light_copy = false;  // also render images_constant/ under one fixed light
+
+  Status Validate() const;
+};
+
+struct ViewLight {
+  Eigen::Vector3d direction{0, 0, 1};  // unit, towards the light
+  double intensity = 1.0;
+  Eigen::Vector3d color{1, 1, 1};
+  double environment = 1.0;  // environment (ambient and reflection) strength
+  double exposure_stops = 0.0;
+};
+
+struct SyntheticScene {
+  TriangleMesh mesh;
+  std::vector<Camera> cameras;
+  std::vector<std::string> names;  // image file names, e.g. v000.png
+  std::vector<bool> is_test;
+  std::vector<ViewLight> lights;
+};
+
+// Builds the mesh, cameras and lights (no rendering).
+Status MakeSyntheticScene(const SynthOptions& options, SyntheticScene* scene);
+
+// Renders one view: RGBA (sRGB, straight alpha), z-depth at pixel centres (0 = background) and
+// world-space unit normals (0 = background).
+void RenderSyntheticView(const RayCaster& caster, const TriangleMesh& mesh, const Camera& camera,
+                         const ViewLight& light, const SynthOptions& options, Image* rgba,
+                         Image* depth, Image* normal);
+
+// Writes the whole scene into `out_dir` (created). Files: images/, masks/, sparse/0/, split.txt,
+// transforms_{train,test}.json, points3d.ply, lights.json, gt/mesh.ply, gt/depth/*.pfm,
+// gt/normal/*.pfm and, if asked, images_constant/.
+Status WriteSyntheticScene(const SynthOptions& options, const std::string& out_dir);
+
+}  // namespace mgsr
