@@ -1,1 +1,281 @@
+#include "mgsr/io/scene.h"
+
 #include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <filesystem>
+#include <map>
+
+#include "mgsr/io/colmap_model.h"
+#include "mgsr/io/file_util.h"
+#include "mgsr/io/image_io.h"
+#include "test_util.h"
+
+namespace mgsr {
+namespace {
+
+namespace fs = std::filesystem;
+
+class SceneTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = testing::ScratchDir();
+    ASSERT_TRUE(WriteSyntheticScene(testing::SmallSynthOptions(), dir_).ok());
+  }
+  Status Load(Scene* scene, SceneOptions options = {}) { return LoadScene(dir_, options, scene); }
+  void ExpectLoadFails(const std::string& expected) {
+    Scene scene;
+    const Status s = Load(&scene);
+    ASSERT_FALSE(s.ok()) << "expected: " << expected;
+    EXPECT_NE(s.message().find(expected), std::string::npos) << s.message();
+    EXPECT_EQ(s.message().find('\n'), std::string::npos) << "one line: " << s.message();
+  }
+  void EditModel(const std::function<void(ColmapModel*)>& edit) {
+    ColmapModel m;
+    ASSERT_TRUE(ReadColmapModel(dir_ + "/sparse/0", &m).ok());
+    edit(&m);
+    ASSERT_TRUE(WriteColmapModel(dir_ + "/sparse/0", m, ColmapFormat::kBinary).ok());
+  }
+  std::string dir_;
+};
+
+TEST_F(SceneTest, ColmapWorkspaceLoads) {
+  Scene scene;
+  ASSERT_TRUE(Load(&scene).ok());
+  EXPECT_EQ(scene.source, "colmap");
+  ASSERT_EQ(scene.views.size(), 12u);
+  EXPECT_EQ(scene.TestIndices().size(), 3u);  // split.txt: views 0, 4, 8
+  EXPECT_TRUE(scene.views[0].is_test);
+  EXPECT_TRUE(scene.views[4].is_test);
+  EXPECT_TRUE(scene.has_masks());
+  for (const View& v : scene.views) {
+    EXPECT_EQ(v.image.channels(), 3);
+    EXPECT_EQ(v.alpha.channels(), 1);
+    EXPECT_EQ(v.image.width(), 32);
+    EXPECT_EQ(v.mask.width(), 32);
+  }
+  EXPECT_FALSE(scene.random_points);
+  EXPECT_GT(scene.points.size(), 50u);
+  // Cameras at distance ~3.5 around the origin: extent = 1.1 x max distance from their centroid.
+  EXPECT_GT(scene.extent, 3.0);
+  EXPECT_LT(scene.extent, 5.0);
+}
+
+TEST_F(SceneTest, BlenderLayoutAgreesWithColmapLayout) {
+  Scene colmap, blender;
+  ASSERT_TRUE(LoadColmapScene(dir_, SceneOptions(), &colmap).ok());
+  ASSERT_TRUE(LoadBlenderScene(dir_, SceneOptions(), &blender).ok());
+  ASSERT_EQ(colmap.views.size(), blender.views.size());
+  std::map<std::string, const View*> by_stem;
+  for (const View& v : blender.views) by_stem[FileStem(v.name)] = &v;
+  for (const View& v : colmap.views) {
+    const View& b = *by_stem.at(FileStem(v.name));
+    EXPECT_EQ(v.is_test, b.is_test) << v.name;
+    EXPECT_NEAR((v.camera.R - b.camera.R).norm(), 0, 1e-9) << v.name;
+    EXPECT_NEAR((v.camera.t - b.camera.t).norm(), 0, 1e-9) << v.name;
+    EXPECT_NEAR(v.camera.fx, b.camera.fx, 1e-9);
+    EXPECT_NEAR(v.camera.cx, b.camera.cx, 1e-12);
+    ASSERT_TRUE(v.image.SameShape(b.image));
+    for (size_t i = 0; i < v.image.size(); ++i) ASSERT_EQ(v.image.data()[i], b.image.data()[i]);
+    for (size_t i = 0; i < v.mask.size(); ++i) ASSERT_EQ(v.mask.data()[i], b.mask.data()[i]);
+  }
+  EXPECT_NEAR(colmap.extent, blender.extent, 1e-9);
+  EXPECT_EQ(colmap.points.size(), blender.points.size());
+}
+
+TEST_F(SceneTest, SplitFallsBackToEveryNth) {
+  fs::remove(dir_ + "/split.txt");
+  SceneOptions o;
+  o.test_every = 5;
+  Scene scene;
+  ASSERT_TRUE(Load(&scene, o).ok());
+  std::vector<int> expected = {0, 5, 10};
+  EXPECT_EQ(scene.TestIndices(), expected);
+  o.test_every = 0;
+  ASSERT_TRUE(Load(&scene, o).ok());
+  EXPECT_TRUE(scene.TestIndices().empty());
+}
+
+TEST_F(SceneTest, ImageIdsNeedNotFollowFileOrder) {
+  EditModel([](ColmapModel* m) {
+    std::reverse(m->images.begin(), m->images.end());
+    for (auto& im : m->images) im.image_id += 1000;
+    for (auto& p : m->points) {
+      for (auto& id : p.track_image_ids) id += 1000;
+    }
+  });
+  Scene scene;
+  ASSERT_TRUE(Load(&scene).ok());
+  EXPECT_EQ(scene.views[0].name, "v000.png");
+  EXPECT_EQ(scene.views[11].name, "v011.png");
+}
+
+TEST_F(SceneTest, DownscaleAndMaxWidthResizeImagesAndIntrinsics) {
+  Scene full, half;
+  ASSERT_TRUE(Load(&full).ok());
+  SceneOptions o;
+  o.downscale = 2;
+  ASSERT_TRUE(Load(&half, o).ok());
+  EXPECT_EQ(half.views[1].image.width(), 16);
+  EXPECT_EQ(half.views[1].mask.height(), 16);
+  EXPECT_NEAR(half.views[1].camera.fx, full.views[1].camera.fx / 2, 1e-12);
+  EXPECT_NEAR(half.views[1].camera.cx, full.views[1].camera.cx / 2, 1e-12);
+  SceneOptions w;
+  w.max_width = 8;
+  ASSERT_TRUE(Load(&half, w).ok());
+  EXPECT_EQ(half.views[1].image.width(), 8);
+  EXPECT_EQ(half.views[1].camera.width, 8);
+}
+
+TEST_F(SceneTest, AlphaBecomesTheMaskWithoutAMasksFolder) {
+  Scene with;
+  ASSERT_TRUE(Load(&with).ok());
+  fs::remove_all(dir_ + "/masks");
+  Scene without;
+  ASSERT_TRUE(Load(&without).ok());
+  ASSERT_TRUE(without.has_masks());
+  const Image& alpha = without.views[3].alpha;
+  for (size_t i = 0; i < alpha.size(); ++i) ASSERT_EQ(without.views[3].mask.data()[i], alpha.data()[i]);
+  // The thresholded mask file and the alpha agree where alpha is decisive.
+  for (size_t i = 0; i < alpha.size(); ++i) {
+    if (alpha.data()[i] > 0.9f) {
+      ASSERT_EQ(with.views[3].mask.data()[i], 1.0f);
+    }
+    if (alpha.data()[i] < 0.1f) {
+      ASSERT_EQ(with.views[3].mask.data()[i], 0.0f);
+    }
+  }
+}
+
+TEST_F(SceneTest, EmptyPoints3DInitialisesRandomlyInsideTheCommonView) {
+  EditModel([](ColmapModel* m) {
+    m->points.clear();
+    for (auto& im : m->images) {
+      im.xys.clear();
+      im.point3D_ids.clear();
+    }
+  });
+  SceneOptions o;
+  o.random_points = 500;
+  Scene scene;
+  ASSERT_TRUE(Load(&scene, o).ok());
+  EXPECT_TRUE(scene.random_points);
+  ASSERT_EQ(scene.points.size(), 500u);
+  ASSERT_EQ(scene.warnings.size(), 1u);
+  EXPECT_NE(scene.warnings[0].find("points3D is empty"), std::string::npos);
+  for (const auto& p : scene.points) {
+    for (int i : scene.TrainIndices()) {
+      const Camera& c = scene.views[i].camera;
+      const Eigen::Vector3d Xc = c.WorldToCamera(p.cast<double>());
+      ASSERT_GT(Xc.z(), 0.2);
+      const Eigen::Vector2d uv = c.CameraToPixel(Xc);
+      ASSERT_TRUE(uv.x() >= 0 && uv.x() <= c.width && uv.y() >= 0 && uv.y() <= c.height);
+    }
+  }
+}
+
+TEST_F(SceneTest, MissingFolderAndUnknownLayout) {
+  Scene scene;
+  Status s = LoadScene(dir_ + "/nope", SceneOptions(), &scene);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.message(), dir_ + "/nope: scene folder does not exist");
+  s = LoadScene(dir_ + "/images", SceneOptions(), &scene);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("not a scene"), std::string::npos);
+}
+
+TEST_F(SceneTest, ImageListedButMissing) {
+  fs::remove(dir_ + "/images/v003.png");
+  ExpectLoadFails(dir_ + "/images/v003.png: image file is missing");
+}
+
+TEST_F(SceneTest, ImageSizeNotMatchingItsCamera) {
+  ASSERT_TRUE(WriteImage(dir_ + "/images/v005.png", Image(16, 20, 3, 0.5f)).ok());
+  ExpectLoadFails(dir_ + "/images/v005.png: image is 16x20 but its camera says 32x32");
+}
+
+TEST_F(SceneTest, MaskSizeNotMatchingItsImage) {
+  ASSERT_TRUE(WriteImage(dir_ + "/masks/v002.png", Image(8, 8, 1, 1.0f)).ok());
+  ExpectLoadFails(dir_ + "/masks/v002.png: mask is 8x8 but its image is 32x32");
+}
+
+TEST_F(SceneTest, MissingMaskWhenTheFolderExists) {
+  fs::remove(dir_ + "/masks/v007.png");
+  ExpectLoadFails("no mask for image v007.png");
+}
+
+TEST_F(SceneTest, NanInPose) {
+  EditModel([](ColmapModel* m) { m->images[2].qvec[1] = std::nan(""); });
+  ExpectLoadFails("image v002.png has a NaN/inf pose");
+}
+
+TEST_F(SceneTest, ZeroImages) {
+  EditModel([](ColmapModel* m) {
+    m->images.clear();
+    m->points.clear();
+  });
+  ExpectLoadFails("the model has no images");
+}
+
+TEST_F(SceneTest, DistortedCameraIsRefusedWithAFix) {
+  EditModel([](ColmapModel* m) {
+    m->cameras[0].model_id = 2;  // SIMPLE_RADIAL: f, cx, cy, k
+    m->cameras[0].params = {m->cameras[0].params[0], 16, 16, 0.01};
+  });
+  ExpectLoadFails("run `colmap image_undistorter`");
+}
+
+TEST_F(SceneTest, TruncatedModelFile) {
+  std::string data;
+  ASSERT_TRUE(ReadFileToString(dir_ + "/sparse/0/images.bin", &data).ok());
+  ASSERT_TRUE(WriteStringToFileAtomic(dir_ + "/sparse/0/images.bin", data.substr(0, 100)).ok());
+  ExpectLoadFails(dir_ + "/sparse/0/images.bin: truncated");
+}
+
+TEST_F(SceneTest, SplitFileNamingAnUnknownImage) {
+  ASSERT_TRUE(WriteStringToFileAtomic(dir_ + "/split.txt", "v001.png\nghost.png\n").ok());
+  ExpectLoadFails("split.txt: lists 'ghost.png', which is not in the model");
+}
+
+TEST_F(SceneTest, BlenderBadJsonAndNanMatrix) {
+  fs::remove_all(dir_ + "/sparse");
+  Scene scene;
+  ASSERT_TRUE(Load(&scene).ok());
+  EXPECT_EQ(scene.source, "blender");
+  std::string json;
+  ASSERT_TRUE(ReadFileToString(dir_ + "/transforms_train.json", &json).ok());
+  ASSERT_TRUE(WriteStringToFileAtomic(dir_ + "/transforms_train.json", json.substr(0, json.size() / 2)).ok());
+  ExpectLoadFails(dir_ + "/transforms_train.json: invalid JSON");
+  // NaN is not JSON; writers that emit it produce null.
+  const size_t pos = json.find("\"transform_matrix\"");
+  const size_t num = json.find_first_of("-0123456789", json.find('[', json.find('[', pos) + 1));
+  const size_t end = json.find_first_of(",\n]", num);
+  ASSERT_TRUE(WriteStringToFileAtomic(dir_ + "/transforms_train.json",
+                                      json.substr(0, num) + "null" + json.substr(end)).ok());
+  ExpectLoadFails("has a non-number (NaN?)");
+}
+
+TEST(SharedSceneTest, SuzanneLoadsInBothLayouts) {
+  if (!testing::HaveSharedData()) GTEST_SKIP() << "../shared/data not present";
+  const std::string root = testing::SharedDataDir() + "/suzanne";
+  Scene colmap, blender;
+  ASSERT_TRUE(LoadColmapScene(root, SceneOptions(), &colmap).ok());
+  ASSERT_TRUE(LoadBlenderScene(root, SceneOptions(), &blender).ok());
+  EXPECT_EQ(colmap.TrainIndices().size(), 48u);
+  EXPECT_EQ(colmap.TestIndices().size(), 12u);
+  EXPECT_EQ(blender.TestIndices().size(), 12u);
+  EXPECT_TRUE(colmap.has_masks());
+  std::map<std::string, const View*> by_stem;
+  for (const View& v : blender.views) by_stem[FileStem(v.name)] = &v;
+  for (const View& v : colmap.views) {
+    const View& b = *by_stem.at(FileStem(v.name));
+    EXPECT_EQ(v.is_test, b.is_test);
+    EXPECT_NEAR((v.camera.Center() - b.camera.Center()).norm(), 0, 1e-5) << v.name;
+    EXPECT_NEAR((v.camera.R - b.camera.R).norm(), 0, 1e-5) << v.name;
+  }
+}
+
+}  // namespace
+}  // namespace mgsr

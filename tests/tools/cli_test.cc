@@ -1,1 +1,144 @@
+// The CLIs: success paths, and every bad-input case gives a one-line error naming the file and a
+// non-zero exit status (never a crash).
 #include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <unistd.h>
+
+#include "mgsr/io/colmap_model.h"
+#include "mgsr/io/file_util.h"
+#include "mgsr/io/image_io.h"
+#include "test_util.h"
+
+namespace mgsr {
+namespace {
+
+namespace fs = std::filesystem;
+
+const std::string kTools = MGSR_TOOLS_DIR;
+
+class CliTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    base_ = (fs::path(::testing::TempDir()) / "mgsr_tests" / ("cli_base_" + std::to_string(getpid()))).string();
+    fs::remove_all(base_);
+    const auto r = testing::RunCommand(kTools + "/mgsr_synth --output " + base_ +
+                                       " --num_views 10 --width 32 --height 32 --num_points 100");
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  // A private copy of the base scene to break.
+  std::string Copy() {
+    const std::string dir = testing::ScratchDir();
+    fs::remove_all(dir);
+    fs::copy(base_, dir, fs::copy_options::recursive);
+    return dir;
+  }
+  void ExpectSolveFails(const std::string& dir, const std::string& expected) {
+    const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir + "/out");
+    EXPECT_EQ(r.exit_code, 1) << r.output;
+    EXPECT_EQ(r.output.rfind("error: ", 0), 0u) << r.output;
+    EXPECT_NE(r.output.find(expected), std::string::npos) << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << "one line: " << r.output;
+  }
+  void EditModel(const std::string& dir, void (*edit)(ColmapModel*)) {
+    ColmapModel m;
+    ASSERT_TRUE(ReadColmapModel(dir + "/sparse/0", &m).ok());
+    edit(&m);
+    ASSERT_TRUE(WriteColmapModel(dir + "/sparse/0", m, ColmapFormat::kBinary).ok());
+  }
+  static std::string base_;
+};
+std::string CliTest::base_;
+
+TEST_F(CliTest, SolveLoadsAGoodScene) {
+  const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + Copy() + "/out");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("views: 8 train, 2 test, 32x32 px, masks: yes"), std::string::npos) << r.output;
+}
+
+TEST_F(CliTest, MissingWorkspaceFlagAndFolder) {
+  auto r = testing::RunCommand(kTools + "/mgsr_solve");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("--workspace is required"), std::string::npos);
+  ExpectSolveFails("/nonexistent/scene", "/nonexistent/scene: scene folder does not exist");
+}
+
+TEST_F(CliTest, TruncatedCamerasFile) {
+  const std::string dir = Copy();
+  std::string data;
+  ASSERT_TRUE(ReadFileToString(dir + "/sparse/0/cameras.bin", &data).ok());
+  ASSERT_TRUE(WriteStringToFileAtomic(dir + "/sparse/0/cameras.bin", data.substr(0, 20)).ok());
+  ExpectSolveFails(dir, dir + "/sparse/0/cameras.bin: truncated");
+}
+
+TEST_F(CliTest, UnknownCameraModelId) {
+  const std::string dir = Copy();
+  std::string data;
+  ASSERT_TRUE(ReadFileToString(dir + "/sparse/0/cameras.bin", &data).ok());
+  const int32_t bad = 77;
+  std::memcpy(data.data() + 12, &bad, 4);
+  ASSERT_TRUE(WriteStringToFileAtomic(dir + "/sparse/0/cameras.bin", data).ok());
+  ExpectSolveFails(dir, "cameras.bin: camera 1 has unknown camera model id 77");
+}
+
+TEST_F(CliTest, ImageListedButMissing) {
+  const std::string dir = Copy();
+  fs::remove(dir + "/images/v004.png");
+  ExpectSolveFails(dir, dir + "/images/v004.png: image file is missing");
+}
+
+TEST_F(CliTest, ImageSizeMismatch) {
+  const std::string dir = Copy();
+  ASSERT_TRUE(WriteImage(dir + "/images/v001.png", Image(31, 32, 3)).ok());
+  ExpectSolveFails(dir, dir + "/images/v001.png: image is 31x32 but its camera says 32x32");
+}
+
+TEST_F(CliTest, CorruptImage) {
+  const std::string dir = Copy();
+  ASSERT_TRUE(WriteStringToFileAtomic(dir + "/images/v002.png", "\x89PNG garbage").ok());
+  ExpectSolveFails(dir, dir + "/images/v002.png: cannot decode image");
+}
+
+TEST_F(CliTest, NanPose) {
+  const std::string dir = Copy();
+  EditModel(dir, [](ColmapModel* m) { m->images[3].tvec.z() = INFINITY; });
+  ExpectSolveFails(dir, "image v003.png has a NaN/inf pose");
+}
+
+TEST_F(CliTest, ZeroImages) {
+  const std::string dir = Copy();
+  EditModel(dir, [](ColmapModel* m) {
+    m->images.clear();
+    m->points.clear();
+  });
+  ExpectSolveFails(dir, "the model has no images");
+}
+
+TEST_F(CliTest, EmptyPointsIsAWarningNotAnError) {
+  const std::string dir = Copy();
+  EditModel(dir, [](ColmapModel* m) {
+    m->points.clear();
+    for (auto& im : m->images) {
+      im.xys.clear();
+      im.point3D_ids.clear();
+    }
+  });
+  const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir + "/out");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("warning: " + dir + "/sparse/0: points3D is empty"), std::string::npos) << r.output;
+}
+
+TEST_F(CliTest, SynthRejectsBadOptions) {
+  auto r = testing::RunCommand(kTools + "/mgsr_synth --output " + testing::ScratchDir() + " --shape teapot");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("error: unknown shape 'teapot'"), std::string::npos) << r.output;
+  r = testing::RunCommand(kTools + "/mgsr_synth");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("--output is required"), std::string::npos) << r.output;
+}
+
+}  // namespace
+}  // namespace mgsr
