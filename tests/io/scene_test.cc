@@ -279,3 +279,32 @@ TEST(SharedSceneTest, SuzanneLoadsInBothLayouts) {
 
 }  // namespace
 }  // namespace mgsr
+
+namespace mgsr {
+namespace {
+
+TEST(SceneTextModelTest, TextAndBinaryWorkspacesLoadTheSame) {
+  const std::string dir = testing::ScratchDir();
+  SynthOptions o = testing::SmallSynthOptions();
+  ASSERT_TRUE(WriteSyntheticScene(o, dir + "/bin").ok());
+  o.write_text_model = true;
+  ASSERT_TRUE(WriteSyntheticScene(o, dir + "/txt").ok());
+  ASSERT_TRUE(FileExists(dir + "/txt/sparse/0/images.txt"));
+  ASSERT_FALSE(FileExists(dir + "/txt/sparse/0/images.bin"));
+  // sparse/ without 0/ is accepted too.
+  std::filesystem::rename(dir + "/txt/sparse/0", dir + "/txt/model");
+  std::filesystem::remove_all(dir + "/txt/sparse");
+  std::filesystem::rename(dir + "/txt/model", dir + "/txt/sparse");
+  Scene a, b;
+  ASSERT_TRUE(LoadScene(dir + "/bin", SceneOptions(), &a).ok());
+  ASSERT_TRUE(LoadScene(dir + "/txt", SceneOptions(), &b).ok());
+  ASSERT_EQ(a.views.size(), b.views.size());
+  for (size_t i = 0; i < a.views.size(); ++i) {
+    EXPECT_EQ(a.views[i].camera.R, b.views[i].camera.R);
+    EXPECT_EQ(a.views[i].camera.t, b.views[i].camera.t);
+  }
+  EXPECT_EQ(a.points, b.points);
+}
+
+}  // namespace
+}  // namespace mgsr
