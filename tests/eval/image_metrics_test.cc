@@ -1,0 +1,73 @@
+#include "mgsr/eval/image_metrics.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "mgsr/core/rng.h"
+
+namespace mgsr {
+namespace {
+
+Image RandomImage(int w, int h, int c, uint64_t seed) {
+  Rng rng(seed);
+  Image im(w, h, c);
+  for (size_t i = 0; i < im.size(); ++i) im.data()[i] = static_cast<float>(rng.Uniform());
+  return im;
+}
+
+// Direct, non-separable SSIM in double precision: an independent reference for the fast one.
+double SlowSsim(const Image& a, const Image& b) {
+  const double C1 = 1e-4, C2 = 9e-4, sigma = 1.5;
+  double g[11][11], sum = 0;
+  for (int i = 0; i < 11; ++i) {
+    for (int j = 0; j < 11; ++j) sum += g[i][j] = std::exp(-((i - 5) * (i - 5) + (j - 5) * (j - 5)) / (2 * sigma * sigma));
+  }
+  double total = 0;
+  for (int c = 0; c < a.channels(); ++c) {
+    for (int y = 0; y < a.height(); ++y) {
+      for (int x = 0; x < a.width(); ++x) {
+        double ma = 0, mb = 0, saa = 0, sbb = 0, sab = 0;
+        for (int i = 0; i < 11; ++i) {
+          for (int j = 0; j < 11; ++j) {
+            const int yy = y + i - 5, xx = x + j - 5;
+            if (yy < 0 || xx < 0 || yy >= a.height() || xx >= a.width()) continue;  // zero padding
+            const double w = g[i][j] / sum, va = a.at(c, yy, xx), vb = b.at(c, yy, xx);
+            ma += w * va;
+            mb += w * vb;
+            saa += w * va * va;
+            sbb += w * vb * vb;
+            sab += w * va * vb;
+          }
+        }
+        total += ((2 * ma * mb + C1) * (2 * (sab - ma * mb) + C2)) /
+                 ((ma * ma + mb * mb + C1) * (saa - ma * ma + sbb - mb * mb + C2));
+      }
+    }
+  }
+  return total / a.size();
+}
+
+TEST(ImageMetricsTest, PsnrOfAKnownError) {
+  Image a(8, 8, 3, 0.5f), b(8, 8, 3, 0.6f);
+  EXPECT_NEAR(Psnr(a, b), 20.0, 1e-5);  // MSE 0.01
+  EXPECT_TRUE(std::isinf(Psnr(a, a)));
+}
+
+TEST(ImageMetricsTest, SsimOfIdenticalImagesIsOne) {
+  const Image a = RandomImage(20, 15, 3, 1);
+  EXPECT_NEAR(Ssim(a, a), 1.0, 1e-6);
+}
+
+TEST(ImageMetricsTest, SsimMatchesADirectImplementation) {
+  const Image a = RandomImage(23, 17, 3, 2);
+  Image b = a;
+  Rng rng(5);
+  for (size_t i = 0; i < b.size(); ++i) b.data()[i] = 0.7f * b.data()[i] + 0.2f * static_cast<float>(rng.Uniform());
+  const double fast = Ssim(a, b), slow = SlowSsim(a, b);
+  EXPECT_NEAR(fast, slow, 1e-5);
+  EXPECT_LT(fast, 0.95);
+}
+
+}  // namespace
+}  // namespace mgsr
