@@ -1,0 +1,38 @@
+// TSDF fusion of per-view depth maps into a triangle mesh (reference 5; DESIGN.md section 2), on
+// Open3D's ScalableTSDFVolume from Debian's libopen3d-dev.
+#pragma once
+
+#include <vector>
+
+#include "mgsr/core/camera.h"
+#include "mgsr/core/image.h"
+#include "mgsr/core/status.h"
+#include "mgsr/core/triangle_mesh.h"
+
+namespace mgsr {
+
+// One view to fuse. Depth is camera-space z per pixel (0 = no depth). Pixels are dropped where
+// `weight` (alpha or mask, optional) is below the threshold.
+struct DepthFrame {
+  Camera camera;
+  Image depth;   // 1 channel
+  Image color;   // 3 channels in [0, 1], optional (grey mesh without it)
+  Image weight;  // 1 channel, optional
+};
+
+struct TsdfOptions {
+  double voxel_size = 0;         // 0: the pixel footprint at the object (AutoVoxelSize)
+  double truncation_voxels = 4;  // sdf truncation in voxels (DESIGN.md: 4 gives the best NC)
+  double depth_max = 0;          // 0: beyond every depth in the frames
+  float weight_threshold = 0.5f;
+  bool keep_largest_component = false;  // drop floating fragments
+};
+
+// The median over views of (distance from the camera to `center`) / focal length: one voxel per
+// pixel footprint at the object, finer than which fusion only adds depth-pixel steps.
+double AutoVoxelSize(const std::vector<DepthFrame>& frames, const Eigen::Vector3d& center);
+
+Status FuseDepthMaps(const std::vector<DepthFrame>& frames, const TsdfOptions& options,
+                     TriangleMesh* mesh);
+
+}  // namespace mgsr

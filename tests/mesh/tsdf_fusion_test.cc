@@ -1,0 +1,72 @@
+#include "mgsr/mesh/tsdf_fusion.h"
+
+#include <gtest/gtest.h>
+
+#include "mgsr/core/timer.h"
+#include "mgsr/eval/mesh_metrics.h"
+#include "mgsr/io/file_util.h"
+#include "mgsr/io/image_io.h"
+#include "mgsr/io/ply.h"
+#include "mgsr/io/scene.h"
+#include "mgsr/synth/shapes.h"
+#include "test_util.h"
+
+namespace mgsr {
+namespace {
+
+// Fusing the exact depth maps of a synthetic scene must give back its ground-truth mesh.
+class TsdfOfExactDepthTest : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(TsdfOfExactDepthTest, ReconstructsTheGroundTruth) {
+  const std::string dir = testing::ScratchDir("_" + GetParam());
+  SynthOptions o;
+  o.shape = GetParam();
+  o.num_views = 48;
+  o.width = o.height = 128;
+  o.supersampling = 1;
+  o.num_points = 100;
+  ASSERT_TRUE(WriteSyntheticScene(o, dir).ok());
+  Scene scene;
+  ASSERT_TRUE(LoadScene(dir, SceneOptions(), &scene).ok());
+  std::vector<DepthFrame> frames;
+  for (int i : scene.TrainIndices()) {
+    DepthFrame f;
+    f.camera = scene.views[i].camera;
+    ASSERT_TRUE(ReadPfm(dir + "/gt/depth/" + FileStem(scene.views[i].name) + ".pfm", &f.depth).ok());
+    f.color = scene.views[i].image;
+    f.weight = scene.views[i].mask;
+    frames.push_back(std::move(f));
+  }
+  TsdfOptions options;
+  const double voxel = AutoVoxelSize(frames, Eigen::Vector3d::Zero());
+  Timer timer;
+  TriangleMesh mesh;
+  ASSERT_TRUE(FuseDepthMaps(frames, options, &mesh).ok());
+  const double seconds = timer.ElapsedSeconds();
+  TriangleMesh gt;
+  ASSERT_TRUE(ReadTriangleMesh(dir + "/gt/mesh.ply", &gt).ok());
+  const MeshMetrics m = EvaluateMesh(mesh, gt, MeshMetricsOptions());
+  ASSERT_TRUE(m.ok) << m.failure;
+  std::printf("[ tsdf     ] %s: voxel %.4f, %zu triangles, CD %.5f (%.2f voxels), NC %.4f, %.2f s\n",
+              GetParam().c_str(), voxel, mesh.triangles.size(), m.chamfer, m.chamfer / voxel,
+              m.normal_consistency, seconds);
+  EXPECT_LT(m.chamfer, 1.5 * voxel);
+  EXPECT_GT(m.normal_consistency, 0.97);
+  EXPECT_EQ(mesh.vertex_colors.size(), mesh.vertices.size());
+}
+
+INSTANTIATE_TEST_SUITE_P(AllShapes, TsdfOfExactDepthTest, ::testing::ValuesIn(ShapeNames()));
+
+TEST(TsdfFusionTest, EmptyInputIsAnErrorNotACrash) {
+  TriangleMesh mesh;
+  EXPECT_FALSE(FuseDepthMaps({}, TsdfOptions(), &mesh).ok());
+  DepthFrame f;
+  f.camera = LookAtCamera({0, -3, 0}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 16, 16, 20, 20);
+  f.depth = Image(16, 16, 1, 0.0f);
+  const Status s = FuseDepthMaps({f}, TsdfOptions(), &mesh);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("every depth map is empty"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace mgsr
