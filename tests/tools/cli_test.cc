@@ -140,5 +140,32 @@ TEST_F(CliTest, SynthRejectsBadOptions) {
   EXPECT_NE(r.output.find("--output is required"), std::string::npos) << r.output;
 }
 
+TEST_F(CliTest, EvalScoresMeshesAndImagesAndWritesJson) {
+  const std::string out = testing::ScratchDir();
+  auto r = testing::RunCommand(kTools + "/mgsr_eval --mesh " + base_ + "/gt/mesh.ply --gt " + base_ +
+                               "/gt/mesh.ply --json " + out + "/mesh.json");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::string json;
+  ASSERT_TRUE(ReadFileToString(out + "/mesh.json", &json).ok());
+  EXPECT_NE(json.find("\"ok\": true"), std::string::npos) << json;
+  r = testing::RunCommand(kTools + "/mgsr_eval --renders " + base_ + "/images --gt_images " + base_ +
+                          "/images --json " + out + "/images.json");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("mean                      100.000   1.0000"), std::string::npos) << r.output;
+}
+
+TEST_F(CliTest, EvalBadInput) {
+  const std::string dir = Copy();
+  auto r = testing::RunCommand(kTools + "/mgsr_eval --mesh " + dir + "/nope.ply --gt " + dir + "/gt/mesh.ply");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.output, "error: " + dir + "/nope.ply: cannot open (missing or unreadable)\n");
+  ASSERT_TRUE(WriteImage(dir + "/masks/v001.png", Image(16, 16, 1)).ok());
+  r = testing::RunCommand(kTools + "/mgsr_eval --renders " + dir + "/masks --gt_images " + dir + "/images");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("error: " + dir + "/masks/v001.png: render is 16x16 but"), std::string::npos) << r.output;
+  r = testing::RunCommand(kTools + "/mgsr_eval --mesh a.ply");
+  EXPECT_EQ(r.exit_code, 2);
+}
+
 }  // namespace
 }  // namespace mgsr
