@@ -1,0 +1,25 @@
+#include "mgsr/render/gaussian_renderer.h"
+
+#include <glog/logging.h>
+
+namespace mgsr {
+
+void GaussianRenderer::Forward(const GaussianModel& model, const GaussianRenderOptions& options,
+                               GaussianRender* out) {
+  ProjectGaussians(model, options.camera, options.sh_degree, options.reflection, &projected_);
+  BinPrimitives(projected_.rects, projected_.depth.data(), options.camera.width, options.camera.height, &bins_);
+  RasterizeGaussians(projected_, bins_, options, out, &scratch_);
+}
+
+void GaussianRenderer::Backward(const GaussianModel& model, const GaussianRenderOptions& options,
+                                const GaussianRender& render, const GaussianRenderGrad& grad,
+                                GaussianGradients* grads) {
+  CHECK_EQ(projected_.size(), model.size()) << "Backward without a matching Forward";
+  d_projected_.ResizeAndZero(model.size());
+  RasterizeGaussiansBackward(projected_, bins_, options, render, grad, &d_projected_, &scratch_);
+  grads->ResizeAndZero(model);
+  ProjectGaussiansBackward(model, options.camera, options.sh_degree, options.reflection, projected_, d_projected_,
+                           grads);
+}
+
+}  // namespace mgsr

@@ -1,0 +1,219 @@
+#include "mgsr/render/project_gaussians.h"
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
+
+#include "mgsr/model/activations.h"
+#include "mgsr/render/sh.h"
+
+namespace mgsr {
+namespace {
+
+using Mat3 = Eigen::Matrix<float, 3, 3, Eigen::RowMajor>;
+using Mat23 = Eigen::Matrix<float, 2, 3, Eigen::RowMajor>;
+
+// Quantities shared by forward and backward for one Gaussian.
+struct Geometry {
+  Eigen::Vector3f t;  // view-space mean
+  Mat3 Rq;            // rotation of the Gaussian
+  Eigen::Vector3f s;  // scales
+  Mat3 M;             // Rq * diag(s)
+  Mat3 Sigma;         // M M^T
+  float rx, ry;       // clamped t.x / t.z, t.y / t.z
+  bool clamped_x, clamped_y;
+  Mat23 J, T;         // T = J * R_cam
+  Eigen::Matrix2f cov;
+};
+
+void ComputeGeometry(const GaussianModel& m, size_t i, const Mat3& Rc, const Eigen::Vector3f& tc,
+                     const Camera& cam, Geometry* g) {
+  const Eigen::Vector3f mean(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
+  g->t = Rc * mean + tc;
+  float q_unit[4];
+  QuaternionToRotation(&m.quats[4 * i], g->Rq.data(), q_unit);
+  g->s = Eigen::Vector3f(std::exp(m.log_scales[3 * i]), std::exp(m.log_scales[3 * i + 1]),
+                         std::exp(m.log_scales[3 * i + 2]));
+  g->M = g->Rq * g->s.asDiagonal();
+  g->Sigma = g->M * g->M.transpose();
+  const float z = g->t.z();
+  const float lim_x = kFovClamp * 0.5f * cam.width / static_cast<float>(cam.fx);
+  const float lim_y = kFovClamp * 0.5f * cam.height / static_cast<float>(cam.fy);
+  const float ux = g->t.x() / z, uy = g->t.y() / z;
+  g->clamped_x = ux < -lim_x || ux > lim_x;
+  g->clamped_y = uy < -lim_y || uy > lim_y;
+  g->rx = std::clamp(ux, -lim_x, lim_x);
+  g->ry = std::clamp(uy, -lim_y, lim_y);
+  const float fx = static_cast<float>(cam.fx), fy = static_cast<float>(cam.fy);
+  g->J << fx / z, 0, -fx * g->rx / z, 0, fy / z, -fy * g->ry / z;
+  g->T = g->J * Rc;
+  g->cov = g->T * g->Sigma * g->T.transpose();
+  g->cov(0, 0) += kScreenDilation;
+  g->cov(1, 1) += kScreenDilation;
+}
+
+}  // namespace
+
+void ProjectedGaussians::Resize(size_t n) {
+  mean2d.resize(2 * n);
+  conic.resize(3 * n);
+  depth.resize(n);
+  radius.resize(n);
+  rects.resize(n);
+  opacity.resize(n);
+  ref_opacity.resize(n);
+  beta.resize(n);
+  color_t.resize(3 * n);
+  color_r.resize(3 * n);
+  clamp_t.resize(3 * n);
+  clamp_r.resize(3 * n);
+  view_dir.resize(3 * n);
+}
+
+void ProjectedGaussiansGrad::ResizeAndZero(size_t n) {
+  for (auto* v : {&mean2d}) v->assign(2 * n, 0.0f);
+  for (auto* v : {&conic, &color_t, &color_r}) v->assign(3 * n, 0.0f);
+  for (auto* v : {&depth, &opacity, &ref_opacity, &beta}) v->assign(n, 0.0f);
+}
+
+void GaussianGradients::ResizeAndZero(const GaussianModel& model) {
+  params.max_sh_degree = model.max_sh_degree;
+  params.Resize(model.size());
+  for (auto* v : {&params.means, &params.log_scales, &params.quats, &params.opacity_logits, &params.sh,
+                  &params.ref_sh, &params.ref_opacity_logits, &params.beta_logits}) {
+    std::fill(v->begin(), v->end(), 0.0f);
+  }
+  mean2d.assign(2 * model.size(), 0.0f);
+}
+
+void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, bool reflection,
+                      ProjectedGaussians* out) {
+  const int n = static_cast<int>(m.size());
+  out->Resize(n);
+  const Mat3 Rc = cam.R.cast<float>();
+  const Eigen::Vector3f tc = cam.t.cast<float>();
+  const Eigen::Vector3f center = cam.Center().cast<float>();
+  const int tiles_x = (cam.width + kTileSize - 1) / kTileSize;
+  const int tiles_y = (cam.height + kTileSize - 1) / kTileSize;
+  const int K = m.sh_coeffs();
+  const int degree = std::min(sh_degree, m.max_sh_degree);
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    out->radius[i] = 0;
+    out->rects[i] = TileRect();
+    Geometry g;
+    ComputeGeometry(m, i, Rc, tc, cam, &g);
+    out->depth[i] = g.t.z();
+    if (!(g.t.z() > kNearPlane)) continue;
+    const float a = g.cov(0, 0), b = g.cov(0, 1), c = g.cov(1, 1);
+    const float det = a * c - b * b;
+    if (!(det > 0) || !std::isfinite(det)) continue;
+    const float mid = 0.5f * (a + c);
+    const float lambda = mid + std::sqrt(std::max(0.1f, mid * mid - det));
+    const float radius = std::ceil(3.0f * std::sqrt(lambda));
+    const float u = static_cast<float>(cam.fx) * g.t.x() / g.t.z() + static_cast<float>(cam.cx);
+    const float v = static_cast<float>(cam.fy) * g.t.y() / g.t.z() + static_cast<float>(cam.cy);
+    const TileRect rect = TileRectFromBox(u, v, radius, radius, tiles_x, tiles_y);
+    if (rect.empty() || !std::isfinite(u) || !std::isfinite(v)) continue;
+    out->radius[i] = radius;
+    out->rects[i] = rect;
+    out->mean2d[2 * i] = u;
+    out->mean2d[2 * i + 1] = v;
+    out->conic[3 * i] = c / det;
+    out->conic[3 * i + 1] = -b / det;
+    out->conic[3 * i + 2] = a / det;
+    out->opacity[i] = Sigmoid(m.opacity_logits[i]);
+    const Eigen::Vector3f mean(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
+    const Eigen::Vector3f dir = (mean - center).normalized();
+    for (int k = 0; k < 3; ++k) out->view_dir[3 * i + k] = dir[k];
+    EvalShColor(degree, &m.sh[static_cast<size_t>(i) * K * 3], dir.data(), &out->color_t[3 * i], &out->clamp_t[3 * i]);
+    if (reflection) {
+      out->ref_opacity[i] = Sigmoid(m.ref_opacity_logits[i]);
+      out->beta[i] = Sigmoid(m.beta_logits[i]);
+      EvalShColor(degree, &m.ref_sh[static_cast<size_t>(i) * K * 3], dir.data(), &out->color_r[3 * i],
+                  &out->clamp_r[3 * i]);
+    }
+  }
+}
+
+void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_degree, bool reflection,
+                              const ProjectedGaussians& p, const ProjectedGaussiansGrad& d,
+                              GaussianGradients* grads) {
+  const int n = static_cast<int>(m.size());
+  const Mat3 Rc = cam.R.cast<float>();
+  const Eigen::Vector3f tc = cam.t.cast<float>();
+  const Eigen::Vector3f center = cam.Center().cast<float>();
+  const float fx = static_cast<float>(cam.fx), fy = static_cast<float>(cam.fy);
+  const int K = m.sh_coeffs();
+  const int degree = std::min(sh_degree, m.max_sh_degree);
+  GaussianModel& G = grads->params;
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    if (p.radius[i] <= 0) continue;
+    grads->mean2d[2 * i] += d.mean2d[2 * i];
+    grads->mean2d[2 * i + 1] += d.mean2d[2 * i + 1];
+    // Activations.
+    G.opacity_logits[i] += d.opacity[i] * SigmoidGradFromValue(p.opacity[i]);
+    if (reflection) {
+      G.ref_opacity_logits[i] += d.ref_opacity[i] * SigmoidGradFromValue(p.ref_opacity[i]);
+      G.beta_logits[i] += d.beta[i] * SigmoidGradFromValue(p.beta[i]);
+    }
+    // Colours -> SH coefficients and the view direction.
+    Eigen::Vector3f d_mean = Eigen::Vector3f::Zero();
+    float d_dir[3], d_dir_r[3] = {0, 0, 0}, d_v[3];
+    const float* dir = &p.view_dir[3 * i];
+    EvalShColorBackward(degree, &m.sh[static_cast<size_t>(i) * K * 3], dir, &p.clamp_t[3 * i], &d.color_t[3 * i],
+                        &G.sh[static_cast<size_t>(i) * K * 3], d_dir);
+    if (reflection) {
+      EvalShColorBackward(degree, &m.ref_sh[static_cast<size_t>(i) * K * 3], dir, &p.clamp_r[3 * i],
+                          &d.color_r[3 * i], &G.ref_sh[static_cast<size_t>(i) * K * 3], d_dir_r);
+    }
+    const float sum_dir[3] = {d_dir[0] + d_dir_r[0], d_dir[1] + d_dir_r[1], d_dir[2] + d_dir_r[2]};
+    const Eigen::Vector3f mean(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
+    const Eigen::Vector3f v = mean - center;
+    NormalizeBackward(v.data(), sum_dir, d_v);
+    d_mean += Eigen::Vector3f(d_v[0], d_v[1], d_v[2]);
+
+    Geometry g;
+    ComputeGeometry(m, i, Rc, tc, cam, &g);
+    const float z = g.t.z(), tx = g.t.x(), ty = g.t.y();
+    // conic -> screen covariance: dCov = -Q dQ Q with the symmetric dQ (b appears twice).
+    Eigen::Matrix2f Q;
+    Q << p.conic[3 * i], p.conic[3 * i + 1], p.conic[3 * i + 1], p.conic[3 * i + 2];
+    Eigen::Matrix2f dQ;
+    dQ << d.conic[3 * i], 0.5f * d.conic[3 * i + 1], 0.5f * d.conic[3 * i + 1], d.conic[3 * i + 2];
+    const Eigen::Matrix2f dCov = -Q * dQ * Q;
+    // Cov = T Sigma T^T (+ dilation): dSigma = T^T dCov T, dT = 2 dCov T Sigma.
+    const Mat3 dSigma = g.T.transpose() * dCov * g.T;
+    const Mat23 dT = 2.0f * dCov * g.T * g.Sigma;
+    const Mat23 dJ = dT * Rc.transpose();
+    // J entries -> view-space mean (the clamped ratio carries no gradient).
+    const float mx = g.clamped_x ? 0.0f : 1.0f, my = g.clamped_y ? 0.0f : 1.0f;
+    Eigen::Vector3f d_t = Eigen::Vector3f::Zero();
+    d_t.x() += dJ(0, 2) * (-fx * mx / (z * z));
+    d_t.y() += dJ(1, 2) * (-fy * my / (z * z));
+    d_t.z() += dJ(0, 0) * (-fx / (z * z)) + dJ(1, 1) * (-fy / (z * z)) +
+               dJ(0, 2) * (fx * g.rx / (z * z) + fx * mx * tx / (z * z * z)) +
+               dJ(1, 2) * (fy * g.ry / (z * z) + fy * my * ty / (z * z * z));
+    // Screen mean and depth.
+    const float du = d.mean2d[2 * i], dv = d.mean2d[2 * i + 1];
+    d_t.x() += du * fx / z;
+    d_t.y() += dv * fy / z;
+    d_t.z() += -du * fx * tx / (z * z) - dv * fy * ty / (z * z) + d.depth[i];
+    d_mean += Rc.transpose() * d_t;
+    for (int k = 0; k < 3; ++k) G.means[3 * i + k] += d_mean[k];
+    // Sigma = M M^T, M = Rq diag(s).
+    const Mat3 dM = 2.0f * dSigma * g.M;
+    Mat3 dRq;
+    for (int k = 0; k < 3; ++k) {
+      const float ds = g.Rq.col(k).dot(dM.col(k));
+      G.log_scales[3 * i + k] += ds * g.s[k];
+      dRq.col(k) = g.s[k] * dM.col(k);
+    }
+    float dq[4];
+    QuaternionToRotationBackward(&m.quats[4 * i], dRq.data(), dq);
+    for (int k = 0; k < 4; ++k) G.quats[4 * i + k] += dq[k];
+  }
+}
+
+}  // namespace mgsr

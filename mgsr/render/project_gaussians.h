@@ -1,0 +1,60 @@
+// Projection stage of the 3DGS branch (reference 4.1): per Gaussian, the view-space mean, the EWA
+// screen covariance with the 0.3 px^2 dilation and the 1.3 x fov clamp of the Jacobian, its conic,
+// a 3-sigma radius and tile rectangle, activated opacities and the SH colours (transmitted and,
+// for MGSR, reflected). Pixel coordinates follow COLMAP: pixel (x, y) spans [x, x+1) x [y, y+1),
+// so its centre is (x + 0.5, y + 0.5).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "mgsr/core/camera.h"
+#include "mgsr/model/gaussian_model.h"
+#include "mgsr/render/tile_binning.h"
+
+namespace mgsr {
+
+constexpr float kNearPlane = 0.2f;
+constexpr float kScreenDilation = 0.3f;  // px^2 added to the screen covariance (low-pass)
+constexpr float kFovClamp = 1.3f;
+
+struct ProjectedGaussians {
+  std::vector<float> mean2d;  // N x 2, pixels
+  std::vector<float> conic;   // N x 3 (a, b, c): power = -a dx^2 / 2 - b dx dy - c dy^2 / 2
+  std::vector<float> depth;   // N, view-space z
+  std::vector<float> radius;  // N, pixels; 0 = culled
+  std::vector<TileRect> rects;
+  std::vector<float> opacity, ref_opacity, beta;  // N, activated
+  std::vector<float> color_t, color_r;            // N x 3
+  std::vector<uint8_t> clamp_t, clamp_r;          // N x 3
+  std::vector<float> view_dir;                    // N x 3, unit (mean - camera centre)
+
+  size_t size() const { return depth.size(); }
+  void Resize(size_t n);
+};
+
+// Gradients of the loss with respect to the projected quantities (filled by the rasterizer).
+struct ProjectedGaussiansGrad {
+  std::vector<float> mean2d, conic, depth, opacity, ref_opacity, beta, color_t, color_r;
+  void ResizeAndZero(size_t n);
+};
+
+// `reflection` false: the reflected quantities are not computed (plain 3DGS).
+void ProjectGaussians(const GaussianModel& model, const Camera& camera, int sh_degree, bool reflection,
+                      ProjectedGaussians* out);
+
+// Gradients of the model's raw parameters (same layout as the model) plus the per-Gaussian
+// screen-space mean gradient (pixels) that density control accumulates.
+struct GaussianGradients {
+  GaussianModel params;       // d loss / d raw parameter, model layout
+  std::vector<float> mean2d;  // N x 2
+
+  void ResizeAndZero(const GaussianModel& model);
+};
+
+// Adds the chain from projected-quantity gradients to every raw parameter into `grads`.
+void ProjectGaussiansBackward(const GaussianModel& model, const Camera& camera, int sh_degree,
+                              bool reflection, const ProjectedGaussians& projected,
+                              const ProjectedGaussiansGrad& d_projected, GaussianGradients* grads);
+
+}  // namespace mgsr

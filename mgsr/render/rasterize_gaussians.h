@@ -1,0 +1,67 @@
+// Rasterization stage of the 3DGS branch with MGSR's reflection decomposition (reference 2.2):
+// per 16x16 tile, front-to-back alpha blending of the depth-sorted Gaussians, two transmittance
+// chains per pixel:
+//   C_tran = sum_i c_t,i a_i T_i + T_N bg        (a_i = min(0.99, o_i G_i), T_i = prod_{j<i} (1 - a_j))
+//   C_ref  = sum_i c_r,i ar_i Tr_i               (ar_i = min(0.99, or_i G_i), own chain, no background)
+//   W      = sum_i beta_i a_i T_i                (beta blended with the transmitted weights)
+//   D      = sum_i z_i a_i T_i / A, A = 1 - T_N  (0 where A < kMinDepthAlpha)
+//   C      = C_tran + W * C_ref
+// A Gaussian affects a pixel only inside its 3-sigma square (|dx|, |dy| <= radius), where the
+// exponent is <= 0, and in a chain only if that chain's alpha >= 1/255 (each chain decides for
+// itself: a departure from the reference kernels, which skip both when either alpha is small,
+// reference 8 item 20). A chain stops when its transmittance would fall below 1e-4 (that Gaussian
+// is not blended in it); the pixel stops when every chain has.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "mgsr/core/camera.h"
+#include "mgsr/core/image.h"
+#include "mgsr/render/project_gaussians.h"
+#include "mgsr/render/tile_binning.h"
+
+namespace mgsr {
+
+constexpr float kMinAlpha = 1.0f / 255.0f;
+constexpr float kMaxAlpha = 0.99f;
+constexpr float kMinTransmittance = 1e-4f;
+constexpr float kMinDepthAlpha = 1e-4f;
+
+struct GaussianRenderOptions {
+  Camera camera;
+  int sh_degree = 3;
+  bool reflection = true;  // false: plain 3DGS (C = C_tran; C_ref and W are zero)
+  float background[3] = {0, 0, 0};
+};
+
+struct GaussianRender {
+  Image color, tran, ref;       // 3 channels
+  Image weight, depth, alpha;   // 1 channel: W, D, A
+  // Kept for the backward pass.
+  std::vector<float> final_t, final_tr, depth_sum;
+  std::vector<uint32_t> last_t, last_r;  // per pixel: 1 + index (within its tile list) of the last blended
+};
+
+// Upstream gradients; an empty image means zero.
+struct GaussianRenderGrad {
+  Image color, tran, ref, weight, depth, alpha;
+};
+
+// Per-thread scratch of the rasterizer (reused between calls).
+struct RasterScratch {
+  std::vector<std::vector<float>> tile_data;  // per thread: gathered Gaussians of the current tile
+  std::vector<std::vector<float>> tile_grad;  // per thread: gradients of the current tile
+  std::vector<std::vector<float>> grads;      // per thread: N x kGradStride accumulators
+};
+
+void RasterizeGaussians(const ProjectedGaussians& projected, const TileBins& bins,
+                        const GaussianRenderOptions& options, GaussianRender* out, RasterScratch* scratch);
+
+// Adds d loss / d projected quantities into `d_projected` (sized by the caller).
+void RasterizeGaussiansBackward(const ProjectedGaussians& projected, const TileBins& bins,
+                                const GaussianRenderOptions& options, const GaussianRender& render,
+                                const GaussianRenderGrad& grad, ProjectedGaussiansGrad* d_projected,
+                                RasterScratch* scratch);
+
+}  // namespace mgsr

@@ -1,0 +1,109 @@
+#include "mgsr/render/sh.h"
+
+#include <cmath>
+
+namespace mgsr {
+namespace {
+
+constexpr float kC0 = 0.28209479177387814f;
+constexpr float kC1 = 0.4886025119029199f;
+constexpr float kC2[5] = {1.0925484305920792f, -1.0925484305920792f, 0.31539156525252005f,
+                          -1.0925484305920792f, 0.5462742152960396f};
+constexpr float kC3[7] = {-0.5900435899266435f, 2.890611442640554f, -0.4570457994644658f,
+                          0.3731763325901154f,  -0.4570457994644658f, 1.445305721320277f,
+                          -0.5900435899266435f};
+
+}  // namespace
+
+void ShBasis(int degree, const float d[3], float b[kMaxShCoeffs]) {
+  const float x = d[0], y = d[1], z = d[2];
+  b[0] = kC0;
+  if (degree < 1) return;
+  b[1] = -kC1 * y;
+  b[2] = kC1 * z;
+  b[3] = -kC1 * x;
+  if (degree < 2) return;
+  const float xx = x * x, yy = y * y, zz = z * z;
+  b[4] = kC2[0] * x * y;
+  b[5] = kC2[1] * y * z;
+  b[6] = kC2[2] * (2 * zz - xx - yy);
+  b[7] = kC2[3] * x * z;
+  b[8] = kC2[4] * (xx - yy);
+  if (degree < 3) return;
+  b[9] = kC3[0] * y * (3 * xx - yy);
+  b[10] = kC3[1] * x * y * z;
+  b[11] = kC3[2] * y * (4 * zz - xx - yy);
+  b[12] = kC3[3] * z * (2 * zz - 3 * xx - 3 * yy);
+  b[13] = kC3[4] * x * (4 * zz - xx - yy);
+  b[14] = kC3[5] * z * (xx - yy);
+  b[15] = kC3[6] * x * (xx - 3 * yy);
+}
+
+void ShBasisWithGradient(int degree, const float d[3], float b[kMaxShCoeffs], float g[kMaxShCoeffs][3]) {
+  ShBasis(degree, d, b);
+  const float x = d[0], y = d[1], z = d[2];
+  auto set = [&](int k, float gx, float gy, float gz) {
+    g[k][0] = gx;
+    g[k][1] = gy;
+    g[k][2] = gz;
+  };
+  set(0, 0, 0, 0);
+  if (degree < 1) return;
+  set(1, 0, -kC1, 0);
+  set(2, 0, 0, kC1);
+  set(3, -kC1, 0, 0);
+  if (degree < 2) return;
+  const float xx = x * x, yy = y * y, zz = z * z;
+  set(4, kC2[0] * y, kC2[0] * x, 0);
+  set(5, 0, kC2[1] * z, kC2[1] * y);
+  set(6, -2 * kC2[2] * x, -2 * kC2[2] * y, 4 * kC2[2] * z);
+  set(7, kC2[3] * z, 0, kC2[3] * x);
+  set(8, 2 * kC2[4] * x, -2 * kC2[4] * y, 0);
+  if (degree < 3) return;
+  set(9, 6 * kC3[0] * x * y, kC3[0] * (3 * xx - 3 * yy), 0);
+  set(10, kC3[1] * y * z, kC3[1] * x * z, kC3[1] * x * y);
+  set(11, -2 * kC3[2] * x * y, kC3[2] * (4 * zz - xx - 3 * yy), 8 * kC3[2] * y * z);
+  set(12, -6 * kC3[3] * x * z, -6 * kC3[3] * y * z, kC3[3] * (6 * zz - 3 * xx - 3 * yy));
+  set(13, kC3[4] * (4 * zz - 3 * xx - yy), -2 * kC3[4] * x * y, 8 * kC3[4] * x * z);
+  set(14, 2 * kC3[5] * x * z, -2 * kC3[5] * y * z, kC3[5] * (xx - yy));
+  set(15, kC3[6] * (3 * xx - 3 * yy), -6 * kC3[6] * x * y, 0);
+}
+
+void EvalShColor(int degree, const float* coeffs, const float dir[3], float rgb[3], uint8_t clamped[3]) {
+  float b[kMaxShCoeffs];
+  ShBasis(degree, dir, b);
+  const int n = (degree + 1) * (degree + 1);
+  for (int c = 0; c < 3; ++c) {
+    float v = 0.5f;
+    for (int k = 0; k < n; ++k) v += b[k] * coeffs[k * 3 + c];
+    clamped[c] = v < 0.0f;
+    rgb[c] = v < 0.0f ? 0.0f : v;
+  }
+}
+
+void EvalShColorBackward(int degree, const float* coeffs, const float dir[3], const uint8_t clamped[3],
+                         const float d_rgb[3], float* d_coeffs, float d_dir[3]) {
+  float b[kMaxShCoeffs], g[kMaxShCoeffs][3];
+  ShBasisWithGradient(degree, dir, b, g);
+  const int n = (degree + 1) * (degree + 1);
+  const float dc[3] = {clamped[0] ? 0.0f : d_rgb[0], clamped[1] ? 0.0f : d_rgb[1],
+                       clamped[2] ? 0.0f : d_rgb[2]};
+  d_dir[0] = d_dir[1] = d_dir[2] = 0;
+  for (int k = 0; k < n; ++k) {
+    const float s = coeffs[k * 3] * dc[0] + coeffs[k * 3 + 1] * dc[1] + coeffs[k * 3 + 2] * dc[2];
+    for (int c = 0; c < 3; ++c) d_coeffs[k * 3 + c] += b[k] * dc[c];
+    d_dir[0] += s * g[k][0];
+    d_dir[1] += s * g[k][1];
+    d_dir[2] += s * g[k][2];
+  }
+}
+
+void NormalizeBackward(const float v[3], const float d_dir[3], float d_v[3]) {
+  const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  const float inv = len > 0 ? 1.0f / len : 0.0f;
+  const float u[3] = {v[0] * inv, v[1] * inv, v[2] * inv};
+  const float dot = u[0] * d_dir[0] + u[1] * d_dir[1] + u[2] * d_dir[2];
+  for (int k = 0; k < 3; ++k) d_v[k] = (d_dir[k] - u[k] * dot) * inv;
+}
+
+}  // namespace mgsr

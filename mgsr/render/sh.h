@@ -1,0 +1,31 @@
+// Real spherical harmonics up to degree 3, as the 3DGS family evaluates colour from a view
+// direction: colour = sum_k Y_k(dir) sh_k + 0.5, clamped at 0 per channel (the clamp mask is kept,
+// so the backward gives clamped channels no gradient).
+#pragma once
+
+#include <cstdint>
+
+namespace mgsr {
+
+constexpr int kMaxShCoeffs = 16;
+
+// Basis values Y_k(dir) for k < (degree + 1)^2; `dir` must be unit length.
+void ShBasis(int degree, const float dir[3], float basis[kMaxShCoeffs]);
+
+// The same and d Y_k / d dir (row k holds the 3 partial derivatives).
+void ShBasisWithGradient(int degree, const float dir[3], float basis[kMaxShCoeffs],
+                         float dbasis[kMaxShCoeffs][3]);
+
+// Colour from coefficients laid out [k][rgb] (stride 3, `coeffs` has at least (degree+1)^2 rows).
+// clamped[c] is set to 1 where the channel was clamped at 0.
+void EvalShColor(int degree, const float* coeffs, const float dir[3], float rgb[3], uint8_t clamped[3]);
+
+// Backward of EvalShColor: adds d/d coeffs into d_coeffs (same layout) and returns d/d dir
+// (of the unit direction; chain through the normalisation is the caller's, see NormalizeBackward).
+void EvalShColorBackward(int degree, const float* coeffs, const float dir[3], const uint8_t clamped[3],
+                         const float d_rgb[3], float* d_coeffs, float d_dir[3]);
+
+// dir = v / |v|: given d/d dir, returns d/d v.
+void NormalizeBackward(const float v[3], const float d_dir[3], float d_v[3]);
+
+}  // namespace mgsr

@@ -1,0 +1,39 @@
+// Tile binning shared by both rasterizers (gsplat's "tile intersection" stage): every primitive
+// covers a rectangle of 16x16-pixel tiles; each tile gets the list of primitives touching it,
+// sorted front to back by depth. Built as a counting sort by tile (parallel over primitives with
+// per-thread histograms) followed by a per-tile sort by (depth, id): O(n) plus small sorts, no
+// global sort, deterministic for any thread count.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+namespace mgsr {
+
+constexpr int kTileSize = 16;
+
+struct TileRect {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // tiles [x0, x1) x [y0, y1); empty when x1 <= x0 or y1 <= y0
+  bool empty() const { return x1 <= x0 || y1 <= y0; }
+};
+
+// Tiles touched by a screen-space box centred at (cx, cy) with half-extents (rx, ry), in pixel
+// coordinates where pixel (x, y) spans [x, x + 1) x [y, y + 1).
+TileRect TileRectFromBox(float cx, float cy, float rx, float ry, int tiles_x, int tiles_y);
+
+struct TileBins {
+  int tiles_x = 0, tiles_y = 0;
+  std::vector<uint32_t> tile_start;  // tiles_x * tiles_y + 1 offsets into ids
+  std::vector<uint32_t> ids;         // primitive ids, per tile front to back
+
+  int num_tiles() const { return tiles_x * tiles_y; }
+  // Scratch reused between calls (no allocation once warm).
+  std::vector<uint32_t> thread_counts;
+  std::vector<uint64_t> keys;
+};
+
+// `rects[i]` for each primitive (empty = not drawn), `depths[i]` positive view depths.
+void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int width, int height,
+                   TileBins* bins);
+
+}  // namespace mgsr

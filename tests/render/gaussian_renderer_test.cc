@@ -1,0 +1,244 @@
+#include "mgsr/render/gaussian_renderer.h"
+
+#include <gtest/gtest.h>
+#include <omp.h>
+
+#include <cmath>
+#include <functional>
+
+#include "mgsr/core/rng.h"
+#include "reference_gaussian_renderer.h"
+
+namespace mgsr {
+namespace {
+
+Camera TestCamera(int w = 24, int h = 24) {
+  return LookAtCamera({0.3, -3.0, 0.4}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), w, h, 30.0 * w / 24, 30.0 * h / 24);
+}
+
+GaussianModel RandomScene(int n, uint64_t seed, double scale_lo = 0.05, double scale_hi = 0.25) {
+  Rng rng(seed);
+  GaussianModel m;
+  m.max_sh_degree = 3;
+  m.Resize(n);
+  for (int i = 0; i < n; ++i) {
+    for (int k = 0; k < 3; ++k) m.means[3 * i + k] = static_cast<float>(rng.Uniform(-0.6, 0.6));
+    for (int k = 0; k < 3; ++k) m.log_scales[3 * i + k] = static_cast<float>(std::log(rng.Uniform(scale_lo, scale_hi)));
+    for (int k = 0; k < 4; ++k) m.quats[4 * i + k] = static_cast<float>(rng.Normal());
+    m.opacity_logits[i] = static_cast<float>(rng.Uniform(-2.0, 1.5));
+    m.ref_opacity_logits[i] = static_cast<float>(rng.Uniform(-2.0, 1.0));
+    m.beta_logits[i] = static_cast<float>(rng.Uniform(-2.0, 2.0));
+  }
+  for (float& v : m.sh) v = static_cast<float>(rng.Normal(0, 0.25));
+  for (float& v : m.ref_sh) v = static_cast<float>(rng.Normal(0, 0.25));
+  return m;
+}
+
+GaussianRenderOptions Options(const Camera& cam, bool reflection = true) {
+  GaussianRenderOptions o;
+  o.camera = cam;
+  o.sh_degree = 3;
+  o.reflection = reflection;
+  o.background[0] = 0.2f;
+  o.background[1] = 0.5f;
+  o.background[2] = 0.7f;
+  return o;
+}
+
+double MaxAbsDiff(const Image& im, const std::vector<double>& ref) {
+  double d = 0;
+  for (size_t i = 0; i < im.size(); ++i) d = std::max(d, std::abs(im.data()[i] - ref[i]));
+  return d;
+}
+
+class GaussianRendererTest : public ::testing::TestWithParam<bool> {};
+
+TEST_P(GaussianRendererTest, TiledRenderMatchesTheReference) {
+  const bool reflection = GetParam();
+  for (uint64_t seed : {1, 2, 3, 4}) {
+    // 40 x 36 pixels: several tiles, partial tiles at the border.
+    const Camera cam = TestCamera(40, 36);
+    const GaussianModel m = RandomScene(30, seed);
+    GaussianRenderer renderer;
+    GaussianRender out;
+    const GaussianRenderOptions o = Options(cam, reflection);
+    renderer.Forward(m, o, &out);
+    const double bg[3] = {0.2, 0.5, 0.7};
+    const auto ref = testing::RenderGaussiansReference(m, cam, 3, reflection, bg);
+    EXPECT_LT(MaxAbsDiff(out.color, ref.color), 1e-5) << seed;
+    EXPECT_LT(MaxAbsDiff(out.tran, ref.tran), 1e-5) << seed;
+    EXPECT_LT(MaxAbsDiff(out.alpha, ref.alpha), 1e-5) << seed;
+    EXPECT_LT(MaxAbsDiff(out.depth, ref.depth), 1e-5 * 4) << seed;  // depths are ~3: relative 1e-5
+    if (reflection) {
+      EXPECT_LT(MaxAbsDiff(out.ref, ref.ref), 1e-5) << seed;
+      EXPECT_LT(MaxAbsDiff(out.weight, ref.weight), 1e-5) << seed;
+    }
+    // The scene is not trivial: most pixels are covered.
+    double covered = 0;
+    for (size_t i = 0; i < out.alpha.size(); ++i) covered += out.alpha.data()[i] > 0.1f;
+    EXPECT_GT(covered, 0.3 * out.alpha.size());
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(WithAndWithoutReflection, GaussianRendererTest, ::testing::Bool());
+
+// Every raw parameter's gradient, for an upstream gradient on each output buffer in turn, against
+// central differences of the double-precision reference.
+TEST(GaussianRendererGradientTest, AllParametersAllOutputsMatchNumericDifferentiation) {
+  const Camera cam = TestCamera();
+  const GaussianModel m = RandomScene(8, 11, 0.1, 0.3);
+  const GaussianRenderOptions o = Options(cam);
+  const double bg[3] = {0.2, 0.5, 0.7};
+  GaussianRenderer renderer;
+  GaussianRender out;
+  renderer.Forward(m, o, &out);
+  const size_t np = static_cast<size_t>(cam.width) * cam.height;
+
+  const char* outputs[] = {"color", "tran", "ref", "weight", "depth", "alpha"};
+  for (int which = 0; which < 6; ++which) {
+    Rng rng(100 + which);
+    GaussianRenderGrad grad;
+    Image* target[] = {&grad.color, &grad.tran, &grad.ref, &grad.weight, &grad.depth, &grad.alpha};
+    const int channels = which < 3 ? 3 : 1;
+    *target[which] = Image(cam.width, cam.height, channels);
+    for (size_t i = 0; i < target[which]->size(); ++i) target[which]->data()[i] = static_cast<float>(rng.Uniform(-1, 1));
+    const Image& upstream = *target[which];
+    GaussianGradients analytic;
+    renderer.Backward(m, o, out, grad, &analytic);
+
+    auto loss = [&](const testing::GaussianModelD& md) {
+      const auto r = testing::RenderGaussiansReference(md, cam, 3, true, bg);
+      const std::vector<double>* buf[] = {&r.color, &r.tran, &r.ref, &r.weight, &r.depth, &r.alpha};
+      double l = 0;
+      for (size_t i = 0; i < channels * np; ++i) l += upstream.data()[i] * (*buf[which])[i];
+      return l;
+    };
+    testing::GaussianModelD base(m);
+    struct Block {
+      const char* name;
+      std::vector<double> testing::GaussianModelD::*field;
+      const std::vector<float>* analytic;
+    };
+    const Block blocks[] = {
+        {"means", &testing::GaussianModelD::means, &analytic.params.means},
+        {"log_scales", &testing::GaussianModelD::log_scales, &analytic.params.log_scales},
+        {"quats", &testing::GaussianModelD::quats, &analytic.params.quats},
+        {"opacity", &testing::GaussianModelD::opacity_logits, &analytic.params.opacity_logits},
+        {"sh", &testing::GaussianModelD::sh, &analytic.params.sh},
+        {"ref_sh", &testing::GaussianModelD::ref_sh, &analytic.params.ref_sh},
+        {"ref_opacity", &testing::GaussianModelD::ref_opacity_logits, &analytic.params.ref_opacity_logits},
+        {"beta", &testing::GaussianModelD::beta_logits, &analytic.params.beta_logits},
+    };
+    for (const Block& b : blocks) {
+      std::vector<double>& values = base.*(b.field);
+      std::vector<double> numeric(values.size());
+      double max_abs = 0;
+      for (size_t k = 0; k < values.size(); ++k) {
+        const double h = 1e-6, keep = values[k];
+        values[k] = keep + h;
+        const double lp = loss(base);
+        values[k] = keep - h;
+        const double lm = loss(base);
+        values[k] = keep;
+        numeric[k] = (lp - lm) / (2 * h);
+        max_abs = std::max(max_abs, std::abs(numeric[k]));
+      }
+      int checked = 0;
+      for (size_t k = 0; k < values.size(); ++k) {
+        const double a = (*b.analytic)[k], n = numeric[k];
+        // Relative 1e-3 where the derivative is not tiny (> 1e-4 of the block's largest).
+        const double tol = 1e-3 * std::abs(n) + 1e-4 * max_abs + 1e-7;
+        EXPECT_NEAR(a, n, tol) << outputs[which] << " d/d " << b.name << "[" << k << "]";
+        checked += std::abs(n) > 1e-4 * max_abs;
+      }
+      if (max_abs > 0) EXPECT_GT(checked, static_cast<int>(values.size()) / 4) << outputs[which] << " " << b.name;
+      if (which == 0) std::printf("[ grad     ] color d/d %-11s %3d of %3zu derivatives checked (not tiny)\n", b.name, checked, values.size());
+    }
+  }
+}
+
+TEST(GaussianRendererEdgeCaseTest, EmptyBehindWholeImageAndDegenerate) {
+  const Camera cam = TestCamera(32, 32);
+  const GaussianRenderOptions o = Options(cam);
+  GaussianRenderer renderer;
+  GaussianRender out;
+  GaussianRenderGrad grad;
+  grad.color = Image(32, 32, 3, 1.0f);
+  grad.depth = Image(32, 32, 1, 1.0f);
+  GaussianGradients g;
+  auto all_finite = [](const std::vector<float>& v) {
+    for (float x : v) {
+      if (!std::isfinite(x)) return false;
+    }
+    return true;
+  };
+  auto check = [&](const GaussianModel& m, const char* what) {
+    renderer.Forward(m, o, &out);
+    for (const Image* im : {&out.color, &out.tran, &out.ref, &out.weight, &out.depth, &out.alpha}) {
+      for (size_t i = 0; i < im->size(); ++i) ASSERT_TRUE(std::isfinite(im->data()[i])) << what;
+    }
+    renderer.Backward(m, o, out, grad, &g);
+    for (const auto* v : {&g.params.means, &g.params.log_scales, &g.params.quats, &g.params.opacity_logits,
+                          &g.params.sh, &g.params.ref_sh}) {
+      ASSERT_TRUE(all_finite(*v)) << what;
+    }
+  };
+  GaussianModel empty;
+  check(empty, "no Gaussians");
+  EXPECT_FLOAT_EQ(out.color.at(2, 5, 5), 0.7f);  // background only
+  EXPECT_FLOAT_EQ(out.alpha.at(0, 5, 5), 0.0f);
+
+  GaussianModel behind = RandomScene(10, 5);
+  for (size_t i = 0; i < behind.size(); ++i) behind.means[3 * i + 1] = -4.0f;  // behind the camera at y = -3
+  check(behind, "all behind");
+  EXPECT_FLOAT_EQ(out.alpha.at(0, 16, 16), 0.0f);
+
+  GaussianModel big = RandomScene(1, 6);
+  big.means = {0, 0, 0};
+  big.log_scales = {std::log(3.0f), std::log(3.0f), std::log(3.0f)};
+  big.opacity_logits = {3.0f};
+  check(big, "whole image");
+  EXPECT_GT(out.alpha.at(0, 0, 0), 0.5f);
+  EXPECT_GT(out.alpha.at(0, 31, 31), 0.5f);
+
+  GaussianModel weird = RandomScene(6, 7);
+  weird.log_scales[0] = 30.0f;   // enormous
+  weird.log_scales[4] = -40.0f;  // flat to a plane
+  weird.log_scales[9] = -40.0f;
+  weird.log_scales[10] = -40.0f;
+  weird.log_scales[11] = -40.0f;  // a point
+  for (int k = 0; k < 4; ++k) weird.quats[4 * 2 + k] = 0.0f;  // zero quaternion
+  check(weird, "degenerate scales");
+}
+
+TEST(GaussianRendererThreadTest, ThreadCountChangesOnlySummationOrder) {
+  const Camera cam = TestCamera(64, 48);
+  const GaussianModel m = RandomScene(200, 21, 0.02, 0.15);
+  const GaussianRenderOptions o = Options(cam);
+  GaussianRenderGrad grad;
+  grad.color = Image(64, 48, 3);
+  Rng rng(3);
+  for (size_t i = 0; i < grad.color.size(); ++i) grad.color.data()[i] = static_cast<float>(rng.Uniform(-1, 1));
+  GaussianRender out[2];
+  GaussianGradients g[2];
+  const int saved = omp_get_max_threads();
+  for (int t = 0; t < 2; ++t) {
+    omp_set_num_threads(t + 1);
+    GaussianRenderer renderer;
+    renderer.Forward(m, o, &out[t]);
+    renderer.Backward(m, o, out[t], grad, &g[t]);
+  }
+  omp_set_num_threads(saved);
+  // Forward: every pixel is computed by one thread in the same order: identical.
+  for (size_t i = 0; i < out[0].color.size(); ++i) ASSERT_EQ(out[0].color.data()[i], out[1].color.data()[i]);
+  // Backward: per-thread partial sums are added in a different order: equal to float rounding,
+  // |a - b| <= 1e-5 |a| + 1e-6 max|a|.
+  double max_abs = 0;
+  for (float v : g[0].params.means) max_abs = std::max<double>(max_abs, std::abs(v));
+  for (size_t i = 0; i < g[0].params.means.size(); ++i) {
+    EXPECT_NEAR(g[0].params.means[i], g[1].params.means[i], 1e-5 * std::abs(g[0].params.means[i]) + 1e-6 * max_abs);
+  }
+}
+
+}  // namespace
+}  // namespace mgsr

@@ -1,0 +1,119 @@
+// Stage tests of the render pipeline: SH evaluation and its backward, quaternion rotation and its
+// backward, tile binning against brute force.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "mgsr/core/rng.h"
+#include "mgsr/model/activations.h"
+#include "mgsr/render/sh.h"
+#include "mgsr/render/tile_binning.h"
+#include "reference_gaussian_renderer.h"
+
+namespace mgsr {
+namespace {
+
+TEST(ShTest, MatchesTheReferenceAndItsBackwardMatchesNumericDifferences) {
+  Rng rng(4);
+  for (int degree = 0; degree <= 3; ++degree) {
+    float coeffs[48];
+    for (float& c : coeffs) c = static_cast<float>(rng.Normal(0, 0.4));
+    Eigen::Vector3d v(rng.Normal(), rng.Normal(), rng.Normal());
+    const Eigen::Vector3f dir = v.normalized().cast<float>();
+    float rgb[3];
+    uint8_t clamped[3];
+    EvalShColor(degree, coeffs, dir.data(), rgb, clamped);
+    double ref[3];
+    testing::ReferenceShColor(degree, coeffs, v.normalized(), ref);
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(rgb[c], ref[c], 1e-6);
+    // Backward through the normalisation, against central differences of the reference in v.
+    const float d_rgb[3] = {0.3f, -0.7f, 0.5f};
+    float d_coeffs[48] = {}, d_dir[3], d_v[3];
+    EvalShColorBackward(degree, coeffs, dir.data(), clamped, d_rgb, d_coeffs, d_dir);
+    const float vf[3] = {static_cast<float>(v.x()), static_cast<float>(v.y()), static_cast<float>(v.z())};
+    NormalizeBackward(vf, d_dir, d_v);
+    auto loss = [&](const Eigen::Vector3d& vv, const float* cf) {
+      double out[3];
+      testing::ReferenceShColor(degree, cf, vv.normalized(), out);
+      return d_rgb[0] * out[0] + d_rgb[1] * out[1] + d_rgb[2] * out[2];
+    };
+    for (int k = 0; k < 3; ++k) {
+      Eigen::Vector3d e = Eigen::Vector3d::Zero();
+      e[k] = 1e-6;
+      const double numeric = (loss(v + e, coeffs) - loss(v - e, coeffs)) / 2e-6;
+      EXPECT_NEAR(d_v[k], numeric, 1e-4 * std::max(1.0, std::abs(numeric))) << "degree " << degree;
+    }
+    const int n = (degree + 1) * (degree + 1);
+    for (int k = 0; k < 3 * n; ++k) {
+      // Y_k(dir) from the reference, with a large DC term so nothing clamps.
+      float base[48] = {}, one[48] = {};
+      base[k % 3] = one[k % 3] = 5.0f;
+      one[k] += 1.0f;
+      double out_base[3], out_one[3];
+      testing::ReferenceShColor(degree, base, v.normalized(), out_base);
+      testing::ReferenceShColor(degree, one, v.normalized(), out_one);
+      const double basis = out_one[k % 3] - out_base[k % 3];
+      const double expected = clamped[k % 3] ? 0.0 : d_rgb[k % 3] * basis;
+      EXPECT_NEAR(d_coeffs[k], expected, 1e-6);
+    }
+  }
+}
+
+TEST(QuaternionTest, RotationBackwardMatchesNumericDifferences) {
+  Rng rng(8);
+  for (int trial = 0; trial < 5; ++trial) {
+    float q[4];
+    for (float& x : q) x = static_cast<float>(rng.Normal());
+    float dR[9];
+    for (float& x : dR) x = static_cast<float>(rng.Normal());
+    float dq[4];
+    QuaternionToRotationBackward(q, dR, dq);
+    for (int k = 0; k < 4; ++k) {
+      auto loss = [&](double delta) {
+        Eigen::Quaterniond qq(q[0], q[1], q[2], q[3]);
+        double* c = &qq.w();
+        if (k > 0) c = &qq.coeffs()[k - 1];
+        *c += delta;
+        const Eigen::Matrix3d R = qq.normalized().toRotationMatrix();
+        double l = 0;
+        for (int i = 0; i < 9; ++i) l += dR[i] * R(i / 3, i % 3);
+        return l;
+      };
+      const double numeric = (loss(1e-6) - loss(-1e-6)) / 2e-6;
+      EXPECT_NEAR(dq[k], numeric, 1e-4 * std::max(1.0, std::abs(numeric)));
+    }
+  }
+}
+
+TEST(TileBinningTest, MatchesBruteForceAndSortsByDepth) {
+  Rng rng(2);
+  const int W = 100, H = 70, n = 500;
+  std::vector<TileRect> rects(n);
+  std::vector<float> depths(n);
+  const int tx = (W + 15) / 16, ty = (H + 15) / 16;
+  for (int i = 0; i < n; ++i) {
+    rects[i] = TileRectFromBox(static_cast<float>(rng.Uniform(-20, 120)), static_cast<float>(rng.Uniform(-20, 90)),
+                               static_cast<float>(rng.Uniform(0, 30)), static_cast<float>(rng.Uniform(0, 30)), tx, ty);
+    depths[i] = static_cast<float>(rng.Uniform(0.2, 10));
+  }
+  TileBins bins;
+  BinPrimitives(rects, depths.data(), W, H, &bins);
+  ASSERT_EQ(bins.tiles_x, tx);
+  ASSERT_EQ(bins.tiles_y, ty);
+  for (int tile = 0; tile < tx * ty; ++tile) {
+    std::vector<std::pair<float, uint32_t>> expected;
+    for (int i = 0; i < n; ++i) {
+      const TileRect& r = rects[i];
+      if (tile % tx >= r.x0 && tile % tx < r.x1 && tile / tx >= r.y0 && tile / tx < r.y1) expected.push_back({depths[i], i});
+    }
+    std::sort(expected.begin(), expected.end());
+    ASSERT_EQ(bins.tile_start[tile + 1] - bins.tile_start[tile], expected.size()) << tile;
+    for (size_t k = 0; k < expected.size(); ++k) ASSERT_EQ(bins.ids[bins.tile_start[tile] + k], expected[k].second);
+  }
+  // A box entirely off screen touches no tile.
+  EXPECT_TRUE(TileRectFromBox(-50, -50, 10, 10, tx, ty).empty());
+  EXPECT_TRUE(TileRectFromBox(200, 20, 10, 10, tx, ty).empty());
+}
+
+}  // namespace
+}  // namespace mgsr
