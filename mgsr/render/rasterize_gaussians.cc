@@ -4,6 +4,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+
+#include "mgsr/render/simd16.h"
 
 namespace mgsr {
 namespace {
@@ -40,11 +43,71 @@ void EnsureScratch(RasterScratch* s, int threads) {
     s->tile_data.resize(threads);
     s->tile_grad.resize(threads);
     s->grads.resize(threads);
+    s->pixel_state.resize(threads);
   }
 }
 
+
+using simd::F16;
+using simd::I16;
+
+constexpr int kTilePixels = kTileSize * kTileSize;
+static_assert(kTileSize == 16, "one tile row is one 16-lane vector");
+
+// Rows [lo, hi] (clamped to [first, last]) whose centres y + 0.5 may lie within radius r of m;
+// one row of slack on each side, the exact tests run per pixel.
+inline void BoxRange(float m, float r, int first, int last, int* lo, int* hi) {
+  *lo = std::max(first, static_cast<int>(std::floor(m - r - 0.5f)) - 1);
+  *hi = std::min(last, static_cast<int>(std::ceil(m - 0.5f + r)) + 1);
+}
+
+// Below this exponent neither chain's alpha reaches 1/255, so the pixel is skipped.
+inline float MinPower(float opacity, float ref_opacity, bool reflection) {
+  const float o = reflection ? std::max(opacity, ref_opacity) : opacity;
+  return o > 0 ? std::log(kMinAlpha / o) : 0.0f;
+}
+
+// Whether row offset dy crosses the ellipse a dx^2 + 2 b dx dy + c dy^2 <= -2 min_power at all
+// (a conservative shortcut; the per-pixel tests decide).
+inline bool RowHitsEllipse(float dy, float a, float b, float c, float min_power) {
+  const float k = -2.0f * min_power;
+  return b * b * dy * dy - a * (c * dy * dy - k) >= -1e-6f * (1.0f + k * a);
+}
+
+// One Gaussian of the tile, as the pixel loops read it.
+struct Splat {
+  float mx, my, rad, ca, cb, cc, op, rop, beta, z, ct0, ct1, ct2, cr0, cr1, cr2;
+  Splat(const float* f, int n, int j)
+      : mx(f[kMx * n + j]), my(f[kMy * n + j]), rad(f[kRad * n + j]), ca(f[kCa * n + j]), cb(f[kCb * n + j]),
+        cc(f[kCc * n + j]), op(f[kOp * n + j]), rop(f[kRefOp * n + j]), beta(f[kBeta * n + j]), z(f[kZ * n + j]),
+        ct0(f[kCt0 * n + j]), ct1(f[kCt1 * n + j]), ct2(f[kCt2 * n + j]), cr0(f[kCr0 * n + j]),
+        cr1(f[kCr1 * n + j]), cr2(f[kCr2 * n + j]) {}
+};
+
+// The exponent and the "may contribute" mask of a Gaussian over one tile row; one definition for
+// both passes so their decisions agree bit for bit. `lanes_ok` masks pixels outside the image.
+inline F16 RowPower(const Splat& s, F16 dx, float dy, float min_power, I16 lanes_ok, I16* in) {
+  const F16 power = -0.5f * (s.ca * dx * dx + s.cc * dy * dy) - s.cb * dx * dy;
+  *in = lanes_ok & (simd::Abs(dx) <= s.rad) & (power <= 0.0f) & (power >= min_power);
+  return power;
+}
+
+// Per-pixel arrays of a tile carved out of one per-thread buffer (index k = row * 16 + column).
+struct PixelArrays {
+  std::vector<float*> arrays;
+  PixelArrays(std::vector<float>* buffer, int count) {
+    buffer->resize(static_cast<size_t>(count) * kTilePixels);
+    for (int i = 0; i < count; ++i) arrays.push_back(buffer->data() + static_cast<size_t>(i) * kTilePixels);
+  }
+  float* operator[](int i) const { return arrays[i]; }
+};
+
 }  // namespace
 
+// Both passes walk a tile Gaussian by Gaussian (front to back, or back to front) and, for each,
+// the tile rows its 3-sigma square covers, 16 pixels at a time in vector registers, keeping every
+// pixel's blending state in tile-local arrays. Per pixel, the order and the decisions are those
+// of the per-pixel loop the header describes; masks replace its branches.
 void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins, const GaussianRenderOptions& o,
                         GaussianRender* out, RasterScratch* scratch) {
   const int W = o.camera.width, H = o.camera.height;
@@ -64,82 +127,107 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins, const
   EnsureScratch(scratch, threads);
   const bool refl = o.reflection;
   const float bg[3] = {o.background[0], o.background[1], o.background[2]};
+  const F16 lanes = simd::Lanes();
 
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int tile = 0; tile < bins.num_tiles(); ++tile) {
+    const int thread = omp_get_thread_num();
     const int tx = tile % bins.tiles_x, ty = tile / bins.tiles_x;
     const uint32_t begin = bins.tile_start[tile];
     const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
-    std::vector<float>& buffer = scratch->tile_data[omp_get_thread_num()];
+    std::vector<float>& buffer = scratch->tile_data[thread];
     GatherTile(p, bins.ids.data() + begin, n, &buffer);
     const float* f = buffer.data();
-    const float *mx = f + kMx * n, *my = f + kMy * n, *rad = f + kRad * n, *ca = f + kCa * n,
-                *cb = f + kCb * n, *cc = f + kCc * n, *op = f + kOp * n, *rop = f + kRefOp * n,
-                *beta = f + kBeta * n, *zz = f + kZ * n;
-    const float* ct[3] = {f + kCt0 * n, f + kCt1 * n, f + kCt2 * n};
-    const float* cr[3] = {f + kCr0 * n, f + kCr1 * n, f + kCr2 * n};
-    const int x_end = std::min(W, (tx + 1) * kTileSize), y_end = std::min(H, (ty + 1) * kTileSize);
-    for (int y = ty * kTileSize; y < y_end; ++y) {
-      for (int x = tx * kTileSize; x < x_end; ++x) {
-        const float px = x + 0.5f, py = y + 0.5f;
-        float T = 1.0f, Tr = 1.0f;
-        float Ct[3] = {0, 0, 0}, Cr[3] = {0, 0, 0};
-        float Wsum = 0, Dsum = 0;
-        bool done_t = false, done_r = !refl;
-        uint32_t last_t = 0, last_r = 0;
-        for (int j = 0; j < n && !(done_t && done_r); ++j) {
-          const float dx = px - mx[j], dy = py - my[j];
-          if (std::abs(dx) > rad[j] || std::abs(dy) > rad[j]) continue;
-          const float power = -0.5f * (ca[j] * dx * dx + cc[j] * dy * dy) - cb[j] * dx * dy;
-          if (power > 0.0f) continue;
-          const float G = std::exp(power);
-          if (!done_t) {
-            const float a = std::min(kMaxAlpha, op[j] * G);
-            if (a >= kMinAlpha) {
-              const float test = T * (1.0f - a);
-              if (test < kMinTransmittance) {
-                done_t = true;
-              } else {
-                const float w = a * T;
-                for (int c = 0; c < 3; ++c) Ct[c] += w * ct[c][j];
-                Wsum += w * beta[j];
-                Dsum += w * zz[j];
-                T = test;
-                last_t = j + 1;
-              }
-            }
-          }
-          if (!done_r) {
-            const float a = std::min(kMaxAlpha, rop[j] * G);
-            if (a >= kMinAlpha) {
-              const float test = Tr * (1.0f - a);
-              if (test < kMinTransmittance) {
-                done_r = true;
-              } else {
-                const float w = a * Tr;
-                for (int c = 0; c < 3; ++c) Cr[c] += w * cr[c][j];
-                Tr = test;
-                last_r = j + 1;
-              }
-            }
-          }
-        }
+    const int x0 = tx * kTileSize, y0 = ty * kTileSize;
+    const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
+    const I16 lanes_ok = lanes < static_cast<float>(x_end - x0);
+    const F16 px = lanes + (x0 + 0.5f);
+
+    // T, Tr, colours, W and D sums, "still blending" flags and 1 + index of the last blended
+    // Gaussian (as float, exact below 2^24), per pixel.
+    enum { aT, aTr, aCt0, aCt1, aCt2, aCr0, aCr1, aCr2, aWs, aDs, aLiveT, aLiveR, aLastT, aLastR, kArrays };
+    const PixelArrays st(&scratch->pixel_state[thread], kArrays);
+    for (int k = 0; k < kTilePixels; ++k) {
+      st[aT][k] = st[aTr][k] = 1.0f;
+      for (int a : {aCt0, aCt1, aCt2, aCr0, aCr1, aCr2, aWs, aDs, aLastT, aLastR}) st[a][k] = 0.0f;
+      st[aLiveT][k] = 1.0f;
+      st[aLiveR][k] = refl ? 1.0f : 0.0f;
+    }
+    for (int j = 0; j < n; ++j) {
+      // Every 32 Gaussians, stop the tile once all of its pixels are saturated.
+      if ((j & 31) == 31) {
+        float any = 0;
+        for (int k = 0; k < kTilePixels; ++k) any += st[aLiveT][k] + st[aLiveR][k];
+        if (any == 0) break;
+      }
+      const Splat s(f, n, j);
+      const float min_power = MinPower(s.op, s.rop, refl);
+      if (!(min_power < 0.0f)) continue;  // too transparent to reach 1/255 anywhere
+      int ya, yb;
+      BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
+      const float jp1 = static_cast<float>(j + 1);
+      const F16 dx = px - s.mx;
+      for (int y = ya; y <= yb; ++y) {
+        const float dy = y + 0.5f - s.my;
+        if (std::abs(dy) > s.rad || !RowHitsEllipse(dy, s.ca, s.cb, s.cc, min_power)) continue;
+        const int k = (y - y0) * kTileSize;
+        I16 in;
+        const F16 power = RowPower(s, dx, dy, min_power, lanes_ok, &in);
+        const F16 G = simd::Exp(simd::Max(power, simd::Splat(-80.0f)));
+        // Transmitted chain.
+        F16 T = simd::Load(st[aT] + k), live = simd::Load(st[aLiveT] + k);
+        const F16 at = simd::Min(s.op * G, simd::Splat(kMaxAlpha));
+        const I16 vt = in & (live > 0.5f) & (at >= kMinAlpha);
+        const F16 test_t = T * (1.0f - at);
+        const I16 term_t = vt & (test_t < kMinTransmittance);
+        const I16 blend_t = vt & ~term_t;
+        const F16 wt = simd::Masked(blend_t, at * T);
+        simd::Store(st[aCt0] + k, simd::Load(st[aCt0] + k) + wt * s.ct0);
+        simd::Store(st[aCt1] + k, simd::Load(st[aCt1] + k) + wt * s.ct1);
+        simd::Store(st[aCt2] + k, simd::Load(st[aCt2] + k) + wt * s.ct2);
+        simd::Store(st[aWs] + k, simd::Load(st[aWs] + k) + wt * s.beta);
+        simd::Store(st[aDs] + k, simd::Load(st[aDs] + k) + wt * s.z);
+        simd::Store(st[aT] + k, simd::Select(blend_t, test_t, T));
+        simd::Store(st[aLastT] + k, simd::Select(blend_t, simd::Splat(jp1), simd::Load(st[aLastT] + k)));
+        simd::Store(st[aLiveT] + k, simd::Select(term_t, F16{}, live));
+        if (!refl) continue;
+        // Reflected chain.
+        const F16 Tr = simd::Load(st[aTr] + k), live_r = simd::Load(st[aLiveR] + k);
+        const F16 ar = simd::Min(s.rop * G, simd::Splat(kMaxAlpha));
+        const I16 vr = in & (live_r > 0.5f) & (ar >= kMinAlpha);
+        const F16 test_r = Tr * (1.0f - ar);
+        const I16 term_r = vr & (test_r < kMinTransmittance);
+        const I16 blend_r = vr & ~term_r;
+        const F16 wr = simd::Masked(blend_r, ar * Tr);
+        simd::Store(st[aCr0] + k, simd::Load(st[aCr0] + k) + wr * s.cr0);
+        simd::Store(st[aCr1] + k, simd::Load(st[aCr1] + k) + wr * s.cr1);
+        simd::Store(st[aCr2] + k, simd::Load(st[aCr2] + k) + wr * s.cr2);
+        simd::Store(st[aTr] + k, simd::Select(blend_r, test_r, Tr));
+        simd::Store(st[aLastR] + k, simd::Select(blend_r, simd::Splat(jp1), simd::Load(st[aLastR] + k)));
+        simd::Store(st[aLiveR] + k, simd::Select(term_r, F16{}, live_r));
+      }
+    }
+    for (int y = y0; y < y_end; ++y) {
+      for (int x = x0; x < x_end; ++x) {
+        const int k = (y - y0) * kTileSize + (x - x0);
         const size_t pix = static_cast<size_t>(y) * W + x;
+        const float T = st[aT][k];
         const float A = 1.0f - T;
+        const float ct[3] = {st[aCt0][k], st[aCt1][k], st[aCt2][k]}, cr[3] = {st[aCr0][k], st[aCr1][k], st[aCr2][k]};
         for (int c = 0; c < 3; ++c) {
-          const float tran = Ct[c] + T * bg[c];
+          const float tran = ct[c] + T * bg[c];
           out->tran.plane(c)[pix] = tran;
-          out->ref.plane(c)[pix] = Cr[c];
-          out->color.plane(c)[pix] = tran + Wsum * Cr[c];
+          out->ref.plane(c)[pix] = cr[c];
+          out->color.plane(c)[pix] = tran + st[aWs][k] * cr[c];
         }
-        out->weight.plane(0)[pix] = Wsum;
+        out->weight.plane(0)[pix] = st[aWs][k];
         out->alpha.plane(0)[pix] = A;
-        out->depth.plane(0)[pix] = A >= kMinDepthAlpha ? Dsum / A : 0.0f;
+        out->depth.plane(0)[pix] = A >= kMinDepthAlpha ? st[aDs][k] / A : 0.0f;
         out->final_t[pix] = T;
-        out->final_tr[pix] = Tr;
-        out->depth_sum[pix] = Dsum;
-        out->last_t[pix] = last_t;
-        out->last_r[pix] = last_r;
+        out->final_tr[pix] = st[aTr][k];
+        out->depth_sum[pix] = st[aDs][k];
+        out->last_t[pix] = static_cast<uint32_t>(st[aLastT][k]);
+        out->last_r[pix] = static_cast<uint32_t>(st[aLastR][k]);
       }
     }
   }
@@ -154,6 +242,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
   EnsureScratch(scratch, threads);
   const bool refl = o.reflection;
   const float bg[3] = {o.background[0], o.background[1], o.background[2]};
+  const F16 lanes = simd::Lanes();
 
 #pragma omp parallel num_threads(threads)
   {
@@ -171,105 +260,152 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
       std::vector<float>& tg = scratch->tile_grad[thread];
       tg.assign(static_cast<size_t>(n) * kGradStride, 0.0f);
       const float* f = buffer.data();
-      const float *mx = f + kMx * n, *my = f + kMy * n, *rad = f + kRad * n, *ca = f + kCa * n,
-                  *cb = f + kCb * n, *cc = f + kCc * n, *op = f + kOp * n, *rop = f + kRefOp * n,
-                  *beta = f + kBeta * n, *zz = f + kZ * n;
-      const float* ct[3] = {f + kCt0 * n, f + kCt1 * n, f + kCt2 * n};
-      const float* cr[3] = {f + kCr0 * n, f + kCr1 * n, f + kCr2 * n};
-      const int x_end = std::min(W, (tx + 1) * kTileSize), y_end = std::min(H, (ty + 1) * kTileSize);
-      for (int y = ty * kTileSize; y < y_end; ++y) {
-        for (int x = tx * kTileSize; x < x_end; ++x) {
+      const int x0 = tx * kTileSize, y0 = ty * kTileSize;
+      const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
+      const I16 lanes_ok = lanes < static_cast<float>(x_end - x0);
+      const F16 px = lanes + (x0 + 0.5f);
+
+      // Per-pixel state, walking back to front: transmittances, "behind" accumulators, the
+      // upstream gradients folded onto the chains (C = C_tran + W C_ref, D = Dsum / A) and the
+      // last-blended indices. Pixels outside the image keep last = 0 and take no part.
+      enum { aT, aTr, aSt0, aSt1, aSt2, aSr0, aSr1, aSr2, aSb, aSz, aGt0, aGt1, aGt2, aGr0, aGr1, aGr2, aGW, aGN,
+             aGA, aTfin, aLastT, aLastR, kArrays };
+      const PixelArrays st(&scratch->pixel_state[thread], kArrays);
+      for (int a = 0; a < kArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
+      int max_last = 0;
+      for (int y = y0; y < y_end; ++y) {
+        for (int x = x0; x < x_end; ++x) {
+          const int k = (y - y0) * kTileSize + (x - x0);
           const size_t pix = static_cast<size_t>(y) * W + x;
-          // Upstream gradients, folded onto the chains: C = C_tran + W C_ref, D = Dsum / A.
-          float gt[3], gr[3], gW = 0, gN = 0, gA = 0;
           const float Wv = r.weight.plane(0)[pix];
+          float gtc[3], w_grad = 0;
           for (int c = 0; c < 3; ++c) {
             const float gc = g.color.empty() ? 0.0f : g.color.plane(c)[pix];
-            gt[c] = gc + (g.tran.empty() ? 0.0f : g.tran.plane(c)[pix]);
-            gr[c] = Wv * gc + (g.ref.empty() ? 0.0f : g.ref.plane(c)[pix]);
-            gW += gc * r.ref.plane(c)[pix];
+            gtc[c] = gc + (g.tran.empty() ? 0.0f : g.tran.plane(c)[pix]);
+            st[aGr0 + c][k] = Wv * gc + (g.ref.empty() ? 0.0f : g.ref.plane(c)[pix]);
+            st[aGt0 + c][k] = gtc[c];
+            w_grad += gc * r.ref.plane(c)[pix];
           }
-          if (!g.weight.empty()) gW += g.weight.plane(0)[pix];
-          if (!g.alpha.empty()) gA += g.alpha.plane(0)[pix];
+          st[aGW][k] = w_grad + (g.weight.empty() ? 0.0f : g.weight.plane(0)[pix]);
+          float a_grad = g.alpha.empty() ? 0.0f : g.alpha.plane(0)[pix];
+          float n_grad = 0;
           const float A = 1.0f - r.final_t[pix];
           if (!g.depth.empty() && A >= kMinDepthAlpha) {
             const float gD = g.depth.plane(0)[pix];
-            gN = gD / A;
-            gA -= gD * r.depth_sum[pix] / (A * A);
+            n_grad = gD / A;
+            a_grad -= gD * r.depth_sum[pix] / (A * A);
           }
-          const float T_final = r.final_t[pix];
-          const float bg_dot = bg[0] * gt[0] + bg[1] * gt[1] + bg[2] * gt[2];
-          const uint32_t last_t = r.last_t[pix], last_r = refl ? r.last_r[pix] : 0;
-          float T = T_final, Tr = r.final_tr[pix];
-          float St[3] = {0, 0, 0}, Sr[3] = {0, 0, 0}, Sbeta = 0, Sz = 0;  // "behind" accumulators
-          const float px = x + 0.5f, py = y + 0.5f;
-          for (int j = static_cast<int>(std::max(last_t, last_r)) - 1; j >= 0; --j) {
-            const float dx = px - mx[j], dy = py - my[j];
-            if (std::abs(dx) > rad[j] || std::abs(dy) > rad[j]) continue;
-            const float power = -0.5f * (ca[j] * dx * dx + cc[j] * dy * dy) - cb[j] * dx * dy;
-            if (power > 0.0f) continue;
-            const float G = std::exp(power);
-            float* gj = tg.data() + static_cast<size_t>(j) * kGradStride;
-            float dG = 0;
-            if (j < static_cast<int>(last_t)) {
-              const float raw = op[j] * G;
-              const float a = std::min(kMaxAlpha, raw);
-              if (a >= kMinAlpha) {
-                T /= (1.0f - a);
-                const float w = a * T;
-                float da = 0;
-                for (int c = 0; c < 3; ++c) {
-                  gj[gCt0 + c] += w * gt[c];
-                  da += (ct[c][j] - St[c]) * gt[c];
-                  St[c] = a * ct[c][j] + (1.0f - a) * St[c];
-                }
-                gj[gBeta] += w * gW;
-                gj[gZ] += w * gN;
-                da += (beta[j] - Sbeta) * gW + (zz[j] - Sz) * gN;
-                da *= T;
-                da += (T_final / (1.0f - a)) * (gA - bg_dot);
-                Sbeta = a * beta[j] + (1.0f - a) * Sbeta;
-                Sz = a * zz[j] + (1.0f - a) * Sz;
-                if (raw < kMaxAlpha) {  // the clamp at 0.99 has zero slope
-                  gj[gOp] += G * da;
-                  dG += op[j] * da;
-                }
-              }
-            }
-            if (j < static_cast<int>(last_r)) {
-              const float raw = rop[j] * G;
-              const float a = std::min(kMaxAlpha, raw);
-              if (a >= kMinAlpha) {
-                Tr /= (1.0f - a);
-                const float w = a * Tr;
-                float da = 0;
-                for (int c = 0; c < 3; ++c) {
-                  gj[gCr0 + c] += w * gr[c];
-                  da += (cr[c][j] - Sr[c]) * gr[c];
-                  Sr[c] = a * cr[c][j] + (1.0f - a) * Sr[c];
-                }
-                da *= Tr;
-                if (raw < kMaxAlpha) {
-                  gj[gRefOp] += G * da;
-                  dG += rop[j] * da;
-                }
-              }
-            }
-            const float dpower = G * dG;
-            gj[gMx] += dpower * (ca[j] * dx + cb[j] * dy);
-            gj[gMy] += dpower * (cb[j] * dx + cc[j] * dy);
-            gj[gCa] += -0.5f * dpower * dx * dx;
-            gj[gCb] += -dpower * dx * dy;
-            gj[gCc] += -0.5f * dpower * dy * dy;
-          }
+          // The background and A terms share d T_N / d a_i = -T_N / (1 - a_i).
+          st[aGA][k] = a_grad - (bg[0] * gtc[0] + bg[1] * gtc[1] + bg[2] * gtc[2]);
+          st[aGN][k] = n_grad;
+          st[aT][k] = st[aTfin][k] = r.final_t[pix];
+          st[aTr][k] = r.final_tr[pix];
+          const int lt = static_cast<int>(r.last_t[pix]), lr = refl ? static_cast<int>(r.last_r[pix]) : 0;
+          st[aLastT][k] = static_cast<float>(lt);
+          st[aLastR][k] = static_cast<float>(lr);
+          max_last = std::max(max_last, std::max(lt, lr));
         }
+      }
+      for (int j = max_last - 1; j >= 0; --j) {
+        const Splat s(f, n, j);
+        const float min_power = MinPower(s.op, s.rop, refl);
+        if (!(min_power < 0.0f)) continue;
+        int ya, yb;
+        BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
+        const float jf = static_cast<float>(j);
+        const F16 dx = px - s.mx;
+        F16 g_mx{}, g_my{}, g_ca{}, g_cb{}, g_cc{}, g_op{}, g_rop{}, g_beta{}, g_z{};
+        F16 g_ct0{}, g_ct1{}, g_ct2{}, g_cr0{}, g_cr1{}, g_cr2{};
+        for (int y = ya; y <= yb; ++y) {
+          const float dy = y + 0.5f - s.my;
+          if (std::abs(dy) > s.rad || !RowHitsEllipse(dy, s.ca, s.cb, s.cc, min_power)) continue;
+          const int k = (y - y0) * kTileSize;
+          I16 in;
+          const F16 power = RowPower(s, dx, dy, min_power, lanes_ok, &in);
+          const F16 G = simd::Exp(simd::Max(power, simd::Splat(-80.0f)));
+          // Transmitted chain: recover T_j = T_{j+1} / (1 - a_j), then the gradients.
+          const F16 raw_t = s.op * G;
+          const F16 at = simd::Min(raw_t, simd::Splat(kMaxAlpha));
+          const I16 vt = in & (jf < simd::Load(st[aLastT] + k)) & (at >= kMinAlpha);
+          const F16 inv_t = 1.0f / (1.0f - at);
+          const F16 T = simd::Select(vt, simd::Load(st[aT] + k) * inv_t, simd::Load(st[aT] + k));
+          simd::Store(st[aT] + k, T);
+          const F16 wt = simd::Masked(vt, at * T);
+          const F16 gt0 = simd::Load(st[aGt0] + k), gt1 = simd::Load(st[aGt1] + k), gt2 = simd::Load(st[aGt2] + k);
+          const F16 gW = simd::Load(st[aGW] + k), gN = simd::Load(st[aGN] + k);
+          g_ct0 += wt * gt0;
+          g_ct1 += wt * gt1;
+          g_ct2 += wt * gt2;
+          g_beta += wt * gW;
+          g_z += wt * gN;
+          const F16 St0 = simd::Load(st[aSt0] + k), St1 = simd::Load(st[aSt1] + k), St2 = simd::Load(st[aSt2] + k);
+          const F16 Sb = simd::Load(st[aSb] + k), Sz = simd::Load(st[aSz] + k);
+          F16 da_t = (s.ct0 - St0) * gt0 + (s.ct1 - St1) * gt1 + (s.ct2 - St2) * gt2 + (s.beta - Sb) * gW +
+                     (s.z - Sz) * gN;
+          da_t = da_t * T + simd::Load(st[aTfin] + k) * inv_t * simd::Load(st[aGA] + k);
+          const F16 keep_t = 1.0f - at;
+          simd::Store(st[aSt0] + k, simd::Select(vt, at * s.ct0 + keep_t * St0, St0));
+          simd::Store(st[aSt1] + k, simd::Select(vt, at * s.ct1 + keep_t * St1, St1));
+          simd::Store(st[aSt2] + k, simd::Select(vt, at * s.ct2 + keep_t * St2, St2));
+          simd::Store(st[aSb] + k, simd::Select(vt, at * s.beta + keep_t * Sb, Sb));
+          simd::Store(st[aSz] + k, simd::Select(vt, at * s.z + keep_t * Sz, Sz));
+          const I16 slope_t = vt & (raw_t < kMaxAlpha);  // the clamp at 0.99 has zero slope
+          g_op += simd::Masked(slope_t, G * da_t);
+          F16 dG = simd::Masked(slope_t, s.op * da_t);
+          if (refl) {
+            // Reflected chain.
+            const F16 raw_r = s.rop * G;
+            const F16 ar = simd::Min(raw_r, simd::Splat(kMaxAlpha));
+            const I16 vr = in & (jf < simd::Load(st[aLastR] + k)) & (ar >= kMinAlpha);
+            const F16 inv_r = 1.0f / (1.0f - ar);
+            const F16 Tr = simd::Select(vr, simd::Load(st[aTr] + k) * inv_r, simd::Load(st[aTr] + k));
+            simd::Store(st[aTr] + k, Tr);
+            const F16 wr = simd::Masked(vr, ar * Tr);
+            const F16 gr0 = simd::Load(st[aGr0] + k), gr1 = simd::Load(st[aGr1] + k), gr2 = simd::Load(st[aGr2] + k);
+            g_cr0 += wr * gr0;
+            g_cr1 += wr * gr1;
+            g_cr2 += wr * gr2;
+            const F16 Sr0 = simd::Load(st[aSr0] + k), Sr1 = simd::Load(st[aSr1] + k), Sr2 = simd::Load(st[aSr2] + k);
+            const F16 da_r = ((s.cr0 - Sr0) * gr0 + (s.cr1 - Sr1) * gr1 + (s.cr2 - Sr2) * gr2) * Tr;
+            const F16 keep_r = 1.0f - ar;
+            simd::Store(st[aSr0] + k, simd::Select(vr, ar * s.cr0 + keep_r * Sr0, Sr0));
+            simd::Store(st[aSr1] + k, simd::Select(vr, ar * s.cr1 + keep_r * Sr1, Sr1));
+            simd::Store(st[aSr2] + k, simd::Select(vr, ar * s.cr2 + keep_r * Sr2, Sr2));
+            const I16 slope_r = vr & (raw_r < kMaxAlpha);
+            g_rop += simd::Masked(slope_r, G * da_r);
+            dG += simd::Masked(slope_r, s.rop * da_r);
+          }
+          // Through G = exp(power) to the conic and the screen mean.
+          const F16 dpower = G * dG;
+          g_mx += dpower * (s.ca * dx + s.cb * dy);
+          g_my += dpower * (s.cb * dx + s.cc * dy);
+          g_ca += -0.5f * dpower * dx * dx;
+          g_cb += -dpower * dx * dy;
+          g_cc += -0.5f * dpower * dy * dy;
+        }
+        float* dst = tg.data() + static_cast<size_t>(j) * kGradStride;
+        dst[gMx] = simd::Sum(g_mx);
+        dst[gMy] = simd::Sum(g_my);
+        dst[gCa] = simd::Sum(g_ca);
+        dst[gCb] = simd::Sum(g_cb);
+        dst[gCc] = simd::Sum(g_cc);
+        dst[gOp] = simd::Sum(g_op);
+        dst[gRefOp] = simd::Sum(g_rop);
+        dst[gBeta] = simd::Sum(g_beta);
+        dst[gZ] = simd::Sum(g_z);
+        dst[gCt0] = simd::Sum(g_ct0);
+        dst[gCt1] = simd::Sum(g_ct1);
+        dst[gCt2] = simd::Sum(g_ct2);
+        dst[gCr0] = simd::Sum(g_cr0);
+        dst[gCr1] = simd::Sum(g_cr1);
+        dst[gCr2] = simd::Sum(g_cr2);
       }
       // Scatter this tile's gradients to the thread's per-Gaussian accumulators.
       const uint32_t* ids = bins.ids.data() + begin;
-      for (int j = 0; j < n; ++j) {
+      for (int j = 0; j < max_last; ++j) {
         float* dst = acc.data() + static_cast<size_t>(ids[j]) * kGradStride;
         const float* src = tg.data() + static_cast<size_t>(j) * kGradStride;
-        for (int k = 0; k < kGradStride; ++k) dst[k] += src[k];
+        for (int q = 0; q < kGradStride; ++q) dst[q] += src[q];
       }
     }
   }

@@ -1,0 +1,41 @@
+// Object-like benchmark scenes: primitives spread over a sphere of radius 1 (a shell), seen from
+// distance 3, with scales matched to the spacing of the points, as a trained object model has.
+#pragma once
+
+#include <cmath>
+
+#include "mgsr/core/camera.h"
+#include "mgsr/core/rng.h"
+#include "mgsr/model/gaussian_model.h"
+
+namespace mgsr::bench {
+
+inline Camera ShellCamera(int width) {
+  const double fx = width / (2 * std::tan(0.5 * 0.8));  // 46 degree field of view
+  return LookAtCamera({0.4, -2.9, 0.6}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), width, width, fx, fx);
+}
+
+inline GaussianModel ShellGaussians(int count, uint64_t seed) {
+  Rng rng(seed);
+  GaussianModel m;
+  m.max_sh_degree = 3;
+  m.Resize(count);
+  const double spacing = std::sqrt(4 * M_PI / count);
+  for (int i = 0; i < count; ++i) {
+    Eigen::Vector3d p(rng.Normal(), rng.Normal(), rng.Normal());
+    p = p.normalized() * (1.0 + rng.Normal(0, 0.01));
+    for (int k = 0; k < 3; ++k) m.means[3 * i + k] = static_cast<float>(p[k]);
+    m.log_scales[3 * i] = static_cast<float>(std::log(spacing * rng.Uniform(0.7, 1.5)));
+    m.log_scales[3 * i + 1] = static_cast<float>(std::log(spacing * rng.Uniform(0.7, 1.5)));
+    m.log_scales[3 * i + 2] = static_cast<float>(std::log(spacing * 0.2));
+    for (int k = 0; k < 4; ++k) m.quats[4 * i + k] = static_cast<float>(rng.Normal());
+    m.opacity_logits[i] = static_cast<float>(rng.Uniform(0.0, 3.0));
+    m.ref_opacity_logits[i] = static_cast<float>(rng.Uniform(-3.0, 0.0));
+    m.beta_logits[i] = static_cast<float>(rng.Uniform(-3.0, 0.0));
+  }
+  for (float& v : m.sh) v = static_cast<float>(rng.Normal(0, 0.2));
+  for (float& v : m.ref_sh) v = static_cast<float>(rng.Normal(0, 0.2));
+  return m;
+}
+
+}  // namespace mgsr::bench
