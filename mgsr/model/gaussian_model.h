@@ -7,6 +7,8 @@
 #include <cstddef>
 #include <vector>
 
+#include "mgsr/model/param_block.h"
+
 namespace mgsr {
 
 // Number of SH coefficients per colour channel for degree d.
@@ -26,6 +28,12 @@ struct GaussianModel {
   size_t size() const { return opacity_logits.size(); }
   int sh_coeffs() const { return NumShCoeffs(max_sh_degree); }
   void Resize(size_t n);
+
+  // Every parameter block, in a fixed order (the optimiser and the row operations use it).
+  std::vector<ParamBlock> Blocks();
+  // Density-control row operations (all blocks together).
+  void KeepRows(const std::vector<uint8_t>& keep) { mgsr::KeepRows(Blocks(), keep); }
+  void AppendCopies(const std::vector<int>& rows) { mgsr::AppendRowsFrom(Blocks(), Blocks(), rows); }
 };
 
 }  // namespace mgsr

@@ -11,3 +11,15 @@ void SurfelModel::Resize(size_t n) {
 }
 
 }  // namespace mgsr
+
+namespace mgsr {
+
+std::vector<ParamBlock> SurfelModel::Blocks() {
+  return {{"means", &means, 3},
+          {"log_scales", &log_scales, 2},
+          {"quats", &quats, 4},
+          {"opacity_logits", &opacity_logits, 1},
+          {"sh", &sh, sh_coeffs() * 3}};
+}
+
+}  // namespace mgsr

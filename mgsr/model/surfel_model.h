@@ -20,6 +20,10 @@ struct SurfelModel {
   size_t size() const { return opacity_logits.size(); }
   int sh_coeffs() const { return NumShCoeffs(max_sh_degree); }
   void Resize(size_t n);
+
+  std::vector<ParamBlock> Blocks();
+  void KeepRows(const std::vector<uint8_t>& keep) { mgsr::KeepRows(Blocks(), keep); }
+  void AppendCopies(const std::vector<int>& rows) { mgsr::AppendRowsFrom(Blocks(), Blocks(), rows); }
 };
 
 }  // namespace mgsr

@@ -79,11 +79,17 @@ void ProjectedGaussiansGrad::ResizeAndZero(size_t n) {
 void GaussianGradients::ResizeAndZero(const GaussianModel& model) {
   params.max_sh_degree = model.max_sh_degree;
   params.Resize(model.size());
-  for (auto* v : {&params.means, &params.log_scales, &params.quats, &params.opacity_logits, &params.sh,
-                  &params.ref_sh, &params.ref_opacity_logits, &params.beta_logits}) {
-    std::fill(v->begin(), v->end(), 0.0f);
-  }
+  for (const ParamBlock& b : params.Blocks()) std::fill(b.data->begin(), b.data->end(), 0.0f);
   mean2d.assign(2 * model.size(), 0.0f);
+}
+
+void ScreenGradientNorms(const GaussianGradients& grads, int width, int height, std::vector<float>* norms) {
+  const size_t n = grads.mean2d.size() / 2;
+  norms->resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    const float gx = grads.mean2d[2 * i] * 0.5f * width, gy = grads.mean2d[2 * i + 1] * 0.5f * height;
+    (*norms)[i] = std::sqrt(gx * gx + gy * gy);
+  }
 }
 
 void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, bool reflection,

@@ -173,6 +173,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins, const
         const int k = (y - y0) * kTileSize;
         I16 in;
         const F16 power = RowPower(s, dx, dy, min_power, lanes_ok, &in);
+        if (!simd::Any(in)) continue;
         const F16 G = simd::Exp(simd::Max(power, simd::Splat(-80.0f)));
         // Transmitted chain.
         F16 T = simd::Load(st[aT] + k), live = simd::Load(st[aLiveT] + k);
@@ -322,6 +323,9 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
           const int k = (y - y0) * kTileSize;
           I16 in;
           const F16 power = RowPower(s, dx, dy, min_power, lanes_ok, &in);
+          // Only pixels that blended this Gaussian (j < last) take part.
+          in &= (jf < simd::Load(st[aLastT] + k)) | (jf < simd::Load(st[aLastR] + k));
+          if (!simd::Any(in)) continue;
           const F16 G = simd::Exp(simd::Max(power, simd::Splat(-80.0f)));
           // Transmitted chain: recover T_j = T_{j+1} / (1 - a_j), then the gradients.
           const F16 raw_t = s.op * G;

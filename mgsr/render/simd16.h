@@ -25,6 +25,12 @@ inline F16 Max(F16 a, F16 b) { return a > b ? a : b; }
 inline F16 Abs(F16 a) { return a < 0.0f ? -a : a; }
 inline F16 Masked(I16 mask, F16 a) { return mask ? a : F16{}; }
 
+inline bool Any(I16 mask) {
+  int32_t any = 0;
+  for (int i = 0; i < 16; ++i) any |= mask[i];
+  return any != 0;
+}
+
 inline float Sum(F16 v) {
   float s = 0;
   for (int i = 0; i < 16; ++i) s += v[i];

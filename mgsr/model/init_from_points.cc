@@ -1,0 +1,106 @@
+#include "mgsr/model/init_from_points.h"
+
+#include <glog/logging.h>
+
+#include <algorithm>
+#include <cmath>
+#include <nanoflann.hpp>
+
+#include "mgsr/core/rng.h"
+#include "mgsr/model/activations.h"
+
+namespace mgsr {
+namespace {
+
+struct Cloud {
+  const std::vector<Eigen::Vector3f>& pts;
+  size_t kdtree_get_point_count() const { return pts.size(); }
+  float kdtree_get_pt(size_t i, size_t d) const { return pts[i][d]; }
+  template <class B>
+  bool kdtree_get_bbox(B&) const { return false; }
+};
+using Tree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, Cloud>, Cloud, 3, size_t>;
+
+constexpr float kInitOpacity = 0.1f;
+
+}  // namespace
+
+std::vector<float> MeanSquaredNeighbourDistance(const std::vector<Eigen::Vector3f>& points, int k) {
+  std::vector<float> out(points.size(), 1e-7f);
+  if (points.size() < 2) return out;
+  Cloud cloud{points};
+  Tree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  tree.buildIndex();
+  const int want = std::min<int>(k + 1, static_cast<int>(points.size()));  // the point itself comes first
+#pragma omp parallel for schedule(static)
+  for (int64_t i = 0; i < static_cast<int64_t>(points.size()); ++i) {
+    size_t idx[16];
+    float d2[16];
+    const size_t found = tree.knnSearch(points[i].data(), want, idx, d2);
+    double sum = 0;
+    int used = 0;
+    for (size_t q = 0; q < found; ++q) {
+      if (idx[q] == static_cast<size_t>(i)) continue;
+      sum += d2[q];
+      ++used;
+      if (used == k) break;
+    }
+    out[i] = std::max(1e-7f, used > 0 ? static_cast<float>(sum / used) : 1e-7f);
+  }
+  return out;
+}
+
+void InitGaussiansFromPoints(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& colors,
+                             int max_sh_degree, GaussianModel* m) {
+  CHECK_EQ(points.size(), colors.size());
+  CHECK_LE(max_sh_degree, 3);
+  *m = GaussianModel();
+  m->max_sh_degree = max_sh_degree;
+  m->Resize(points.size());
+  std::fill(m->sh.begin(), m->sh.end(), 0.0f);
+  std::fill(m->ref_sh.begin(), m->ref_sh.end(), 0.0f);
+  const std::vector<float> d2 = MeanSquaredNeighbourDistance(points, 3);
+  const int K = m->sh_coeffs();
+  const float logit = InverseSigmoid(kInitOpacity);
+  for (size_t i = 0; i < points.size(); ++i) {
+    const float log_scale = std::log(std::sqrt(d2[i]));
+    for (int d = 0; d < 3; ++d) {
+      m->means[3 * i + d] = points[i][d];
+      m->log_scales[3 * i + d] = log_scale;
+      m->sh[i * K * 3 + d] = RgbToShDc(colors[i][d]);
+      m->ref_sh[i * K * 3 + d] = RgbToShDc(colors[i][d]);
+    }
+    m->quats[4 * i] = 1.0f;
+    m->quats[4 * i + 1] = m->quats[4 * i + 2] = m->quats[4 * i + 3] = 0.0f;
+    m->opacity_logits[i] = logit;
+    m->ref_opacity_logits[i] = logit;
+    m->beta_logits[i] = logit;
+  }
+}
+
+void InitSurfelsFromPoints(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& colors,
+                           int max_sh_degree, uint64_t seed, SurfelModel* m) {
+  CHECK_EQ(points.size(), colors.size());
+  CHECK_LE(max_sh_degree, 3);
+  *m = SurfelModel();
+  m->max_sh_degree = max_sh_degree;
+  m->Resize(points.size());
+  std::fill(m->sh.begin(), m->sh.end(), 0.0f);
+  const std::vector<float> d2 = MeanSquaredNeighbourDistance(points, 3);
+  const int K = m->sh_coeffs();
+  const float logit = InverseSigmoid(kInitOpacity);
+  Rng rng(seed);
+  for (size_t i = 0; i < points.size(); ++i) {
+    const float log_scale = std::log(std::sqrt(d2[i]));
+    for (int d = 0; d < 3; ++d) {
+      m->means[3 * i + d] = points[i][d];
+      m->sh[i * K * 3 + d] = RgbToShDc(colors[i][d]);
+    }
+    m->log_scales[2 * i] = m->log_scales[2 * i + 1] = log_scale;
+    // The reference draws U(0,1)^4 and normalises on use; same here, seeded.
+    for (int d = 0; d < 4; ++d) m->quats[4 * i + d] = static_cast<float>(rng.Uniform());
+    m->opacity_logits[i] = logit;
+  }
+}
+
+}  // namespace mgsr

@@ -1,0 +1,112 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "mgsr/model/activations.h"
+#include "mgsr/model/gaussian_model.h"
+#include "mgsr/model/init_from_points.h"
+#include "mgsr/model/surfel_model.h"
+
+namespace mgsr {
+namespace {
+
+std::vector<Eigen::Vector3f> Grid(int n, float spacing) {
+  std::vector<Eigen::Vector3f> p;
+  for (int x = 0; x < n; ++x) {
+    for (int y = 0; y < n; ++y) {
+      for (int z = 0; z < n; ++z) p.emplace_back(x * spacing, y * spacing, z * spacing);
+    }
+  }
+  return p;
+}
+
+TEST(InitFromPointsTest, NeighbourDistancesOnAGrid) {
+  const auto pts = Grid(5, 0.1f);
+  const auto d2 = MeanSquaredNeighbourDistance(pts, 3);
+  // An interior grid point has 6 neighbours at exactly the spacing.
+  const int centre = 2 * 25 + 2 * 5 + 2;
+  EXPECT_NEAR(d2[centre], 0.01f, 1e-6f);
+  // Duplicates give the floor, not zero.
+  const auto dup = MeanSquaredNeighbourDistance({{0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {0, 0, 0}}, 3);
+  EXPECT_FLOAT_EQ(dup[0], 1e-7f);
+}
+
+TEST(InitFromPointsTest, GaussiansFollowTheReference) {
+  const auto pts = Grid(4, 0.2f);
+  std::vector<Eigen::Vector3f> colors(pts.size(), Eigen::Vector3f(0.2f, 0.5f, 0.9f));
+  GaussianModel m;
+  InitGaussiansFromPoints(pts, colors, 3, &m);
+  ASSERT_EQ(m.size(), pts.size());
+  const int K = m.sh_coeffs();
+  for (size_t i = 0; i < m.size(); ++i) {
+    EXPECT_NEAR(Sigmoid(m.opacity_logits[i]), 0.1f, 1e-6f);
+    EXPECT_NEAR(Sigmoid(m.ref_opacity_logits[i]), 0.1f, 1e-6f);
+    EXPECT_NEAR(Sigmoid(m.beta_logits[i]), 0.1f, 1e-6f);
+    EXPECT_EQ(m.quats[4 * i], 1.0f);
+    // SH DC reproduces the colour: C0 * dc + 0.5.
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(kShC0 * m.sh[i * K * 3 + c] + 0.5f, colors[i][c], 1e-6f);
+      EXPECT_EQ(m.ref_sh[i * K * 3 + c], m.sh[i * K * 3 + c]);
+    }
+    for (int k = 3; k < K * 3; ++k) EXPECT_EQ(m.sh[i * K * 3 + k], 0.0f);
+    EXPECT_EQ(m.log_scales[3 * i], m.log_scales[3 * i + 2]);
+  }
+  // A corner point's 3 nearest neighbours are at the spacing.
+  EXPECT_NEAR(std::exp(m.log_scales[0]), 0.2f, 1e-5f);
+}
+
+TEST(InitFromPointsTest, SurfelsHaveSeededRandomRotations) {
+  const auto pts = Grid(3, 0.1f);
+  std::vector<Eigen::Vector3f> colors(pts.size(), Eigen::Vector3f(0.5f, 0.5f, 0.5f));
+  SurfelModel a, b, c;
+  InitSurfelsFromPoints(pts, colors, 3, 1, &a);
+  InitSurfelsFromPoints(pts, colors, 3, 1, &b);
+  InitSurfelsFromPoints(pts, colors, 3, 2, &c);
+  EXPECT_EQ(a.quats, b.quats);
+  EXPECT_NE(a.quats, c.quats);
+  EXPECT_EQ(a.log_scales.size(), 2 * pts.size());
+  EXPECT_NE(a.quats[0], a.quats[4]);
+}
+
+TEST(ParamBlockTest, BlocksCoverEveryFieldWithMatchingSizes) {
+  GaussianModel g;
+  g.max_sh_degree = 2;
+  g.Resize(7);
+  size_t floats = 0;
+  for (const ParamBlock& b : g.Blocks()) {
+    EXPECT_EQ(b.data->size(), 7u * b.width) << b.name;
+    floats += b.data->size();
+  }
+  EXPECT_EQ(floats, 7u * (3 + 3 + 4 + 1 + 27 + 27 + 1 + 1));
+  SurfelModel s;
+  s.Resize(5);
+  for (const ParamBlock& b : s.Blocks()) EXPECT_EQ(b.data->size(), 5u * b.width) << b.name;
+}
+
+TEST(ParamBlockTest, KeepAndAppendRowsMoveWholeRows) {
+  GaussianModel g;
+  g.max_sh_degree = 1;
+  g.Resize(5);
+  // Tag every value with its row.
+  for (const ParamBlock& b : g.Blocks()) {
+    for (size_t i = 0; i < b.data->size(); ++i) (*b.data)[i] = static_cast<float>(i / b.width);
+  }
+  g.KeepRows({1, 0, 1, 1, 0});
+  ASSERT_EQ(g.size(), 3u);
+  for (const ParamBlock& b : g.Blocks()) {
+    ASSERT_EQ(b.data->size(), 3u * b.width);
+    EXPECT_EQ((*b.data)[0], 0.0f) << b.name;
+    EXPECT_EQ((*b.data)[b.width], 2.0f) << b.name;
+    EXPECT_EQ((*b.data)[2 * b.width], 3.0f) << b.name;
+  }
+  g.AppendCopies({2, 0, 2});  // copies of old rows 3, 0, 3
+  ASSERT_EQ(g.size(), 6u);
+  for (const ParamBlock& b : g.Blocks()) {
+    EXPECT_EQ((*b.data)[3 * b.width], 3.0f) << b.name;
+    EXPECT_EQ((*b.data)[4 * b.width], 0.0f) << b.name;
+    EXPECT_EQ((*b.data)[5 * b.width + b.width - 1], 3.0f) << b.name;
+  }
+}
+
+}  // namespace
+}  // namespace mgsr
