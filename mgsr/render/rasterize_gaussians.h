@@ -19,6 +19,7 @@
 #include "mgsr/core/camera.h"
 #include "mgsr/core/image.h"
 #include "mgsr/render/project_gaussians.h"
+#include "mgsr/render/raster_scratch.h"
 #include "mgsr/render/tile_binning.h"
 
 namespace mgsr {
@@ -48,13 +49,6 @@ struct GaussianRenderGrad {
   Image color, tran, ref, weight, depth, alpha;
 };
 
-// Per-thread scratch of the rasterizer (reused between calls).
-struct RasterScratch {
-  std::vector<std::vector<float>> pixel_state;  // per thread: pixel state of the current tile
-  std::vector<std::vector<float>> tile_data;  // per thread: gathered Gaussians of the current tile
-  std::vector<std::vector<float>> tile_grad;  // per thread: gradients of the current tile
-  std::vector<std::vector<float>> grads;      // per thread: N x kGradStride accumulators
-};
 
 void RasterizeGaussians(const ProjectedGaussians& projected, const TileBins& bins,
                         const GaussianRenderOptions& options, GaussianRender* out, RasterScratch* scratch);

@@ -1,0 +1,211 @@
+#include "mgsr/render/project_surfels.h"
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
+
+#include "mgsr/model/activations.h"
+#include "mgsr/render/sh.h"
+
+namespace mgsr {
+namespace {
+
+using Mat3 = Eigen::Matrix<float, 3, 3, Eigen::RowMajor>;
+
+struct SurfelGeometry {
+  Mat3 R;              // columns t_u, t_v, t_w
+  float su, sv;
+  Eigen::Vector3f p;   // centre (world)
+  Mat3 A;              // R_c [s_u t_u, s_v t_v, p] + t_c e3^T
+  Mat3 M;              // K A, rows T_u, T_v, T_w
+};
+
+Mat3 Intrinsics(const Camera& cam) {
+  Mat3 K;
+  K << static_cast<float>(cam.fx), 0, static_cast<float>(cam.cx), 0, static_cast<float>(cam.fy),
+      static_cast<float>(cam.cy), 0, 0, 1;
+  return K;
+}
+
+void ComputeGeometry(const SurfelModel& m, size_t i, const Mat3& Rc, const Eigen::Vector3f& tc, const Mat3& K,
+                     SurfelGeometry* g) {
+  float q_unit[4];
+  QuaternionToRotation(&m.quats[4 * i], g->R.data(), q_unit);
+  g->su = std::exp(m.log_scales[2 * i]);
+  g->sv = std::exp(m.log_scales[2 * i + 1]);
+  g->p = Eigen::Vector3f(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
+  g->A.col(0) = Rc * (g->su * g->R.col(0));
+  g->A.col(1) = Rc * (g->sv * g->R.col(1));
+  g->A.col(2) = Rc * g->p + tc;
+  g->M = K * g->A;
+}
+
+constexpr float kCutoff2 = 9.0f;  // (3 sigma)^2
+
+}  // namespace
+
+void ProjectedSurfels::Resize(size_t n) {
+  M.resize(9 * n);
+  center.resize(2 * n);
+  radius.resize(n);
+  rects.resize(n);
+  depth.resize(n);
+  normal.resize(3 * n);
+  normal_sign.resize(n);
+  opacity.resize(n);
+  color.resize(3 * n);
+  clamp.resize(3 * n);
+  view_dir.resize(3 * n);
+}
+
+void ProjectedSurfelsGrad::ResizeAndZero(size_t n) {
+  M.assign(9 * n, 0.0f);
+  center.assign(2 * n, 0.0f);
+  normal.assign(3 * n, 0.0f);
+  opacity.assign(n, 0.0f);
+  color.assign(3 * n, 0.0f);
+}
+
+void SurfelGradients::ResizeAndZero(const SurfelModel& model) {
+  params.max_sh_degree = model.max_sh_degree;
+  params.Resize(model.size());
+  for (const ParamBlock& b : params.Blocks()) std::fill(b.data->begin(), b.data->end(), 0.0f);
+  mean2d.assign(2 * model.size(), 0.0f);
+}
+
+void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, ProjectedSurfels* out) {
+  const Eigen::Matrix3d Kd = Intrinsics(cam).cast<double>();
+  const int n = static_cast<int>(m.size());
+  out->Resize(n);
+  const Mat3 Rc = cam.R.cast<float>();
+  const Eigen::Vector3f tc = cam.t.cast<float>();
+  const Eigen::Vector3f center = cam.Center().cast<float>();
+  const Mat3 K = Intrinsics(cam);
+  const int tiles_x = (cam.width + kTileSize - 1) / kTileSize;
+  const int tiles_y = (cam.height + kTileSize - 1) / kTileSize;
+  const int Kc = m.sh_coeffs();
+  const int degree = std::min(sh_degree, m.max_sh_degree);
+  const float min_radius = 3.0f * std::sqrt(0.5f);  // 3 sigma of the low-pass filter
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    out->radius[i] = 0;
+    out->rects[i] = TileRect();
+    SurfelGeometry g;
+    ComputeGeometry(m, i, Rc, tc, K, &g);
+    const Eigen::Vector3f pv = g.A.col(2);  // view-space centre
+    out->depth[i] = pv.z();
+    if (!(pv.z() > kSurfelNear)) continue;
+    Eigen::Vector3f n_view = Rc * g.R.col(2);
+    const float cos = -pv.dot(n_view);
+    if (cos == 0.0f || !std::isfinite(cos)) continue;
+    const float sign = cos < 0 ? -1.0f : 1.0f;
+    n_view *= sign;
+    const Eigen::Vector3f Tu = g.M.row(0), Tv = g.M.row(1), Tw = g.M.row(2);
+    // Screen AABB of the projected 3-sigma disk (reference 3.2).
+    const Eigen::Vector3f t(kCutoff2, kCutoff2, -1.0f);
+    const float d = t.dot(Tw.cwiseProduct(Tw));
+    if (d == 0.0f || !std::isfinite(d)) continue;
+    const Eigen::Vector3f f = t / d;
+    const float mx = f.dot(Tu.cwiseProduct(Tw)), my = f.dot(Tv.cwiseProduct(Tw));
+    const float hx = std::sqrt(std::max(1e-4f, mx * mx - f.dot(Tu.cwiseProduct(Tu))));
+    const float hy = std::sqrt(std::max(1e-4f, my * my - f.dot(Tv.cwiseProduct(Tv))));
+    const float radius = std::ceil(std::max(std::max(hx, hy), min_radius));
+    if (!std::isfinite(mx) || !std::isfinite(my) || !std::isfinite(radius)) continue;
+    const TileRect rect = TileRectFromBox(mx, my, radius, radius, tiles_x, tiles_y);
+    if (rect.empty()) continue;
+    out->radius[i] = radius;
+    out->rects[i] = rect;
+    out->center[2 * i] = mx;
+    out->center[2 * i + 1] = my;
+    // The rows again in double, centred on m (see the header).
+    Eigen::Matrix3d Ad;
+    Ad.col(0) = cam.R * (static_cast<double>(g.su) * g.R.col(0).cast<double>());
+    Ad.col(1) = cam.R * (static_cast<double>(g.sv) * g.R.col(1).cast<double>());
+    Ad.col(2) = cam.R * g.p.cast<double>() + cam.t;
+    const Eigen::Matrix3d Md = Kd * Ad;
+    const Eigen::Vector3d rows[3] = {Md.row(0).transpose() - static_cast<double>(mx) * Md.row(2).transpose(),
+                                     Md.row(1).transpose() - static_cast<double>(my) * Md.row(2).transpose(),
+                                     Md.row(2).transpose()};
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) out->M[9 * i + 3 * r + c] = static_cast<float>(rows[r][c]);
+      out->normal[3 * i + r] = n_view[r];
+    }
+    out->normal_sign[i] = sign;
+    out->opacity[i] = Sigmoid(m.opacity_logits[i]);
+    const Eigen::Vector3f dir = (g.p - center).normalized();
+    for (int k = 0; k < 3; ++k) out->view_dir[3 * i + k] = dir[k];
+    EvalShColor(degree, &m.sh[static_cast<size_t>(i) * Kc * 3], dir.data(), &out->color[3 * i], &out->clamp[3 * i]);
+  }
+}
+
+void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degree, const ProjectedSurfels& p,
+                            const ProjectedSurfelsGrad& d, SurfelGradients* grads) {
+  const int n = static_cast<int>(m.size());
+  const Mat3 Rc = cam.R.cast<float>();
+  const Eigen::Vector3f tc = cam.t.cast<float>();
+  const Eigen::Vector3f center = cam.Center().cast<float>();
+  const Mat3 K = Intrinsics(cam);
+  const int Kc = m.sh_coeffs();
+  const int degree = std::min(sh_degree, m.max_sh_degree);
+  SurfelModel& G = grads->params;
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    if (p.radius[i] <= 0) continue;
+    SurfelGeometry g;
+    ComputeGeometry(m, i, Rc, tc, K, &g);
+    G.opacity_logits[i] += d.opacity[i] * SigmoidGradFromValue(p.opacity[i]);
+    // Colour -> SH and the view direction.
+    float d_dir[3], d_v[3];
+    EvalShColorBackward(degree, &m.sh[static_cast<size_t>(i) * Kc * 3], &p.view_dir[3 * i], &p.clamp[3 * i],
+                        &d.color[3 * i], &G.sh[static_cast<size_t>(i) * Kc * 3], d_dir);
+    const Eigen::Vector3f v = g.p - center;
+    NormalizeBackward(v.data(), d_dir, d_v);
+    Eigen::Vector3f d_p(d_v[0], d_v[1], d_v[2]);
+    // d/dM from the rasterizer, plus the screen centre m = (f.(T_u o T_w), f.(T_v o T_w)).
+    // Undo the centring T_u' = T_u - m_x T_w, T_v' = T_v - m_y T_w (m held as its own input).
+    Mat3 dM;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) dM(r, c) = d.M[9 * i + 3 * r + c];
+    }
+    const float cx = p.center[2 * i], cy = p.center[2 * i + 1];
+    const Eigen::Vector3f dTu_c = dM.row(0), dTv_c = dM.row(1);
+    const Eigen::Vector3f Tw_row = g.M.row(2);
+    dM.row(2) -= (cx * dTu_c + cy * dTv_c).transpose();
+    const float dmx = d.center[2 * i] - Tw_row.dot(dTu_c), dmy = d.center[2 * i + 1] - Tw_row.dot(dTv_c);
+    if (dmx != 0.0f || dmy != 0.0f) {
+      const Eigen::Vector3f Tu = g.M.row(0), Tv = g.M.row(1), Tw = g.M.row(2);
+      const Eigen::Vector3f t(kCutoff2, kCutoff2, -1.0f);
+      const float dd = t.dot(Tw.cwiseProduct(Tw));
+      const Eigen::Vector3f f = t / dd;
+      const float mx = f.dot(Tu.cwiseProduct(Tw)), my = f.dot(Tv.cwiseProduct(Tw));
+      dM.row(0) += dmx * f.cwiseProduct(Tw).transpose();
+      dM.row(1) += dmy * f.cwiseProduct(Tw).transpose();
+      // d m / d T_w through the numerators and through d = t . (T_w o T_w).
+      const Eigen::Vector3f dTw = dmx * (f.cwiseProduct(Tu) - 2.0f * mx * f.cwiseProduct(Tw)) +
+                                  dmy * (f.cwiseProduct(Tv) - 2.0f * my * f.cwiseProduct(Tw));
+      dM.row(2) += dTw.transpose();
+    }
+    // Densification statistic (reference 3.8(5)): the centre's x_num / y_num gradients scaled by
+    // the depth, in pixels.
+    grads->mean2d[2 * i] = dM(0, 2) * g.M(2, 2);
+    grads->mean2d[2 * i + 1] = dM(1, 2) * g.M(2, 2);
+    // M = K A: dA = K^T dM; A's columns are R_c s_u t_u, R_c s_v t_v, R_c p + t_c.
+    const Mat3 dA = K.transpose() * dM;
+    Mat3 dR = Mat3::Zero();
+    const Eigen::Vector3f du = Rc.transpose() * dA.col(0), dv = Rc.transpose() * dA.col(1);
+    G.log_scales[2 * i] += g.R.col(0).dot(du) * g.su;
+    G.log_scales[2 * i + 1] += g.R.col(1).dot(dv) * g.sv;
+    dR.col(0) = g.su * du;
+    dR.col(1) = g.sv * dv;
+    d_p += Rc.transpose() * dA.col(2);
+    // Normal: n = sign R_c t_w.
+    const Eigen::Vector3f dn(d.normal[3 * i], d.normal[3 * i + 1], d.normal[3 * i + 2]);
+    dR.col(2) = p.normal_sign[i] * (Rc.transpose() * dn);
+    float dq[4];
+    QuaternionToRotationBackward(&m.quats[4 * i], dR.data(), dq);
+    for (int k = 0; k < 4; ++k) G.quats[4 * i + k] += dq[k];
+    for (int k = 0; k < 3; ++k) G.means[3 * i + k] += d_p[k];
+  }
+}
+
+}  // namespace mgsr

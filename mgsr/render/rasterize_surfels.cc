@@ -1,0 +1,467 @@
+#include "mgsr/render/rasterize_surfels.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "mgsr/render/simd16.h"
+
+namespace mgsr {
+namespace {
+
+using simd::F16;
+using simd::I16;
+
+constexpr int kTilePixels = kTileSize * kTileSize;
+
+// Gathered per-tile fields (structure of arrays over the tile's surfels).
+enum Field {
+  kTu0, kTu1, kTu2, kTv0, kTv1, kTv2, kTw0, kTw1, kTw2, kMx, kMy, kRad, kOp, kN0, kN1, kN2, kC0, kC1, kC2, kNumFields
+};
+// Gradient fields per surfel.
+enum GradField {
+  gTu0, gTu1, gTu2, gTv0, gTv1, gTv2, gTw0, gTw1, gTw2, gMx, gMy, gOp, gN0, gN1, gN2, gC0, gC1, gC2, kGradStride
+};
+
+void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, std::vector<float>* buffer) {
+  buffer->resize(static_cast<size_t>(kNumFields) * n);
+  float* f = buffer->data();
+  for (int j = 0; j < n; ++j) {
+    const uint32_t g = ids[j];
+    for (int q = 0; q < 9; ++q) f[(kTu0 + q) * n + j] = p.M[9 * g + q];
+    f[kMx * n + j] = p.center[2 * g];
+    f[kMy * n + j] = p.center[2 * g + 1];
+    f[kRad * n + j] = p.radius[g];
+    f[kOp * n + j] = p.opacity[g];
+    for (int c = 0; c < 3; ++c) {
+      f[(kN0 + c) * n + j] = p.normal[3 * g + c];
+      f[(kC0 + c) * n + j] = p.color[3 * g + c];
+    }
+  }
+}
+
+void EnsureScratch(RasterScratch* s, int threads) {
+  if (static_cast<int>(s->tile_data.size()) < threads) {
+    s->tile_data.resize(threads);
+    s->tile_grad.resize(threads);
+    s->grads.resize(threads);
+    s->pixel_state.resize(threads);
+  }
+}
+
+inline void BoxRange(float m, float r, int first, int last, int* lo, int* hi) {
+  *lo = std::max(first, static_cast<int>(std::floor(m - r - 0.5f)) - 1);
+  *hi = std::min(last, static_cast<int>(std::ceil(m - 0.5f + r)) + 1);
+}
+
+struct Surfel {
+  float tu[3], tv[3], tw[3], mx, my, rad, op, n[3], c[3];
+  Surfel(const float* f, int n_, int j) {
+    for (int q = 0; q < 3; ++q) {
+      tu[q] = f[(kTu0 + q) * n_ + j];
+      tv[q] = f[(kTv0 + q) * n_ + j];
+      tw[q] = f[(kTw0 + q) * n_ + j];
+      n[q] = f[(kN0 + q) * n_ + j];
+      c[q] = f[(kC0 + q) * n_ + j];
+    }
+    mx = f[kMx * n_ + j];
+    my = f[kMy * n_ + j];
+    rad = f[kRad * n_ + j];
+    op = f[kOp * n_ + j];
+  }
+};
+
+// The ray-splat intersection of one tile row (reference 3.3), shared by both passes so their
+// decisions agree bit for bit.
+struct RowHit {
+  F16 k0, k1, k2;    // k = x T_w - T_u per lane
+  float l0, l1, l2;  // l = y T_w - T_v (one value for the row)
+  F16 p2, u, v;      // p = k x l, (u, v) = (p_x, p_y) / p_z
+  F16 dxp;           // pixel - m (x), per lane
+  float dyp;         // pixel - m (y), one value for the row
+  F16 dxm, dym;      // m - pixel
+  F16 rho3d, rho2d, G, z;
+  I16 in, splat_branch;  // may contribute; rho3d <= rho2d
+};
+
+inline void IntersectRow(const Surfel& s, F16 px, float py, float min_power, I16 lanes_ok, RowHit* h) {
+  // Pixel offsets from the centre m; the stored rows are T_u - m_x T_w and T_v - m_y T_w (see
+  // project_surfels.h), so k and l stay small and float keeps its precision.
+  h->dxp = px - s.mx;
+  h->dyp = py - s.my;
+  h->k0 = h->dxp * s.tw[0] - s.tu[0];
+  h->k1 = h->dxp * s.tw[1] - s.tu[1];
+  h->k2 = h->dxp * s.tw[2] - s.tu[2];
+  h->l0 = h->dyp * s.tw[0] - s.tv[0];
+  h->l1 = h->dyp * s.tw[1] - s.tv[1];
+  h->l2 = h->dyp * s.tw[2] - s.tv[2];
+  const F16 p0 = h->k1 * h->l2 - h->k2 * h->l1;
+  const F16 p1 = h->k2 * h->l0 - h->k0 * h->l2;
+  h->p2 = h->k0 * h->l1 - h->k1 * h->l0;
+  const I16 ok = h->p2 != 0.0f;
+  const F16 safe_p2 = simd::Select(ok, h->p2, simd::Splat(1.0f));
+  h->u = p0 / safe_p2;
+  h->v = p1 / safe_p2;
+  h->dxm = s.mx - px;
+  h->dym = simd::Splat(s.my - py);
+  h->rho3d = h->u * h->u + h->v * h->v;
+  h->rho2d = kSurfelFilterInvSquare * (h->dxm * h->dxm + h->dym * h->dym);
+  h->splat_branch = h->rho3d <= h->rho2d;
+  const F16 rho = simd::Min(h->rho3d, h->rho2d);
+  h->z = s.tw[0] * h->u + s.tw[1] * h->v + s.tw[2];
+  const F16 power = -0.5f * rho;
+  // (The row itself is within the radius: callers skip rows with |m_y - y| > radius.)
+  h->in = lanes_ok & ok & (simd::Abs(h->dxm) <= s.rad) & (h->z >= kSurfelNear) & (power >= min_power);
+  h->G = simd::Exp(simd::Max(power, simd::Splat(-80.0f)));
+}
+
+inline F16 NdcDepth(F16 z) { return (kSurfelFar / (kSurfelFar - kSurfelNear)) * (1.0f - kSurfelNear / z); }
+
+struct PixelArrays {
+  std::vector<float*> arrays;
+  PixelArrays(std::vector<float>* buffer, int count) {
+    buffer->resize(static_cast<size_t>(count) * kTilePixels);
+    for (int i = 0; i < count; ++i) arrays.push_back(buffer->data() + static_cast<size_t>(i) * kTilePixels);
+  }
+  float* operator[](int i) const { return arrays[i]; }
+};
+
+void EnsureImage(Image* im, int w, int h, int c) {
+  if (im->width() != w || im->height() != h || im->channels() != c) *im = Image(w, h, c);
+}
+
+}  // namespace
+
+void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const SurfelRenderOptions& o,
+                      SurfelRender* out, RasterScratch* scratch) {
+  const int W = o.camera.width, H = o.camera.height;
+  const size_t npix = static_cast<size_t>(W) * H;
+  EnsureImage(&out->color, W, H, 3);
+  EnsureImage(&out->normal, W, H, 3);
+  EnsureImage(&out->normal_world, W, H, 3);
+  for (Image* im : {&out->depth, &out->alpha, &out->median_depth, &out->distortion}) EnsureImage(im, W, H, 1);
+  out->final_t.resize(npix);
+  out->depth_sum.resize(npix);
+  out->m1.resize(npix);
+  out->m2.resize(npix);
+  out->m_ref.resize(npix);
+  out->last.resize(npix);
+  out->median_index.resize(npix);
+  const int threads = omp_get_max_threads();
+  EnsureScratch(scratch, threads);
+  const float bg[3] = {o.background[0], o.background[1], o.background[2]};
+  const Eigen::Matrix3f Rt = o.camera.R.transpose().cast<float>();
+  const F16 lanes = simd::Lanes();
+
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (int tile = 0; tile < bins.num_tiles(); ++tile) {
+    const int thread = omp_get_thread_num();
+    const int tx = tile % bins.tiles_x, ty = tile / bins.tiles_x;
+    const uint32_t begin = bins.tile_start[tile];
+    const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
+    std::vector<float>& buffer = scratch->tile_data[thread];
+    GatherTile(p, bins.ids.data() + begin, n, &buffer);
+    const float* f = buffer.data();
+    const int x0 = tx * kTileSize, y0 = ty * kTileSize;
+    const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
+    const I16 lanes_ok = lanes < static_cast<float>(x_end - x0);
+    const F16 px = lanes + (x0 + 0.5f);
+
+    enum { aT, aC0, aC1, aC2, aDs, aN0, aN1, aN2, aLive, aLast, aZmed, aMed, aM1, aM2, aDist, aMref, kArrays };
+    const PixelArrays st(&scratch->pixel_state[thread], kArrays);
+    for (int a = 0; a < kArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
+    std::fill(st[aT], st[aT] + kTilePixels, 1.0f);
+    std::fill(st[aLive], st[aLive] + kTilePixels, 1.0f);
+    for (int j = 0; j < n; ++j) {
+      if ((j & 31) == 31) {
+        float any = 0;
+        for (int k = 0; k < kTilePixels; ++k) any += st[aLive][k];
+        if (any == 0) break;
+      }
+      const Surfel s(f, n, j);
+      if (!(s.op > kMinAlpha)) continue;
+      const float min_power = std::log(kMinAlpha / s.op);
+      int ya, yb;
+      BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
+      const float jp1 = static_cast<float>(j + 1);
+      for (int y = ya; y <= yb; ++y) {
+        const float py = y + 0.5f;
+        if (std::abs(s.my - py) > s.rad) continue;
+        RowHit h;
+        IntersectRow(s, px, py, min_power, lanes_ok, &h);
+        const int k = (y - y0) * kTileSize;
+        const F16 live = simd::Load(st[aLive] + k);
+        h.in &= live > 0.5f;
+        if (!simd::Any(h.in)) continue;
+        const F16 T = simd::Load(st[aT] + k);
+        const F16 a = simd::Min(s.op * h.G, simd::Splat(kMaxAlpha));
+        const I16 valid = h.in & (a >= kMinAlpha);
+        const F16 test = T * (1.0f - a);
+        const I16 term = valid & (test < kMinTransmittance);
+        const I16 blend = valid & ~term;
+        const F16 w = simd::Masked(blend, a * T);
+        simd::Store(st[aC0] + k, simd::Load(st[aC0] + k) + w * s.c[0]);
+        simd::Store(st[aC1] + k, simd::Load(st[aC1] + k) + w * s.c[1]);
+        simd::Store(st[aC2] + k, simd::Load(st[aC2] + k) + w * s.c[2]);
+        simd::Store(st[aDs] + k, simd::Load(st[aDs] + k) + w * h.z);
+        simd::Store(st[aN0] + k, simd::Load(st[aN0] + k) + w * s.n[0]);
+        simd::Store(st[aN1] + k, simd::Load(st[aN1] + k) + w * s.n[1]);
+        simd::Store(st[aN2] + k, simd::Load(st[aN2] + k) + w * s.n[2]);
+        // Median: the last surfel blended while the incoming transmittance is above one half.
+        const I16 med = blend & (T > 0.5f);
+        simd::Store(st[aZmed] + k, simd::Select(med, h.z, simd::Load(st[aZmed] + k)));
+        simd::Store(st[aMed] + k, simd::Select(med, simd::Splat(jp1), simd::Load(st[aMed] + k)));
+        // Distortion: w_i (m_i^2 A_i + M2_i - 2 m_i M1_i), A_i = 1 - T_i, M1/M2 over the surfels in front.
+        // It only depends on differences of m, so m is taken relative to the pixel's first blended
+        // surfel: in float, the absolute NDC depths (all close to 1) would cancel catastrophically.
+        const F16 m_abs = NdcDepth(simd::Select(blend, h.z, simd::Splat(1.0f)));
+        const F16 mref = simd::Select(blend & (simd::Load(st[aLast] + k) == 0.0f), m_abs, simd::Load(st[aMref] + k));
+        simd::Store(st[aMref] + k, mref);
+        const F16 m = m_abs - mref;
+        const F16 M1 = simd::Load(st[aM1] + k), M2 = simd::Load(st[aM2] + k);
+        simd::Store(st[aDist] + k, simd::Load(st[aDist] + k) + w * (m * m * (1.0f - T) + M2 - 2.0f * m * M1));
+        simd::Store(st[aM1] + k, M1 + w * m);
+        simd::Store(st[aM2] + k, M2 + w * m * m);
+        simd::Store(st[aT] + k, simd::Select(blend, test, T));
+        simd::Store(st[aLast] + k, simd::Select(blend, simd::Splat(jp1), simd::Load(st[aLast] + k)));
+        simd::Store(st[aLive] + k, simd::Select(term, F16{}, live));
+      }
+    }
+    for (int y = y0; y < y_end; ++y) {
+      for (int x = x0; x < x_end; ++x) {
+        const int k = (y - y0) * kTileSize + (x - x0);
+        const size_t pix = static_cast<size_t>(y) * W + x;
+        const float T = st[aT][k], A = 1.0f - T;
+        const float cs[3] = {st[aC0][k], st[aC1][k], st[aC2][k]};
+        const Eigen::Vector3f nv(st[aN0][k], st[aN1][k], st[aN2][k]);
+        const Eigen::Vector3f nw = Rt * nv;
+        for (int c = 0; c < 3; ++c) {
+          out->color.plane(c)[pix] = cs[c] + T * bg[c];
+          out->normal.plane(c)[pix] = nv[c];
+          out->normal_world.plane(c)[pix] = nw[c];
+        }
+        out->alpha.plane(0)[pix] = A;
+        out->depth.plane(0)[pix] = A >= kMinDepthAlpha ? st[aDs][k] / A : 0.0f;
+        out->median_depth.plane(0)[pix] = st[aZmed][k];
+        out->distortion.plane(0)[pix] = st[aDist][k];
+        out->final_t[pix] = T;
+        out->depth_sum[pix] = st[aDs][k];
+        out->m1[pix] = st[aM1][k];
+        out->m2[pix] = st[aM2][k];
+        out->m_ref[pix] = st[aMref][k];
+        out->last[pix] = static_cast<uint32_t>(st[aLast][k]);
+        out->median_index[pix] = static_cast<uint32_t>(st[aMed][k]);
+      }
+    }
+  }
+}
+
+void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins, const SurfelRenderOptions& o,
+                              const SurfelRender& r, const SurfelRenderGrad& g, ProjectedSurfelsGrad* d,
+                              RasterScratch* scratch) {
+  const int W = o.camera.width, H = o.camera.height;
+  const size_t num = p.size();
+  const int threads = omp_get_max_threads();
+  EnsureScratch(scratch, threads);
+  const float bg[3] = {o.background[0], o.background[1], o.background[2]};
+  const Eigen::Matrix3f Rc = o.camera.R.cast<float>();
+  const F16 lanes = simd::Lanes();
+  constexpr float kDmDzScale = kSurfelFar * kSurfelNear / (kSurfelFar - kSurfelNear);
+
+#pragma omp parallel num_threads(threads)
+  {
+    const int thread = omp_get_thread_num();
+    std::vector<float>& acc = scratch->grads[thread];
+    acc.assign(num * kGradStride, 0.0f);
+#pragma omp for schedule(dynamic, 1)
+    for (int tile = 0; tile < bins.num_tiles(); ++tile) {
+      const int tx = tile % bins.tiles_x, ty = tile / bins.tiles_x;
+      const uint32_t begin = bins.tile_start[tile];
+      const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
+      if (n == 0) continue;
+      std::vector<float>& buffer = scratch->tile_data[thread];
+      GatherTile(p, bins.ids.data() + begin, n, &buffer);
+      std::vector<float>& tg = scratch->tile_grad[thread];
+      tg.assign(static_cast<size_t>(n) * kGradStride, 0.0f);
+      const float* f = buffer.data();
+      const int x0 = tx * kTileSize, y0 = ty * kTileSize;
+      const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
+      const I16 lanes_ok = lanes < static_cast<float>(x_end - x0);
+      const F16 px = lanes + (x0 + 0.5f);
+
+      enum { aT, aSc0, aSc1, aSc2, aSz, aSn0, aSn1, aSn2, aSw, aGc0, aGc1, aGc2, aGDs, aGn0, aGn1, aGn2, aGA,
+             aGZmed, aGDist, aTfin, aAN, aM1N, aM2N, aMref, aLast, aMed, kArrays };
+      const PixelArrays st(&scratch->pixel_state[thread], kArrays);
+      for (int a = 0; a < kArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
+      int max_last = 0;
+      for (int y = y0; y < y_end; ++y) {
+        for (int x = x0; x < x_end; ++x) {
+          const int k = (y - y0) * kTileSize + (x - x0);
+          const size_t pix = static_cast<size_t>(y) * W + x;
+          float gc[3];
+          for (int c = 0; c < 3; ++c) gc[c] = g.color.empty() ? 0.0f : g.color.plane(c)[pix];
+          Eigen::Vector3f gn = Eigen::Vector3f::Zero();
+          if (!g.normal.empty()) gn += Eigen::Vector3f(g.normal.plane(0)[pix], g.normal.plane(1)[pix], g.normal.plane(2)[pix]);
+          if (!g.normal_world.empty()) {
+            gn += Rc * Eigen::Vector3f(g.normal_world.plane(0)[pix], g.normal_world.plane(1)[pix],
+                                       g.normal_world.plane(2)[pix]);
+          }
+          float a_grad = g.alpha.empty() ? 0.0f : g.alpha.plane(0)[pix];
+          float ds_grad = 0;
+          const float A = 1.0f - r.final_t[pix];
+          if (!g.depth.empty() && A >= kMinDepthAlpha) {
+            const float gD = g.depth.plane(0)[pix];
+            ds_grad = gD / A;
+            a_grad -= gD * r.depth_sum[pix] / (A * A);
+          }
+          for (int c = 0; c < 3; ++c) {
+            st[aGc0 + c][k] = gc[c];
+            st[aGn0 + c][k] = gn[c];
+          }
+          st[aGDs][k] = ds_grad;
+          // The background and A terms share d T_N / d a_i = -T_N / (1 - a_i).
+          st[aGA][k] = a_grad - (bg[0] * gc[0] + bg[1] * gc[1] + bg[2] * gc[2]);
+          st[aGZmed][k] = g.median_depth.empty() ? 0.0f : g.median_depth.plane(0)[pix];
+          st[aGDist][k] = g.distortion.empty() ? 0.0f : g.distortion.plane(0)[pix];
+          st[aT][k] = st[aTfin][k] = r.final_t[pix];
+          st[aAN][k] = A;
+          st[aM1N][k] = r.m1[pix];
+          st[aM2N][k] = r.m2[pix];
+          st[aMref][k] = r.m_ref[pix];
+          st[aLast][k] = static_cast<float>(r.last[pix]);
+          st[aMed][k] = static_cast<float>(r.median_index[pix]);
+          max_last = std::max(max_last, static_cast<int>(r.last[pix]));
+        }
+      }
+      for (int j = max_last - 1; j >= 0; --j) {
+        const Surfel s(f, n, j);
+        if (!(s.op > kMinAlpha)) continue;
+        const float min_power = std::log(kMinAlpha / s.op);
+        int ya, yb;
+        BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
+        const float jf = static_cast<float>(j);
+        F16 gTu0{}, gTu1{}, gTu2{}, gTv0{}, gTv1{}, gTv2{}, gTw0{}, gTw1{}, gTw2{}, gmx{}, gmy{}, gop{};
+        F16 gn0{}, gn1{}, gn2{}, gc0{}, gc1{}, gc2{};
+        for (int y = ya; y <= yb; ++y) {
+          const float py = y + 0.5f;
+          if (std::abs(s.my - py) > s.rad) continue;
+          const int k = (y - y0) * kTileSize;
+          RowHit h;
+          IntersectRow(s, px, py, min_power, lanes_ok, &h);
+          h.in &= jf < simd::Load(st[aLast] + k);
+          if (!simd::Any(h.in)) continue;
+          const F16 raw = s.op * h.G;
+          const F16 a = simd::Min(raw, simd::Splat(kMaxAlpha));
+          const I16 valid = h.in & (a >= kMinAlpha);
+          if (!simd::Any(valid)) continue;
+          const F16 inv = 1.0f / (1.0f - a);
+          const F16 T = simd::Select(valid, simd::Load(st[aT] + k) * inv, simd::Load(st[aT] + k));
+          simd::Store(st[aT] + k, T);
+          const F16 w = simd::Masked(valid, a * T);
+          const F16 Gc0 = simd::Load(st[aGc0] + k), Gc1 = simd::Load(st[aGc1] + k), Gc2 = simd::Load(st[aGc2] + k);
+          const F16 Gn0 = simd::Load(st[aGn0] + k), Gn1 = simd::Load(st[aGn1] + k), Gn2 = simd::Load(st[aGn2] + k);
+          const F16 GDs = simd::Load(st[aGDs] + k), GDist = simd::Load(st[aGDist] + k);
+          gc0 += w * Gc0;
+          gc1 += w * Gc1;
+          gc2 += w * Gc2;
+          gn0 += w * Gn0;
+          gn1 += w * Gn1;
+          gn2 += w * Gn2;
+          // Distortion: d dist / d w_i and d dist / d m_i at this pixel's totals.
+          const F16 zz = simd::Select(valid, h.z, simd::Splat(1.0f));
+          const F16 m = NdcDepth(zz) - simd::Load(st[aMref] + k);  // relative, as in the forward pass
+          const F16 AN = simd::Load(st[aAN] + k), M1N = simd::Load(st[aM1N] + k), M2N = simd::Load(st[aM2N] + k);
+          const F16 gw_dist = GDist * (m * m * AN - 2.0f * m * M1N + M2N);
+          const F16 dm = 2.0f * w * GDist * (m * AN - M1N);
+          // d loss / d z of the intersection.
+          const I16 is_median = valid & (jf + 1.0f == simd::Load(st[aMed] + k));
+          const F16 dz = w * GDs + simd::Masked(is_median, simd::Load(st[aGZmed] + k)) +
+                         dm * (kDmDzScale / (zz * zz));
+          // d loss / d a through every output (the "behind" accumulators S).
+          const F16 Sc0 = simd::Load(st[aSc0] + k), Sc1 = simd::Load(st[aSc1] + k), Sc2 = simd::Load(st[aSc2] + k);
+          const F16 Sn0 = simd::Load(st[aSn0] + k), Sn1 = simd::Load(st[aSn1] + k), Sn2 = simd::Load(st[aSn2] + k);
+          const F16 Sz = simd::Load(st[aSz] + k), Sw = simd::Load(st[aSw] + k);
+          F16 da = (s.c[0] - Sc0) * Gc0 + (s.c[1] - Sc1) * Gc1 + (s.c[2] - Sc2) * Gc2 + (h.z - Sz) * GDs +
+                   (s.n[0] - Sn0) * Gn0 + (s.n[1] - Sn1) * Gn1 + (s.n[2] - Sn2) * Gn2 + (gw_dist - Sw);
+          da = da * T + simd::Load(st[aTfin] + k) * inv * simd::Load(st[aGA] + k);
+          const F16 keep = 1.0f - a;
+          simd::Store(st[aSc0] + k, simd::Select(valid, a * s.c[0] + keep * Sc0, Sc0));
+          simd::Store(st[aSc1] + k, simd::Select(valid, a * s.c[1] + keep * Sc1, Sc1));
+          simd::Store(st[aSc2] + k, simd::Select(valid, a * s.c[2] + keep * Sc2, Sc2));
+          simd::Store(st[aSn0] + k, simd::Select(valid, a * s.n[0] + keep * Sn0, Sn0));
+          simd::Store(st[aSn1] + k, simd::Select(valid, a * s.n[1] + keep * Sn1, Sn1));
+          simd::Store(st[aSn2] + k, simd::Select(valid, a * s.n[2] + keep * Sn2, Sn2));
+          simd::Store(st[aSz] + k, simd::Select(valid, a * h.z + keep * Sz, Sz));
+          simd::Store(st[aSw] + k, simd::Select(valid, a * gw_dist + keep * Sw, Sw));
+          const I16 slope = valid & (raw < kMaxAlpha);  // the clamp at 0.99 has zero slope
+          gop += simd::Masked(slope, h.G * da);
+          const F16 dG = simd::Masked(slope, s.op * da);
+          const F16 drho = -0.5f * h.G * dG;
+          // rho = min(rho3d, rho2d): the splat branch moves (u, v), the low-pass branch the centre.
+          F16 du = simd::Masked(h.splat_branch, 2.0f * h.u * drho);
+          F16 dv = simd::Masked(h.splat_branch, 2.0f * h.v * drho);
+          const F16 drho2d = simd::Masked(~h.splat_branch, drho) * (2.0f * kSurfelFilterInvSquare);
+          gmx += drho2d * h.dxm;
+          gmy += drho2d * h.dym;
+          // z = T_w . (u, v, 1) in both branches.
+          const F16 dzv = simd::Masked(valid, dz);
+          du += dzv * s.tw[0];
+          dv += dzv * s.tw[1];
+          gTw0 += dzv * h.u;
+          gTw1 += dzv * h.v;
+          gTw2 += dzv;
+          // (u, v) = (p_x, p_y) / p_z, p = k x l, k = x T_w - T_u, l = y T_w - T_v.
+          const F16 safe_p2 = simd::Select(valid, h.p2, simd::Splat(1.0f));
+          const F16 dp0 = du / safe_p2, dp1 = dv / safe_p2, dp2 = -(h.u * du + h.v * dv) / safe_p2;
+          const F16 dk0 = h.l1 * dp2 - h.l2 * dp1;  // dk = l x dp
+          const F16 dk1 = h.l2 * dp0 - h.l0 * dp2;
+          const F16 dk2 = h.l0 * dp1 - h.l1 * dp0;
+          const F16 dl0 = dp1 * h.k2 - dp2 * h.k1;  // dl = dp x k
+          const F16 dl1 = dp2 * h.k0 - dp0 * h.k2;
+          const F16 dl2 = dp0 * h.k1 - dp1 * h.k0;
+          gTu0 -= dk0;
+          gTu1 -= dk1;
+          gTu2 -= dk2;
+          gTv0 -= dl0;
+          gTv1 -= dl1;
+          gTv2 -= dl2;
+          gTw0 += h.dxp * dk0 + h.dyp * dl0;
+          gTw1 += h.dxp * dk1 + h.dyp * dl1;
+          gTw2 += h.dxp * dk2 + h.dyp * dl2;
+          // k and l depend on the centre through the pixel offsets.
+          gmx -= s.tw[0] * dk0 + s.tw[1] * dk1 + s.tw[2] * dk2;
+          gmy -= s.tw[0] * dl0 + s.tw[1] * dl1 + s.tw[2] * dl2;
+        }
+        float* dst = tg.data() + static_cast<size_t>(j) * kGradStride;
+        const F16* accs[kGradStride] = {&gTu0, &gTu1, &gTu2, &gTv0, &gTv1, &gTv2, &gTw0, &gTw1, &gTw2,
+                                        &gmx,  &gmy,  &gop,  &gn0,  &gn1,  &gn2,  &gc0,  &gc1,  &gc2};
+        for (int q = 0; q < kGradStride; ++q) dst[q] = simd::Sum(*accs[q]);
+      }
+      const uint32_t* ids = bins.ids.data() + begin;
+      for (int j = 0; j < max_last; ++j) {
+        float* dst = acc.data() + static_cast<size_t>(ids[j]) * kGradStride;
+        const float* src = tg.data() + static_cast<size_t>(j) * kGradStride;
+        for (int q = 0; q < kGradStride; ++q) dst[q] += src[q];
+      }
+    }
+  }
+#pragma omp parallel for schedule(static)
+  for (int64_t i = 0; i < static_cast<int64_t>(num); ++i) {
+    float s[kGradStride] = {};
+    for (int t = 0; t < threads; ++t) {
+      const float* src = scratch->grads[t].data() + static_cast<size_t>(i) * kGradStride;
+      for (int q = 0; q < kGradStride; ++q) s[q] += src[q];
+    }
+    for (int q = 0; q < 9; ++q) d->M[9 * i + q] += s[gTu0 + q];
+    d->center[2 * i] += s[gMx];
+    d->center[2 * i + 1] += s[gMy];
+    d->opacity[i] += s[gOp];
+    for (int c = 0; c < 3; ++c) {
+      d->normal[3 * i + c] += s[gN0 + c];
+      d->color[3 * i + c] += s[gC0 + c];
+    }
+  }
+}
+
+}  // namespace mgsr

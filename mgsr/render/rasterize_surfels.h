@@ -1,0 +1,58 @@
+// Rasterization stage of the 2DGS branch (reference 3.3-3.4): per tile, front-to-back blending of
+// depth-sorted surfels with the exact ray-splat intersection in each splat's (u, v) frame:
+//   k = x T_w - T_u, l = y T_w - T_v, p = k x l, (u, v) = (p_x, p_y) / p_z   at the pixel centre (x, y)
+//   rho = min(u^2 + v^2, 2 |m - (x, y)|^2)       (the screen low-pass floor), G = exp(-rho / 2)
+//   z = T_w . (u, v, 1)  (skipped below the near plane), a = min(0.99, o G)
+// Outputs per pixel: C = sum w c + T_N bg, expected depth D = sum w z / A (0 where A < 1e-4),
+// A = 1 - T_N, N = sum w n (view space; world = R_c^T N), the median depth (z of the last surfel
+// blended while T > 0.5) and the depth distortion sum_i sum_{j<i} w_i w_j (m_i - m_j)^2 of NDC
+// depths m = far/(far-near) (1 - near/z). A surfel affects a pixel only inside its square
+// |x - m_x|, |y - m_y| <= radius and only where a >= 1/255; a pixel stops when T would fall below
+// 1e-4 (that surfel is not blended).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "mgsr/core/camera.h"
+#include "mgsr/core/image.h"
+#include "mgsr/render/project_surfels.h"
+#include "mgsr/render/raster_scratch.h"
+#include "mgsr/render/rasterize_gaussians.h"  // shared constants (alpha clamps, termination)
+#include "mgsr/render/tile_binning.h"
+
+namespace mgsr {
+
+struct SurfelRenderOptions {
+  Camera camera;
+  int sh_degree = 3;
+  float background[3] = {0, 0, 0};
+};
+
+struct SurfelRender {
+  Image color;         // 3 channels
+  Image depth;         // expected depth
+  Image alpha;
+  Image normal;        // view space, alpha-weighted (not normalised)
+  Image normal_world;  // R_c^T normal
+  Image median_depth;
+  Image distortion;
+  // Kept for the backward pass.
+  std::vector<float> final_t, depth_sum, m1, m2, m_ref;  // m1, m2 relative to m_ref (see .cc)
+  std::vector<uint32_t> last, median_index;  // 1 + index within the tile list (0: none)
+};
+
+// Upstream gradients; an empty image means zero.
+struct SurfelRenderGrad {
+  Image color, depth, alpha, normal, normal_world, median_depth, distortion;
+};
+
+void RasterizeSurfels(const ProjectedSurfels& projected, const TileBins& bins, const SurfelRenderOptions& options,
+                      SurfelRender* out, RasterScratch* scratch);
+
+void RasterizeSurfelsBackward(const ProjectedSurfels& projected, const TileBins& bins,
+                              const SurfelRenderOptions& options, const SurfelRender& render,
+                              const SurfelRenderGrad& grad, ProjectedSurfelsGrad* d_projected,
+                              RasterScratch* scratch);
+
+}  // namespace mgsr

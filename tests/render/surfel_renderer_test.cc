@@ -1,0 +1,299 @@
+#include "mgsr/render/surfel_renderer.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+
+#include "mgsr/core/rng.h"
+#include "reference_surfel_renderer.h"
+
+namespace mgsr {
+namespace {
+
+Camera TestCamera(int w = 24, int h = 24) {
+  return LookAtCamera({0.3, -3.0, 0.4}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), w, h, 30.0 * w / 24, 30.0 * h / 24);
+}
+
+SurfelModel RandomSurfels(int n, uint64_t seed, double scale_lo = 0.1, double scale_hi = 0.35) {
+  Rng rng(seed);
+  SurfelModel m;
+  m.max_sh_degree = 3;
+  m.Resize(n);
+  for (int i = 0; i < n; ++i) {
+    for (int k = 0; k < 3; ++k) m.means[3 * i + k] = static_cast<float>(rng.Uniform(-0.6, 0.6));
+    for (int k = 0; k < 2; ++k) m.log_scales[2 * i + k] = static_cast<float>(std::log(rng.Uniform(scale_lo, scale_hi)));
+    for (int k = 0; k < 4; ++k) m.quats[4 * i + k] = static_cast<float>(rng.Normal());
+    m.opacity_logits[i] = static_cast<float>(rng.Uniform(-1.0, 2.0));
+  }
+  for (float& v : m.sh) v = static_cast<float>(rng.Normal(0, 0.25));
+  return m;
+}
+
+SurfelRenderOptions Options(const Camera& cam) {
+  SurfelRenderOptions o;
+  o.camera = cam;
+  o.sh_degree = 3;
+  o.background[0] = 0.2f;
+  o.background[1] = 0.5f;
+  o.background[2] = 0.7f;
+  return o;
+}
+
+double MaxAbsDiff(const Image& im, const std::vector<double>& ref) {
+  double d = 0;
+  for (size_t i = 0; i < im.size(); ++i) d = std::max(d, std::abs(im.data()[i] - ref[i]));
+  return d;
+}
+
+TEST(SurfelRendererTest, TiledRenderMatchesTheReference) {
+  const double bg[3] = {0.2, 0.5, 0.7};
+  for (uint64_t seed : {1, 2, 3, 4}) {
+    const Camera cam = TestCamera(40, 36);
+    const SurfelModel m = RandomSurfels(30, seed);
+    SurfelRenderer renderer;
+    SurfelRender out;
+    renderer.Forward(m, Options(cam), &out);
+    const auto ref = testing::RenderSurfelsReference(m, cam, 3, bg);
+    EXPECT_LT(MaxAbsDiff(out.color, ref.color), 1e-5) << seed;
+    EXPECT_LT(MaxAbsDiff(out.alpha, ref.alpha), 1e-5) << seed;
+    EXPECT_LT(MaxAbsDiff(out.normal, ref.normal), 1e-5) << seed;
+    EXPECT_LT(MaxAbsDiff(out.normal_world, ref.normal_world), 1e-5) << seed;
+    // Depths: relative 1e-4. The screen low-pass lets a nearly edge-on surfel contribute where the
+    // pixel ray meets its plane far behind it (z of tens of units); that intersection is
+    // ill-conditioned, and float and double differ there by ~1e-5 of z. The median (front surface)
+    // is held to the same bound.
+    double depth_err = 0, median_err = 0;
+    for (size_t i = 0; i < out.depth.size(); ++i) {
+      depth_err = std::max(depth_err, std::abs(out.depth.data()[i] - ref.depth[i]) / std::max(1.0, std::abs(ref.depth[i])));
+      median_err = std::max(median_err, std::abs(out.median_depth.data()[i] - ref.median[i]) / std::max(1.0, std::abs(ref.median[i])));
+    }
+    EXPECT_LT(depth_err, 1e-4) << seed;
+    EXPECT_LT(median_err, 1e-5) << seed;
+    EXPECT_LT(MaxAbsDiff(out.distortion, ref.distortion), 1e-5) << seed;
+    double covered = 0;
+    for (size_t i = 0; i < out.alpha.size(); ++i) covered += out.alpha.data()[i] > 0.1f;
+    EXPECT_GT(covered, 0.3 * out.alpha.size());
+  }
+}
+
+// Gradient of every raw parameter for an upstream gradient on each output in turn, against central
+// differences of the double-precision reference.
+void CheckGradients(const SurfelModel& m, const Camera& cam, const char* label, bool expect_most_checked) {
+  const SurfelRenderOptions o = Options(cam);
+  const double bg[3] = {0.2, 0.5, 0.7};
+  SurfelRenderer renderer;
+  SurfelRender out;
+  renderer.Forward(m, o, &out);
+  const size_t np = static_cast<size_t>(cam.width) * cam.height;
+  const char* outputs[] = {"color", "depth", "alpha", "normal", "normal_world", "median_depth", "distortion"};
+  for (int which = 0; which < 7; ++which) {
+    Rng rng(200 + which);
+    SurfelRenderGrad grad;
+    Image* target[] = {&grad.color, &grad.depth, &grad.alpha, &grad.normal, &grad.normal_world,
+                       &grad.median_depth, &grad.distortion};
+    const int channels = (which == 0 || which == 3 || which == 4) ? 3 : 1;
+    *target[which] = Image(cam.width, cam.height, channels);
+    // Distortion values are small; scale its upstream gradient up so the check is meaningful.
+    const float scale = which == 6 ? 100.0f : 1.0f;
+    for (size_t i = 0; i < target[which]->size(); ++i) target[which]->data()[i] = scale * static_cast<float>(rng.Uniform(-1, 1));
+    const Image& upstream = *target[which];
+    SurfelGradients analytic;
+    renderer.Backward(m, o, out, grad, &analytic);
+    auto loss = [&](const testing::SurfelModelD& md) {
+      const auto r = testing::RenderSurfelsReference(md, cam, 3, bg);
+      const std::vector<double>* buf[] = {&r.color, &r.depth, &r.alpha, &r.normal, &r.normal_world, &r.median, &r.distortion};
+      double l = 0;
+      for (size_t i = 0; i < channels * np; ++i) l += upstream.data()[i] * (*buf[which])[i];
+      return l;
+    };
+    testing::SurfelModelD base(m);
+    struct Block {
+      const char* name;
+      std::vector<double> testing::SurfelModelD::*field;
+      const std::vector<float>* analytic;
+    };
+    const Block blocks[] = {
+        {"means", &testing::SurfelModelD::means, &analytic.params.means},
+        {"log_scales", &testing::SurfelModelD::log_scales, &analytic.params.log_scales},
+        {"quats", &testing::SurfelModelD::quats, &analytic.params.quats},
+        {"opacity", &testing::SurfelModelD::opacity_logits, &analytic.params.opacity_logits},
+        {"sh", &testing::SurfelModelD::sh, &analytic.params.sh},
+    };
+    // Numeric derivatives of every block first: the error floor scales with the output's largest.
+    std::vector<std::vector<double>> numeric(5);
+    double global_max = 0;
+    for (int bi = 0; bi < 5; ++bi) {
+      std::vector<double>& values = base.*(blocks[bi].field);
+      numeric[bi].resize(values.size());
+      for (size_t k = 0; k < values.size(); ++k) {
+        const double h = 1e-6, keep = values[k];
+        values[k] = keep + h;
+        const double lp = loss(base);
+        values[k] = keep - h;
+        const double lm = loss(base);
+        values[k] = keep;
+        numeric[bi][k] = (lp - lm) / (2 * h);
+        global_max = std::max(global_max, std::abs(numeric[bi][k]));
+      }
+    }
+    for (int bi = 0; bi < 5; ++bi) {
+      const Block& b = blocks[bi];
+      double max_abs = 0;
+      for (double v : numeric[bi]) max_abs = std::max(max_abs, std::abs(v));
+      int checked = 0;
+      for (size_t k = 0; k < numeric[bi].size(); ++k) {
+        const double a = (*b.analytic)[k], n = numeric[bi][k];
+        // Relative 1e-3 where the derivative is not tiny; float rounding allows a floor of 1e-5 of
+        // the output's largest derivative (exact zeros come out as ~1e-7 in float).
+        const double tol = 1e-3 * std::abs(n) + 1e-4 * max_abs + 1e-5 * global_max + 1e-7;
+        EXPECT_NEAR(a, n, tol) << label << ": " << outputs[which] << " d/d " << b.name << "[" << k << "]";
+        checked += std::abs(n) > 1e-4 * max_abs;
+      }
+      if (expect_most_checked && max_abs > 1e-3 * global_max) {
+        EXPECT_GT(checked, static_cast<int>(numeric[bi].size()) / 4) << outputs[which] << " " << b.name;
+      }
+    }
+  }
+}
+
+TEST(SurfelRendererGradientTest, AllParametersAllOutputsMatchNumericDifferentiation) {
+  CheckGradients(RandomSurfels(8, 11, 0.15, 0.35), TestCamera(), "splats", true);
+}
+
+// Surfels far smaller than a pixel: the screen low-pass floor (rho2d < rho3d) decides their footprint
+// almost everywhere, so this checks that branch, including the gradient through the screen centre.
+TEST(SurfelRendererGradientTest, LowPassBranchMatchesNumericDifferentiation) {
+  SurfelModel m = RandomSurfels(6, 12, 0.002, 0.004);
+  for (size_t i = 0; i < m.size(); ++i) m.opacity_logits[i] = 2.0f;
+  CheckGradients(m, TestCamera(), "low-pass", false);
+}
+
+TEST(SurfelRendererGeometryTest, FlatSplatFacingTheCamera) {
+  const Camera cam = LookAtCamera({0, -3, 0}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 32, 32, 40, 40);
+  SurfelModel m;
+  m.max_sh_degree = 0;
+  m.Resize(1);
+  m.means = {0, 0, 0};
+  m.log_scales = {std::log(0.5f), std::log(0.5f)};
+  // Rotate local z (the normal) onto -y: a quarter turn about x.
+  const Eigen::Quaternionf q(Eigen::AngleAxisf(static_cast<float>(M_PI / 2), Eigen::Vector3f::UnitX()));
+  m.quats = {q.w(), q.x(), q.y(), q.z()};
+  m.opacity_logits = {5.0f};
+  m.sh = {0.1f, 0.2f, 0.3f};
+  SurfelRenderer renderer;
+  SurfelRender out;
+  renderer.Forward(m, Options(cam), &out);
+  // Every covered pixel sees the plane y = 0 at view depth exactly 3; the normal faces the camera.
+  int covered = 0;
+  for (int y = 0; y < 32; ++y) {
+    for (int x = 0; x < 32; ++x) {
+      if (out.alpha.at(0, y, x) < 0.5f) continue;
+      ++covered;
+      EXPECT_NEAR(out.depth.at(0, y, x), 3.0f, 1e-5f);
+      const float a = out.alpha.at(0, y, x);
+      EXPECT_NEAR(out.normal.at(2, y, x) / a, -1.0f, 1e-5f);     // view space: towards the camera
+      EXPECT_NEAR(out.normal_world.at(1, y, x) / a, -1.0f, 1e-5f);  // world: towards -y
+    }
+  }
+  EXPECT_GT(covered, 50);
+  // The centre pixels are nearly opaque (o = sigmoid(5) ~ 0.993, clamped at 0.99; their centres
+  // are half a pixel from the splat's centre).
+  EXPECT_GT(out.alpha.at(0, 16, 16), 0.98f);
+  EXPECT_LE(out.alpha.at(0, 16, 16), 0.99f);
+}
+
+TEST(SurfelRendererGeometryTest, PlaneOfOverlappingSplatsGivesConstantNormalAndExactDepth) {
+  const Camera cam = LookAtCamera({0.5, -3, 1.0}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 48, 48, 60, 60);
+  // The plane through the origin with normal n; surfels on a grid in it, all with that normal.
+  const Eigen::Vector3d n = Eigen::Vector3d(0.2, -1, 0.3).normalized();
+  const Eigen::Vector3d e1 = n.unitOrthogonal(), e2 = n.cross(e1);
+  Eigen::Matrix3d R;
+  R << e1, e2, n;
+  const Eigen::Quaterniond q(R);
+  SurfelModel m;
+  m.max_sh_degree = 0;
+  const int g = 15;
+  m.Resize(g * g);
+  for (int i = 0; i < g; ++i) {
+    for (int j = 0; j < g; ++j) {
+      const int k = i * g + j;
+      const Eigen::Vector3d p = (i - g / 2) * 0.1 * e1 + (j - g / 2) * 0.1 * e2;
+      for (int d = 0; d < 3; ++d) m.means[3 * k + d] = static_cast<float>(p[d]);
+      m.log_scales[2 * k] = m.log_scales[2 * k + 1] = std::log(0.1f);
+      m.quats[4 * k] = static_cast<float>(q.w());
+      m.quats[4 * k + 1] = static_cast<float>(q.x());
+      m.quats[4 * k + 2] = static_cast<float>(q.y());
+      m.quats[4 * k + 3] = static_cast<float>(q.z());
+      m.opacity_logits[k] = 3.0f;
+      m.sh[3 * k] = m.sh[3 * k + 1] = m.sh[3 * k + 2] = 0.0f;
+    }
+  }
+  SurfelRenderer renderer;
+  SurfelRender out;
+  renderer.Forward(m, Options(cam), &out);
+  const Eigen::Vector3d n_facing = n.dot(cam.Center()) > 0 ? n : Eigen::Vector3d(-n);
+  int checked = 0;
+  for (int y = 8; y < 40; ++y) {
+    for (int x = 8; x < 40; ++x) {
+      const float a = out.alpha.at(0, y, x);
+      if (a < 0.99f) continue;
+      ++checked;
+      // Ray-plane intersection at the pixel centre.
+      const Eigen::Vector3d ray = cam.R.transpose() * cam.PixelToRay(x + 0.5, y + 0.5);
+      const double t = -n.dot(cam.Center()) / n.dot(ray);
+      EXPECT_NEAR(out.depth.at(0, y, x), t, 1e-4) << x << "," << y;  // ray has camera z = 1: t is the depth
+      const Eigen::Vector3d nw(out.normal_world.at(0, y, x) / a, out.normal_world.at(1, y, x) / a,
+                               out.normal_world.at(2, y, x) / a);
+      EXPECT_NEAR((nw - n_facing).norm(), 0.0, 1e-4) << x << "," << y;
+    }
+  }
+  EXPECT_GT(checked, 400);
+}
+
+TEST(SurfelRendererEdgeCaseTest, EmptyBehindWholeImageAndDegenerate) {
+  const Camera cam = TestCamera(32, 32);
+  const SurfelRenderOptions o = Options(cam);
+  SurfelRenderer renderer;
+  SurfelRender out;
+  SurfelRenderGrad grad;
+  grad.color = Image(32, 32, 3, 1.0f);
+  grad.depth = Image(32, 32, 1, 1.0f);
+  grad.normal_world = Image(32, 32, 3, 1.0f);
+  grad.distortion = Image(32, 32, 1, 1.0f);
+  SurfelGradients gr;
+  auto check = [&](const SurfelModel& m, const char* what) {
+    renderer.Forward(m, o, &out);
+    for (const Image* im : {&out.color, &out.depth, &out.alpha, &out.normal, &out.median_depth, &out.distortion}) {
+      for (size_t i = 0; i < im->size(); ++i) ASSERT_TRUE(std::isfinite(im->data()[i])) << what;
+    }
+    renderer.Backward(m, o, out, grad, &gr);
+    for (const auto* v : {&gr.params.means, &gr.params.log_scales, &gr.params.quats, &gr.params.opacity_logits,
+                          &gr.params.sh}) {
+      for (float x : *v) ASSERT_TRUE(std::isfinite(x)) << what;
+    }
+  };
+  check(SurfelModel(), "no surfels");
+  EXPECT_FLOAT_EQ(out.color.at(2, 3, 3), 0.7f);
+  SurfelModel behind = RandomSurfels(10, 5);
+  for (size_t i = 0; i < behind.size(); ++i) behind.means[3 * i + 1] = -4.0f;
+  check(behind, "all behind");
+  EXPECT_FLOAT_EQ(out.alpha.at(0, 16, 16), 0.0f);
+  SurfelModel big = RandomSurfels(1, 6);
+  big.means = {0, 0, 0};
+  big.log_scales = {std::log(5.0f), std::log(5.0f)};
+  big.quats = {0.7071f, 0.7071f, 0, 0};
+  big.opacity_logits = {3.0f};
+  check(big, "whole image");
+  EXPECT_GT(out.alpha.at(0, 0, 0), 0.5f);
+  EXPECT_GT(out.alpha.at(0, 31, 31), 0.5f);
+  SurfelModel weird = RandomSurfels(6, 7);
+  weird.log_scales[0] = 30.0f;
+  weird.log_scales[2] = -40.0f;
+  weird.log_scales[3] = -40.0f;
+  for (int k = 0; k < 4; ++k) weird.quats[4 * 4 + k] = 0.0f;
+  check(weird, "degenerate");
+}
+
+}  // namespace
+}  // namespace mgsr
