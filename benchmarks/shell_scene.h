@@ -2,11 +2,13 @@
 // distance 3, with scales matched to the spacing of the points, as a trained object model has.
 #pragma once
 
+#include <Eigen/Geometry>
 #include <cmath>
 
 #include "mgsr/core/camera.h"
 #include "mgsr/core/rng.h"
 #include "mgsr/model/gaussian_model.h"
+#include "mgsr/model/surfel_model.h"
 
 namespace mgsr::bench {
 
@@ -35,6 +37,31 @@ inline GaussianModel ShellGaussians(int count, uint64_t seed) {
   }
   for (float& v : m.sh) v = static_cast<float>(rng.Normal(0, 0.2));
   for (float& v : m.ref_sh) v = static_cast<float>(rng.Normal(0, 0.2));
+  return m;
+}
+
+// Surfels on the same shell, oriented along the surface (normal = radial direction).
+inline SurfelModel ShellSurfels(int count, uint64_t seed) {
+  Rng rng(seed);
+  SurfelModel m;
+  m.max_sh_degree = 3;
+  m.Resize(count);
+  const double spacing = std::sqrt(4 * M_PI / count);
+  for (int i = 0; i < count; ++i) {
+    Eigen::Vector3d p(rng.Normal(), rng.Normal(), rng.Normal());
+    p.normalize();
+    const Eigen::Quaterniond q = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), p);
+    p *= 1.0 + rng.Normal(0, 0.01);
+    for (int k = 0; k < 3; ++k) m.means[3 * i + k] = static_cast<float>(p[k]);
+    m.log_scales[2 * i] = static_cast<float>(std::log(spacing * rng.Uniform(0.7, 1.5)));
+    m.log_scales[2 * i + 1] = static_cast<float>(std::log(spacing * rng.Uniform(0.7, 1.5)));
+    m.quats[4 * i] = static_cast<float>(q.w());
+    m.quats[4 * i + 1] = static_cast<float>(q.x());
+    m.quats[4 * i + 2] = static_cast<float>(q.y());
+    m.quats[4 * i + 3] = static_cast<float>(q.z());
+    m.opacity_logits[i] = static_cast<float>(rng.Uniform(0.0, 3.0));
+  }
+  for (float& v : m.sh) v = static_cast<float>(rng.Normal(0, 0.2));
   return m;
 }
 
