@@ -8,6 +8,7 @@ namespace mgsr {
 
 // Per-thread scratch of the rasterizer (reused between calls).
 struct RasterScratch {
+  std::vector<float> packed;                    // per primitive: the fields the pixel loops read
   std::vector<std::vector<float>> pixel_state;  // per thread: pixel state of the current tile
   std::vector<std::vector<float>> tile_data;  // per thread: gathered Gaussians of the current tile
   std::vector<std::vector<float>> tile_grad;  // per thread: gradients of the current tile

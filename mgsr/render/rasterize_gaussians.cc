@@ -16,25 +16,41 @@ enum Field { kMx, kMy, kRad, kCa, kCb, kCc, kOp, kRefOp, kBeta, kZ, kCt0, kCt1, 
 // Gradient fields, per Gaussian.
 enum GradField { gMx, gMy, gCa, gCb, gCc, gOp, gRefOp, gBeta, gZ, gCt0, gCt1, gCt2, gCr0, gCr1, gCr2, kGradStride };
 
-void GatherTile(const ProjectedGaussians& p, const uint32_t* ids, int n, std::vector<float>* buffer) {
-  buffer->resize(static_cast<size_t>(kNumFields) * n);
-  float* f = buffer->data();
-  for (int j = 0; j < n; ++j) {
-    const uint32_t g = ids[j];
-    f[kMx * n + j] = p.mean2d[2 * g];
-    f[kMy * n + j] = p.mean2d[2 * g + 1];
-    f[kRad * n + j] = p.radius[g];
-    f[kCa * n + j] = p.conic[3 * g];
-    f[kCb * n + j] = p.conic[3 * g + 1];
-    f[kCc * n + j] = p.conic[3 * g + 2];
-    f[kOp * n + j] = p.opacity[g];
-    f[kRefOp * n + j] = p.ref_opacity[g];
-    f[kBeta * n + j] = p.beta[g];
-    f[kZ * n + j] = p.depth[g];
+// Everything the pixel loops read about one Gaussian, packed into one 64-byte row (AoS), so a
+// tile's loop touches one cache line per Gaussian instead of 16 scattered arrays.
+void PackGaussians(const ProjectedGaussians& p, std::vector<float>* packed) {
+  const int64_t n = static_cast<int64_t>(p.size());
+  packed->resize(static_cast<size_t>(n) * kNumFields);
+  float* out = packed->data();
+#pragma omp parallel for schedule(static)
+  for (int64_t g = 0; g < n; ++g) {
+    float* f = out + g * kNumFields;
+    if (p.radius[g] <= 0) continue;  // never binned
+    f[kMx] = p.mean2d[2 * g];
+    f[kMy] = p.mean2d[2 * g + 1];
+    f[kRad] = p.radius[g];
+    f[kCa] = p.conic[3 * g];
+    f[kCb] = p.conic[3 * g + 1];
+    f[kCc] = p.conic[3 * g + 2];
+    f[kOp] = p.opacity[g];
+    f[kRefOp] = p.ref_opacity[g];
+    f[kBeta] = p.beta[g];
+    f[kZ] = p.depth[g];
     for (int c = 0; c < 3; ++c) {
-      f[(kCt0 + c) * n + j] = p.color_t[3 * g + c];
-      f[(kCr0 + c) * n + j] = p.color_r[3 * g + c];
+      f[kCt0 + c] = p.color_t[3 * g + c];
+      f[kCr0 + c] = p.color_r[3 * g + c];
     }
+  }
+}
+
+// Copies the packed rows of a tile's Gaussians into one contiguous buffer first: the independent
+// loads overlap their cache misses, which the compute-heavy pixel loop would otherwise serialise.
+void GatherTile(const float* packed, const uint32_t* ids, int n, std::vector<float>* buffer) {
+  buffer->resize(static_cast<size_t>(n) * kNumFields);
+  float* out = buffer->data();
+  for (int j = 0; j < n; ++j) {
+    std::memcpy(out + static_cast<size_t>(j) * kNumFields, packed + static_cast<size_t>(ids[j]) * kNumFields,
+                kNumFields * sizeof(float));
   }
 }
 
@@ -74,14 +90,13 @@ inline bool RowHitsEllipse(float dy, float a, float b, float c, float min_power)
   return b * b * dy * dy - a * (c * dy * dy - k) >= -1e-6f * (1.0f + k * a);
 }
 
-// One Gaussian of the tile, as the pixel loops read it.
+// One Gaussian, as the pixel loops read it (from its packed row).
 struct Splat {
   float mx, my, rad, ca, cb, cc, op, rop, beta, z, ct0, ct1, ct2, cr0, cr1, cr2;
-  Splat(const float* f, int n, int j)
-      : mx(f[kMx * n + j]), my(f[kMy * n + j]), rad(f[kRad * n + j]), ca(f[kCa * n + j]), cb(f[kCb * n + j]),
-        cc(f[kCc * n + j]), op(f[kOp * n + j]), rop(f[kRefOp * n + j]), beta(f[kBeta * n + j]), z(f[kZ * n + j]),
-        ct0(f[kCt0 * n + j]), ct1(f[kCt1 * n + j]), ct2(f[kCt2 * n + j]), cr0(f[kCr0 * n + j]),
-        cr1(f[kCr1 * n + j]), cr2(f[kCr2 * n + j]) {}
+  explicit Splat(const float* f)
+      : mx(f[kMx]), my(f[kMy]), rad(f[kRad]), ca(f[kCa]), cb(f[kCb]), cc(f[kCc]), op(f[kOp]), rop(f[kRefOp]),
+        beta(f[kBeta]), z(f[kZ]), ct0(f[kCt0]), ct1(f[kCt1]), ct2(f[kCt2]), cr0(f[kCr0]), cr1(f[kCr1]),
+        cr2(f[kCr2]) {}
 };
 
 // The exponent and the "may contribute" mask of a Gaussian over one tile row; one definition for
@@ -128,6 +143,8 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins, const
   const bool refl = o.reflection;
   const float bg[3] = {o.background[0], o.background[1], o.background[2]};
   const F16 lanes = simd::Lanes();
+  PackGaussians(p, &scratch->packed);
+  const float* packed = scratch->packed.data();
 
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int tile = 0; tile < bins.num_tiles(); ++tile) {
@@ -136,7 +153,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins, const
     const uint32_t begin = bins.tile_start[tile];
     const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
     std::vector<float>& buffer = scratch->tile_data[thread];
-    GatherTile(p, bins.ids.data() + begin, n, &buffer);
+    GatherTile(packed, bins.ids.data() + begin, n, &buffer);
     const float* f = buffer.data();
     const int x0 = tx * kTileSize, y0 = ty * kTileSize;
     const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
@@ -160,7 +177,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins, const
         for (int k = 0; k < kTilePixels; ++k) any += st[aLiveT][k] + st[aLiveR][k];
         if (any == 0) break;
       }
-      const Splat s(f, n, j);
+      const Splat s(f + static_cast<size_t>(j) * kNumFields);
       const float min_power = MinPower(s.op, s.rop, refl);
       if (!(min_power < 0.0f)) continue;  // too transparent to reach 1/255 anywhere
       int ya, yb;
@@ -244,6 +261,8 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
   const bool refl = o.reflection;
   const float bg[3] = {o.background[0], o.background[1], o.background[2]};
   const F16 lanes = simd::Lanes();
+  PackGaussians(p, &scratch->packed);
+  const float* packed = scratch->packed.data();
 
 #pragma omp parallel num_threads(threads)
   {
@@ -256,11 +275,12 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
       const uint32_t begin = bins.tile_start[tile];
       const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
       if (n == 0) continue;
+      const uint32_t* ids = bins.ids.data() + begin;
       std::vector<float>& buffer = scratch->tile_data[thread];
-      GatherTile(p, bins.ids.data() + begin, n, &buffer);
+      GatherTile(packed, ids, n, &buffer);
+      const float* f = buffer.data();
       std::vector<float>& tg = scratch->tile_grad[thread];
       tg.assign(static_cast<size_t>(n) * kGradStride, 0.0f);
-      const float* f = buffer.data();
       const int x0 = tx * kTileSize, y0 = ty * kTileSize;
       const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
       const I16 lanes_ok = lanes < static_cast<float>(x_end - x0);
@@ -308,7 +328,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
         }
       }
       for (int j = max_last - 1; j >= 0; --j) {
-        const Splat s(f, n, j);
+        const Splat s(f + static_cast<size_t>(j) * kNumFields);
         const float min_power = MinPower(s.op, s.rop, refl);
         if (!(min_power < 0.0f)) continue;
         int ya, yb;
@@ -405,7 +425,6 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
         dst[gCr2] = simd::Sum(g_cr2);
       }
       // Scatter this tile's gradients to the thread's per-Gaussian accumulators.
-      const uint32_t* ids = bins.ids.data() + begin;
       for (int j = 0; j < max_last; ++j) {
         float* dst = acc.data() + static_cast<size_t>(ids[j]) * kGradStride;
         const float* src = tg.data() + static_cast<size_t>(j) * kGradStride;

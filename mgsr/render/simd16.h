@@ -25,16 +25,34 @@ inline F16 Max(F16 a, F16 b) { return a > b ? a : b; }
 inline F16 Abs(F16 a) { return a < 0.0f ? -a : a; }
 inline F16 Masked(I16 mask, F16 a) { return mask ? a : F16{}; }
 
-inline bool Any(I16 mask) {
-  int32_t any = 0;
-  for (int i = 0; i < 16; ++i) any |= mask[i];
-  return any != 0;
+typedef float F8 __attribute__((vector_size(32)));
+typedef float F4 __attribute__((vector_size(16)));
+typedef int32_t I8 __attribute__((vector_size(32)));
+typedef int32_t I4 __attribute__((vector_size(16)));
+
+// Horizontal reductions by halving (a few shuffles instead of 15 dependent scalar adds).
+inline float Sum(F16 v) {
+  F8 a, b;
+  std::memcpy(&a, &v, sizeof(a));
+  std::memcpy(&b, reinterpret_cast<const char*>(&v) + sizeof(a), sizeof(b));
+  const F8 s8 = a + b;
+  F4 c, d;
+  std::memcpy(&c, &s8, sizeof(c));
+  std::memcpy(&d, reinterpret_cast<const char*>(&s8) + sizeof(c), sizeof(d));
+  const F4 s4 = c + d;
+  return (s4[0] + s4[2]) + (s4[1] + s4[3]);
 }
 
-inline float Sum(F16 v) {
-  float s = 0;
-  for (int i = 0; i < 16; ++i) s += v[i];
-  return s;
+inline bool Any(I16 mask) {
+  I8 a, b;
+  std::memcpy(&a, &mask, sizeof(a));
+  std::memcpy(&b, reinterpret_cast<const char*>(&mask) + sizeof(a), sizeof(b));
+  const I8 o8 = a | b;
+  I4 c, d;
+  std::memcpy(&c, &o8, sizeof(c));
+  std::memcpy(&d, reinterpret_cast<const char*>(&o8) + sizeof(c), sizeof(d));
+  const I4 o4 = c | d;
+  return (o4[0] | o4[1] | o4[2] | o4[3]) != 0;
 }
 
 // exp(x) for x in [-88, 0], lane by lane (Cephes' expf: range reduction by ln 2 and a degree-6

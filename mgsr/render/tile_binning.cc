@@ -17,72 +17,99 @@ TileRect TileRectFromBox(float cx, float cy, float rx, float ry, int tiles_x, in
   return r;
 }
 
+namespace {
+
+// Stable LSD radix sort of (key, id) pairs by 32-bit key, 11 bits per pass.
+void RadixSortByKey(std::vector<uint32_t>* keys, std::vector<uint32_t>* ids, std::vector<uint32_t>* tmp_keys,
+                    std::vector<uint32_t>* tmp_ids) {
+  const size_t n = keys->size();
+  tmp_keys->resize(n);
+  tmp_ids->resize(n);
+  constexpr int kBits = 11, kBuckets = 1 << kBits;
+  for (int shift = 0; shift < 32; shift += kBits) {
+    uint32_t count[kBuckets] = {};
+    for (uint32_t k : *keys) ++count[(k >> shift) & (kBuckets - 1)];
+    uint32_t sum = 0;
+    for (uint32_t& c : count) {
+      const uint32_t v = c;
+      c = sum;
+      sum += v;
+    }
+    for (size_t i = 0; i < n; ++i) {
+      const uint32_t b = ((*keys)[i] >> shift) & (kBuckets - 1);
+      (*tmp_keys)[count[b]] = (*keys)[i];
+      (*tmp_ids)[count[b]++] = (*ids)[i];
+    }
+    keys->swap(*tmp_keys);
+    ids->swap(*tmp_ids);
+  }
+}
+
+}  // namespace
+
 void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int width, int height,
                    TileBins* bins) {
   bins->tiles_x = (width + kTileSize - 1) / kTileSize;
   bins->tiles_y = (height + kTileSize - 1) / kTileSize;
   const int num_tiles = bins->num_tiles();
-  const int n = static_cast<int>(rects.size());
+  // 1. The drawn primitives in depth order (ties by id): one radix sort instead of a sort per tile.
+  //    Positive floats order like their bit patterns.
+  bins->order_keys.clear();
+  bins->order.clear();
+  for (size_t i = 0; i < rects.size(); ++i) {
+    if (rects[i].empty()) continue;
+    uint32_t bits;
+    std::memcpy(&bits, &depths[i], 4);
+    bins->order_keys.push_back(bits);
+    bins->order.push_back(static_cast<uint32_t>(i));
+  }
+  RadixSortByKey(&bins->order_keys, &bins->order, &bins->tmp_keys, &bins->tmp_ids);
+  const int n = static_cast<int>(bins->order.size());
   const int threads = omp_get_max_threads();
   bins->thread_counts.assign(static_cast<size_t>(threads) * num_tiles, 0);
   bins->tile_start.assign(num_tiles + 1, 0);
 
-  // Pass 1: per-thread histograms over a static split of the primitives.
+  // 2. Per-thread tile histograms over consecutive chunks of the depth order.
 #pragma omp parallel num_threads(threads)
   {
     const int t = omp_get_thread_num();
     uint32_t* counts = bins->thread_counts.data() + static_cast<size_t>(t) * num_tiles;
     const int begin = static_cast<int>(static_cast<int64_t>(n) * t / threads);
     const int end = static_cast<int>(static_cast<int64_t>(n) * (t + 1) / threads);
-    for (int i = begin; i < end; ++i) {
-      const TileRect& r = rects[i];
-      if (r.empty()) continue;
+    for (int q = begin; q < end; ++q) {
+      const TileRect& r = rects[bins->order[q]];
       for (int ty = r.y0; ty < r.y1; ++ty) {
         for (int tx = r.x0; tx < r.x1; ++tx) ++counts[ty * bins->tiles_x + tx];
       }
     }
   }
-  // Exclusive prefix over (tile, thread): thread t's entries of a tile follow threads < t.
+  // 3. Offsets: within a tile, thread t's (deeper) chunk follows the chunks of threads < t, so
+  //    every tile list comes out front to back.
   uint32_t total = 0;
   for (int tile = 0; tile < num_tiles; ++tile) {
     bins->tile_start[tile] = total;
     for (int t = 0; t < threads; ++t) {
       uint32_t& c = bins->thread_counts[static_cast<size_t>(t) * num_tiles + tile];
       const uint32_t count = c;
-      c = total;  // becomes this thread's write offset
+      c = total;
       total += count;
     }
   }
   bins->tile_start[num_tiles] = total;
-  bins->keys.resize(total);
-
-  // Pass 2: fill (depth bits << 32 | id); positive floats order like their bit patterns.
+  bins->ids.resize(total);
 #pragma omp parallel num_threads(threads)
   {
     const int t = omp_get_thread_num();
     uint32_t* offsets = bins->thread_counts.data() + static_cast<size_t>(t) * num_tiles;
     const int begin = static_cast<int>(static_cast<int64_t>(n) * t / threads);
     const int end = static_cast<int>(static_cast<int64_t>(n) * (t + 1) / threads);
-    for (int i = begin; i < end; ++i) {
-      const TileRect& r = rects[i];
-      if (r.empty()) continue;
-      uint32_t bits;
-      std::memcpy(&bits, &depths[i], 4);
-      const uint64_t key = (static_cast<uint64_t>(bits) << 32) | static_cast<uint32_t>(i);
+    for (int q = begin; q < end; ++q) {
+      const uint32_t id = bins->order[q];
+      const TileRect& r = rects[id];
       for (int ty = r.y0; ty < r.y1; ++ty) {
-        for (int tx = r.x0; tx < r.x1; ++tx) bins->keys[offsets[ty * bins->tiles_x + tx]++] = key;
+        for (int tx = r.x0; tx < r.x1; ++tx) bins->ids[offsets[ty * bins->tiles_x + tx]++] = id;
       }
     }
-  }
-  // Pass 3: sort each tile front to back.
-  bins->ids.resize(total);
-#pragma omp parallel for schedule(dynamic, 4)
-  for (int tile = 0; tile < num_tiles; ++tile) {
-    uint64_t* first = bins->keys.data() + bins->tile_start[tile];
-    uint64_t* last = bins->keys.data() + bins->tile_start[tile + 1];
-    std::sort(first, last);
-    uint32_t* out = bins->ids.data() + bins->tile_start[tile];
-    for (uint64_t* k = first; k != last; ++k) *out++ = static_cast<uint32_t>(*k);
   }
 }
 
