@@ -1,4 +1,4 @@
-// Image: a planar float buffer (channel-major: all of channel 0, then channel 1, ...), row-major
+// ImageT: a planar buffer (channel-major: all of channel 0, then channel 1, ...), row-major
 // within a channel. Planar layout lets the rasterizers and losses run vectorised loops per channel.
 #pragma once
 
@@ -7,10 +7,11 @@
 
 namespace mgsr {
 
-class Image {
+template <typename T>
+class ImageT {
  public:
-  Image() = default;
-  Image(int width, int height, int channels, float fill = 0.0f)
+  ImageT() = default;
+  ImageT(int width, int height, int channels, T fill = T(0))
       : width_(width), height_(height), channels_(channels),
         data_(static_cast<size_t>(width) * height * channels, fill) {}
 
@@ -21,23 +22,33 @@ class Image {
   size_t plane_size() const { return static_cast<size_t>(width_) * height_; }
   size_t size() const { return data_.size(); }
 
-  float* data() { return data_.data(); }
-  const float* data() const { return data_.data(); }
-  float* plane(int c) { return data_.data() + c * plane_size(); }
-  const float* plane(int c) const { return data_.data() + c * plane_size(); }
-  float& at(int c, int y, int x) { return data_[c * plane_size() + static_cast<size_t>(y) * width_ + x]; }
-  float at(int c, int y, int x) const {
-    return data_[c * plane_size() + static_cast<size_t>(y) * width_ + x];
-  }
+  T* data() { return data_.data(); }
+  const T* data() const { return data_.data(); }
+  T* plane(int c) { return data_.data() + c * plane_size(); }
+  const T* plane(int c) const { return data_.data() + c * plane_size(); }
+  T& at(int c, int y, int x) { return data_[c * plane_size() + static_cast<size_t>(y) * width_ + x]; }
+  T at(int c, int y, int x) const { return data_[c * plane_size() + static_cast<size_t>(y) * width_ + x]; }
 
-  void Fill(float v) { data_.assign(data_.size(), v); }
-  bool SameShape(const Image& o) const {
-    return width_ == o.width_ && height_ == o.height_ && channels_ == o.channels_;
+  void Fill(T v) { data_.assign(data_.size(), v); }
+  template <typename U>
+  bool SameShape(const ImageT<U>& o) const {
+    return width_ == o.width() && height_ == o.height() && channels_ == o.channels();
+  }
+  // A copy in another scalar type (e.g. double for gradient checks).
+  template <typename U>
+  ImageT<U> Cast() const {
+    ImageT<U> out(width_, height_, channels_);
+    for (size_t i = 0; i < data_.size(); ++i) out.data()[i] = static_cast<U>(data_[i]);
+    return out;
   }
 
  private:
   int width_ = 0, height_ = 0, channels_ = 0;
-  std::vector<float> data_;
+  std::vector<T> data_;
 };
+
+// Renders, images and gradients are float; double images serve numeric gradient checks.
+using Image = ImageT<float>;
+using ImageD = ImageT<double>;
 
 }  // namespace mgsr

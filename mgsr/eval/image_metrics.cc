@@ -5,51 +5,15 @@
 
 #include <glog/logging.h>
 
+#include "mgsr/core/separable_blur.h"
+
 namespace mgsr {
 
-std::vector<float> SsimWindow() {
-  constexpr int kSize = 11;
-  constexpr double kSigma = 1.5;
-  std::vector<float> w(kSize);
-  double sum = 0;
-  for (int i = 0; i < kSize; ++i) {
-    const double x = i - kSize / 2;
-    sum += std::exp(-x * x / (2 * kSigma * kSigma));
-  }
-  for (int i = 0; i < kSize; ++i) {
-    const double x = i - kSize / 2;
-    w[i] = static_cast<float>(std::exp(-x * x / (2 * kSigma * kSigma)) / sum);
-  }
-  return w;
-}
+std::vector<float> SsimWindow() { return SsimWindowT<float>(); }
 
-void BlurZeroPadded(const float* in, int width, int height, const std::vector<float>& kernel,
-                    float* out, std::vector<float>* scratch) {
-  const int r = static_cast<int>(kernel.size()) / 2;
-  scratch->resize(static_cast<size_t>(width) * height);
-  float* tmp = scratch->data();
-  // Horizontal pass.
-  for (int y = 0; y < height; ++y) {
-    const float* row = in + static_cast<size_t>(y) * width;
-    float* dst = tmp + static_cast<size_t>(y) * width;
-    for (int x = 0; x < width; ++x) {
-      const int k0 = std::max(0, r - x), k1 = std::min(2 * r, width - 1 - x + r);
-      float acc = 0;
-      for (int k = k0; k <= k1; ++k) acc += kernel[k] * row[x + k - r];
-      dst[x] = acc;
-    }
-  }
-  // Vertical pass, row by row so the inner loop runs over contiguous x (vectorises).
-  for (int y = 0; y < height; ++y) {
-    float* dst = out + static_cast<size_t>(y) * width;
-    for (int x = 0; x < width; ++x) dst[x] = 0;
-    const int k0 = std::max(0, r - y), k1 = std::min(2 * r, height - 1 - y + r);
-    for (int k = k0; k <= k1; ++k) {
-      const float w = kernel[k];
-      const float* src = tmp + static_cast<size_t>(y + k - r) * width;
-      for (int x = 0; x < width; ++x) dst[x] += w * src[x];
-    }
-  }
+void BlurZeroPadded(const float* in, int width, int height, const std::vector<float>& kernel, float* out,
+                    std::vector<float>* scratch) {
+  BlurZeroPaddedT(in, width, height, kernel, out, scratch);
 }
 
 double Psnr(const Image& a, const Image& b) {

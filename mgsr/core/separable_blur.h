@@ -1,0 +1,54 @@
+// Separable blur with zero padding (the convolution SSIM uses), for any scalar type. A symmetric
+// kernel with zero padding is its own adjoint, which the SSIM backward relies on.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace mgsr {
+
+// The normalised 1-D Gaussian window of SSIM: 11 taps, sigma 1.5.
+template <typename T>
+std::vector<T> SsimWindowT() {
+  constexpr int kSize = 11;
+  constexpr double kSigma = 1.5;
+  std::vector<T> w(kSize);
+  double sum = 0;
+  for (int i = 0; i < kSize; ++i) sum += std::exp(-(i - kSize / 2) * (i - kSize / 2) / (2 * kSigma * kSigma));
+  for (int i = 0; i < kSize; ++i) {
+    w[i] = static_cast<T>(std::exp(-(i - kSize / 2) * (i - kSize / 2) / (2 * kSigma * kSigma)) / sum);
+  }
+  return w;
+}
+
+template <typename T>
+void BlurZeroPaddedT(const T* in, int width, int height, const std::vector<T>& kernel, T* out,
+                     std::vector<T>* scratch) {
+  const int r = static_cast<int>(kernel.size()) / 2;
+  scratch->resize(static_cast<size_t>(width) * height);
+  T* tmp = scratch->data();
+  for (int y = 0; y < height; ++y) {
+    const T* row = in + static_cast<size_t>(y) * width;
+    T* dst = tmp + static_cast<size_t>(y) * width;
+    for (int x = 0; x < width; ++x) {
+      const int k0 = std::max(0, r - x), k1 = std::min(2 * r, width - 1 - x + r);
+      T acc = 0;
+      for (int k = k0; k <= k1; ++k) acc += kernel[k] * row[x + k - r];
+      dst[x] = acc;
+    }
+  }
+  // Vertical pass row by row, so the inner loop runs over contiguous x (vectorises).
+  for (int y = 0; y < height; ++y) {
+    T* dst = out + static_cast<size_t>(y) * width;
+    std::fill(dst, dst + width, T(0));
+    const int k0 = std::max(0, r - y), k1 = std::min(2 * r, height - 1 - y + r);
+    for (int k = k0; k <= k1; ++k) {
+      const T w = kernel[k];
+      const T* src = tmp + static_cast<size_t>(y + k - r) * width;
+      for (int x = 0; x < width; ++x) dst[x] += w * src[x];
+    }
+  }
+}
+
+}  // namespace mgsr

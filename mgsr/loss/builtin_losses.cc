@@ -1,0 +1,76 @@
+// The registration lines of the built-in loss terms: one per term.
+#include "mgsr/loss/dssim_loss.h"
+#include "mgsr/loss/edge_aware_tv_loss.h"
+#include "mgsr/loss/l1_loss.h"
+#include "mgsr/loss/loss_registry.h"
+#include "mgsr/loss/mutual_depth_loss.h"
+#include "mgsr/loss/normal_consistency_loss.h"
+#include "mgsr/loss/render_loss.h"
+
+namespace mgsr {
+namespace {
+
+Status ParseTarget(const nlohmann::json& c, const char* key, TargetKind* out) {
+  *out = TargetKind::kImage;
+  if (!c.contains(key)) return Status::Ok();
+  const std::string v = c[key].is_string() ? c[key].get<std::string>() : "";
+  if (v == "image") *out = TargetKind::kImage;
+  else if (v == "transmitted") *out = TargetKind::kTransmitted;
+  else return Status::Error(std::string("'") + key + "' must be \"image\" or \"transmitted\"");
+  return Status::Ok();
+}
+
+double Number(const nlohmann::json& c, const char* key, double fallback) {
+  return c.contains(key) && c[key].is_number() ? c[key].get<double>() : fallback;
+}
+
+// Factory for the (buffer, target) photometric terms.
+template <typename Term>
+LossRegistry::Factory Photometric(Buffer default_buffer) {
+  return [default_buffer](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
+    Buffer b;
+    TargetKind t;
+    *s = ParseBuffer(c, "buffer", default_buffer, &b);
+    if (s->ok()) *s = ParseTarget(c, "target", &t);
+    if (!s->ok()) return nullptr;
+    return std::make_unique<Term>(b, t);
+  };
+}
+
+}  // namespace
+
+void RegisterBuiltinLosses(LossRegistry* r) {
+  r->Register("l1", Photometric<L1Loss>(Buffer::kColor));
+  r->Register("dssim", Photometric<DssimLoss>(Buffer::kColor));
+  r->Register("render", [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
+    Buffer b;
+    TargetKind t;
+    *s = ParseBuffer(c, "buffer", Buffer::kColor, &b);
+    if (s->ok()) *s = ParseTarget(c, "target", &t);
+    if (!s->ok()) return nullptr;
+    return std::make_unique<RenderLoss>(b, t, Number(c, "lambda", 0.8));
+  });
+  r->Register("mutual_render", [](const nlohmann::json& c, Status*) -> std::unique_ptr<LossTerm> {
+    return std::make_unique<MutualRenderLoss>(Number(c, "transmitted_weight", 0.2), Number(c, "image_weight", 0.8),
+                                              Number(c, "lambda", 0.8));
+  });
+  r->Register("tv", [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
+    Buffer b;
+    TargetKind g;
+    *s = ParseBuffer(c, "buffer", Buffer::kDepth, &b);
+    if (s->ok()) *s = ParseTarget(c, "guide", &g);
+    if (!s->ok()) return nullptr;
+    return std::make_unique<EdgeAwareTvLoss>(b, g);
+  });
+  r->Register("normal_consistency", [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {
+    return std::make_unique<NormalConsistencyLoss>();
+  });
+  r->Register("mutual_depth", [](const nlohmann::json& c, Status*) -> std::unique_ptr<LossTerm> {
+    return std::make_unique<MutualDepthLoss>(c.contains("masked") && c["masked"].is_boolean() && c["masked"].get<bool>());
+  });
+  r->Register("distortion", [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {
+    return std::make_unique<DistortionLoss>();
+  });
+}
+
+}  // namespace mgsr

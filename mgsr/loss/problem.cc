@@ -1,0 +1,41 @@
+#include "mgsr/loss/problem.h"
+
+namespace mgsr {
+
+void Problem::AddTerm(std::unique_ptr<LossTerm> term, double weight, Branch branch) {
+  entries_.push_back({std::move(term), weight, branch});
+}
+
+bool Problem::SetWeight(const std::string& name, Branch branch, double weight) {
+  for (Entry& e : entries_) {
+    if (e.branch == branch && e.term->Name() == name) {
+      e.weight = weight;
+      return true;
+    }
+  }
+  return false;
+}
+
+Status Problem::Check(Branch branch, const RenderBuffers& in, const Targets& targets) const {
+  for (const Entry& e : entries_) {
+    if (e.branch != branch || e.weight == 0) continue;
+    MGSR_RETURN_IF_ERROR(e.term->Check(in, targets));
+  }
+  return Status::Ok();
+}
+
+double Problem::Evaluate(Branch branch, const RenderBuffers& in, const Targets& targets, RenderGradients* grad,
+                         std::vector<TermValue>* breakdown) const {
+  if (grad != nullptr) grad->Clear();
+  if (breakdown != nullptr) breakdown->clear();
+  double total = 0;
+  for (const Entry& e : entries_) {
+    if (e.branch != branch || e.weight == 0) continue;
+    const double v = e.term->Evaluate(in, targets, e.weight, grad);
+    total += e.weight * v;
+    if (breakdown != nullptr) breakdown->push_back({e.term->Name(), e.weight, v});
+  }
+  return total;
+}
+
+}  // namespace mgsr

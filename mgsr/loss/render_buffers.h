@@ -1,0 +1,72 @@
+// What loss terms read and write: the named buffers of a branch's render, constant targets, and
+// the gradients with respect to the buffers. Templated on the scalar type: float in training,
+// double for gradient checks.
+#pragma once
+
+#include <array>
+#include <string>
+
+#include "mgsr/core/camera.h"
+#include "mgsr/core/image.h"
+
+namespace mgsr {
+
+enum class Buffer {
+  kColor,        // the branch's colour (3DGS: C = C_tran + W C_ref; 2DGS: C)
+  kTransmitted,  // 3DGS C_tran
+  kReflected,    // 3DGS C_ref
+  kWeight,       // 3DGS W
+  kDepth,        // expected depth (both branches)
+  kAlpha,        // accumulated opacity
+  kNormal,       // 2DGS alpha-weighted world-space normal
+  kMedianDepth,  // 2DGS
+  kDistortion,   // 2DGS
+  kCount
+};
+constexpr int kNumBuffers = static_cast<int>(Buffer::kCount);
+const char* BufferName(Buffer b);
+// Channels of each buffer (3 for colours and normals, else 1).
+int BufferChannels(Buffer b);
+
+template <typename T>
+struct RenderBuffersT {
+  std::array<const ImageT<T>*, kNumBuffers> images{};
+  const Camera* camera = nullptr;  // needed by geometric terms (depth to normal)
+
+  const ImageT<T>* Get(Buffer b) const { return images[static_cast<int>(b)]; }
+  void Set(Buffer b, const ImageT<T>* image) { images[static_cast<int>(b)] = image; }
+};
+
+// Constant inputs: nothing here receives a gradient (that is one-way supervision).
+template <typename T>
+struct TargetsT {
+  const ImageT<T>* image = nullptr;        // ground truth, RGB
+  const ImageT<T>* mask = nullptr;         // foreground weight gamma in [0, 1], 1 channel
+  const ImageT<T>* transmitted = nullptr;  // the 3DGS branch's C_tran, as a target for the 2DGS branch
+  const ImageT<T>* other_depth = nullptr;  // the 2DGS branch's depth, as a target for the 3DGS branch
+};
+
+template <typename T>
+struct RenderGradientsT {
+  std::array<ImageT<T>, kNumBuffers> images;
+
+  // The gradient image of `b`, created as zeros shaped like `like` on first use.
+  ImageT<T>& Get(Buffer b, const ImageT<T>& like) {
+    ImageT<T>& g = images[static_cast<int>(b)];
+    if (!g.SameShape(like)) g = ImageT<T>(like.width(), like.height(), like.channels());
+    return g;
+  }
+  const ImageT<T>& Get(Buffer b) const { return images[static_cast<int>(b)]; }
+  void Clear() {
+    for (auto& im : images) im = ImageT<T>();
+  }
+};
+
+using RenderBuffers = RenderBuffersT<float>;
+using RenderBuffersD = RenderBuffersT<double>;
+using Targets = TargetsT<float>;
+using TargetsD = TargetsT<double>;
+using RenderGradients = RenderGradientsT<float>;
+using RenderGradientsD = RenderGradientsT<double>;
+
+}  // namespace mgsr

@@ -1,0 +1,286 @@
+#include <ceres/ceres.h>
+#include <ceres/gradient_checker.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "mgsr/core/rng.h"
+#include "mgsr/eval/image_metrics.h"
+#include "mgsr/loss/dssim_loss.h"
+#include "mgsr/loss/edge_aware_tv_loss.h"
+#include "mgsr/loss/l1_loss.h"
+#include "mgsr/loss/loss_registry.h"
+#include "mgsr/loss/mutual_depth_loss.h"
+#include "mgsr/loss/normal_consistency_loss.h"
+#include "mgsr/loss/problem.h"
+#include "mgsr/loss/render_loss.h"
+
+namespace mgsr {
+namespace {
+
+// Random double-precision inputs for any term: every buffer and every target, plausible ranges
+// (positive depths around 3, alpha in (0.5, 1)).
+struct Fixture {
+  Camera camera = LookAtCamera({0.2, -3, 0.5}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 14, 11, 16, 16);
+  std::array<ImageD, kNumBuffers> buffers;
+  ImageD image, transmitted, mask, other_depth;
+  RenderBuffersD in;
+  TargetsD targets;
+
+  explicit Fixture(uint64_t seed) {
+    Rng rng(seed);
+    const int w = camera.width, h = camera.height;
+    auto random = [&](int c, double lo, double hi) {
+      ImageD im(w, h, c);
+      for (size_t i = 0; i < im.size(); ++i) im.data()[i] = rng.Uniform(lo, hi);
+      return im;
+    };
+    for (int b = 0; b < kNumBuffers; ++b) {
+      const Buffer buf = static_cast<Buffer>(b);
+      if (buf == Buffer::kDepth || buf == Buffer::kMedianDepth) buffers[b] = random(1, 2.8, 3.2);
+      else if (buf == Buffer::kAlpha) buffers[b] = random(1, 0.5, 1.0);
+      else buffers[b] = random(BufferChannels(buf), -0.2, 1.2);
+      in.Set(buf, &buffers[b]);
+    }
+    in.camera = &camera;
+    image = random(3, 0, 1);
+    transmitted = random(3, 0, 1);
+    mask = random(1, 0, 1);
+    other_depth = random(1, 2.5, 3.5);
+    targets.image = &image;
+    targets.transmitted = &transmitted;
+    targets.mask = &mask;
+    targets.other_depth = &other_depth;
+  }
+};
+
+// The generic harness: every input buffer element of `term`, analytic against central differences.
+// Constant inputs (stop-gradient) are not differentiated. The mutual depth holds its maxima
+// constant by design, so the harness skips the one pixel where that differs (the argmax).
+void ExpectGradientMatchesNumeric(const LossTerm& term, uint64_t seed = 1) {
+  SCOPED_TRACE(term.Name());
+  Fixture f(seed);
+  RenderGradientsD grad;
+  const double scale = 1.7;
+  const double value = term.Evaluate(f.in, f.targets, scale, &grad);
+  EXPECT_TRUE(std::isfinite(value));
+  int nonzero = 0;
+  for (Buffer b : term.Inputs()) {
+    ImageD& x = f.buffers[static_cast<int>(b)];
+    const ImageD& g = grad.Get(b);
+    const bool has_grad = !g.empty();
+    const size_t argmax = std::max_element(x.data(), x.data() + x.size()) - x.data();
+    const bool skip_argmax = term.Name().rfind("mutual_depth", 0) == 0;
+    for (size_t i = 0; i < x.size(); ++i) {
+      if (skip_argmax && i == argmax) continue;
+      const double keep = x.data()[i], h = 1e-6;
+      x.data()[i] = keep + h;
+      const double vp = term.Evaluate(f.in, f.targets, 1.0, nullptr);
+      x.data()[i] = keep - h;
+      const double vm = term.Evaluate(f.in, f.targets, 1.0, nullptr);
+      x.data()[i] = keep;
+      const double numeric = scale * (vp - vm) / (2 * h);
+      const double analytic = has_grad ? g.data()[i] : 0.0;
+      EXPECT_NEAR(analytic, numeric, 1e-6 + 1e-5 * std::abs(numeric)) << BufferName(b) << "[" << i << "]";
+      nonzero += std::abs(numeric) > 1e-9;
+    }
+  }
+  EXPECT_GT(nonzero, 0) << "the term should depend on its inputs";
+}
+
+TEST(LossGradientTest, EveryTermMatchesNumericDifferentiation) {
+  ExpectGradientMatchesNumeric(L1Loss(Buffer::kColor, TargetKind::kImage));
+  ExpectGradientMatchesNumeric(L1Loss(Buffer::kTransmitted, TargetKind::kTransmitted));
+  ExpectGradientMatchesNumeric(DssimLoss(Buffer::kColor, TargetKind::kImage));
+  ExpectGradientMatchesNumeric(RenderLoss(Buffer::kColor, TargetKind::kImage, 0.8));
+  ExpectGradientMatchesNumeric(MutualRenderLoss());
+  ExpectGradientMatchesNumeric(EdgeAwareTvLoss(Buffer::kTransmitted, TargetKind::kImage));
+  ExpectGradientMatchesNumeric(EdgeAwareTvLoss(Buffer::kDepth, TargetKind::kTransmitted));
+  ExpectGradientMatchesNumeric(EdgeAwareTvLoss(Buffer::kNormal, TargetKind::kImage));
+  ExpectGradientMatchesNumeric(NormalConsistencyLoss());
+  ExpectGradientMatchesNumeric(NormalConsistencyLoss(), 5);
+  ExpectGradientMatchesNumeric(MutualDepthLoss(false));
+  ExpectGradientMatchesNumeric(MutualDepthLoss(true));
+  ExpectGradientMatchesNumeric(DistortionLoss());
+}
+
+TEST(LossGradientTest, EveryRegisteredTermPassesTheHarness) {
+  for (const std::string& name : LossRegistry::Get().Names()) {
+    Status s;
+    auto term = LossRegistry::Get().Create(name, nlohmann::json::object(), &s);
+    ASSERT_TRUE(s.ok()) << s.message();
+    ExpectGradientMatchesNumeric(*term, 3);
+  }
+}
+
+// The interface really is Ceres-shaped: a term wrapped as a ceres::CostFunction (one residual, the
+// value; one parameter block, the input buffer) passes ceres::GradientChecker.
+class LossTermCostFunction : public ceres::CostFunction {
+ public:
+  LossTermCostFunction(const LossTerm* term, Fixture* fixture, Buffer buffer)
+      : term_(term), f_(fixture), buffer_(buffer) {
+    set_num_residuals(1);
+    mutable_parameter_block_sizes()->push_back(static_cast<int32_t>(f_->buffers[static_cast<int>(buffer)].size()));
+  }
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    ImageD& x = f_->buffers[static_cast<int>(buffer_)];
+    std::copy(parameters[0], parameters[0] + x.size(), x.data());
+    RenderGradientsD grad;
+    residuals[0] = term_->Evaluate(f_->in, f_->targets, 1.0, jacobians ? &grad : nullptr);
+    if (jacobians != nullptr && jacobians[0] != nullptr) {
+      const ImageD& g = grad.Get(buffer_);
+      for (size_t i = 0; i < x.size(); ++i) jacobians[0][i] = g.empty() ? 0.0 : g.data()[i];
+    }
+    return true;
+  }
+
+ private:
+  const LossTerm* term_;
+  Fixture* f_;
+  Buffer buffer_;
+};
+
+TEST(LossGradientTest, CeresGradientCheckerAcceptsTheTerms) {
+  for (int which = 0; which < 2; ++which) {
+    Fixture f(5);
+    DssimLoss dssim;
+    NormalConsistencyLoss normal;
+    const LossTerm* term = which == 0 ? static_cast<const LossTerm*>(&dssim) : &normal;
+    const Buffer buffer = which == 0 ? Buffer::kColor : Buffer::kDepth;
+    LossTermCostFunction cost(term, &f, buffer);
+    std::vector<double> x(f.buffers[static_cast<int>(buffer)].data(),
+                          f.buffers[static_cast<int>(buffer)].data() + f.buffers[static_cast<int>(buffer)].size());
+    const double* blocks[] = {x.data()};
+    ceres::NumericDiffOptions options;
+    // GradientChecker uses Ridders' method; its default first step (1% of the value) is too coarse
+    // for the rough random depth maps of this fixture.
+    options.ridders_relative_initial_step_size = 1e-4;
+    ceres::GradientChecker checker(&cost, static_cast<const std::vector<const ceres::Manifold*>*>(nullptr), options);
+    ceres::GradientChecker::ProbeResults results;
+    EXPECT_TRUE(checker.Probe(blocks, 1e-5, &results)) << term->Name() << ": " << results.error_log;
+  }
+}
+
+TEST(LossValueTest, HandComputedCases) {
+  Fixture f(7);
+  // L1 of a constant offset.
+  ImageD shifted = f.image;
+  for (size_t i = 0; i < shifted.size(); ++i) shifted.data()[i] += 0.25;
+  f.in.Set(Buffer::kColor, &shifted);
+  EXPECT_NEAR(L1Loss().Evaluate(f.in, f.targets, 1, nullptr), 0.25, 1e-12);
+  // D-SSIM of identical images is 0, and SSIM matches the evaluation metric.
+  f.in.Set(Buffer::kColor, &f.image);
+  EXPECT_NEAR(DssimLoss().Evaluate(f.in, f.targets, 1, nullptr), 0.0, 1e-12);
+  f.in.Set(Buffer::kColor, &f.buffers[0]);
+  EXPECT_NEAR(1.0 - DssimLoss().Evaluate(f.in, f.targets, 1, nullptr),
+              Ssim(f.buffers[0].Cast<float>(), f.image.Cast<float>()), 1e-5);
+  // TV of a horizontal ramp with a flat guide: only horizontal steps, each a^2.
+  ImageD ramp(14, 11, 1), flat(14, 11, 3, 0.5);
+  for (int y = 0; y < 11; ++y) {
+    for (int x = 0; x < 14; ++x) ramp.at(0, y, x) = 0.3 * x;
+  }
+  f.in.Set(Buffer::kDepth, &ramp);
+  f.targets.image = &flat;
+  EXPECT_NEAR(EdgeAwareTvLoss(Buffer::kDepth).Evaluate(f.in, f.targets, 1, nullptr), 0.09, 1e-12);
+  // Mutual depth of proportional depths is 0 (max normalisation).
+  ImageD twice = ramp;
+  for (size_t i = 0; i < twice.size(); ++i) twice.data()[i] = 2 * ramp.data()[i] + 2;
+  ImageD base = twice;
+  for (size_t i = 0; i < base.size(); ++i) base.data()[i] = 0.5 * twice.data()[i];
+  f.in.Set(Buffer::kDepth, &base);
+  f.targets.other_depth = &twice;
+  EXPECT_NEAR(MutualDepthLoss().Evaluate(f.in, f.targets, 1, nullptr), 0.0, 1e-15);
+}
+
+TEST(LossValueTest, DepthOfATiltedPlaneGivesItsNormal) {
+  const Camera cam = LookAtCamera({0.5, -3, 1}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 20, 16, 24, 24);
+  const Eigen::Vector3d n = Eigen::Vector3d(0.3, -1, 0.4).normalized();
+  ImageD depth(20, 16, 1);
+  for (int y = 0; y < 16; ++y) {
+    for (int x = 0; x < 20; ++x) {
+      const Eigen::Vector3d ray = cam.R.transpose() * cam.PixelToRay(x + 0.5, y + 0.5);
+      depth.at(0, y, x) = -n.dot(cam.Center()) / n.dot(ray);
+    }
+  }
+  const ImageD normals = DepthToNormal(depth, cam);
+  const Eigen::Vector3d facing = n.dot(cam.Center()) > 0 ? n : Eigen::Vector3d(-n);
+  for (int y = 1; y < 15; ++y) {
+    for (int x = 1; x < 19; ++x) {
+      const Eigen::Vector3d got(normals.at(0, y, x), normals.at(1, y, x), normals.at(2, y, x));
+      EXPECT_NEAR((got - facing).norm(), 0, 1e-9) << x << "," << y;
+    }
+  }
+  EXPECT_EQ(normals.at(0, 0, 0), 0.0);  // border
+  // And the consistency loss of matching normals with alpha 1 is 0 inside the border.
+  ImageD alpha(20, 16, 1, 1.0), mask(20, 16, 1, 0.0);
+  for (int y = 1; y < 15; ++y) {
+    for (int x = 1; x < 19; ++x) mask.at(0, y, x) = 1.0;
+  }
+  RenderBuffersD in;
+  in.camera = &cam;
+  in.Set(Buffer::kDepth, &depth);
+  in.Set(Buffer::kNormal, &normals);
+  in.Set(Buffer::kAlpha, &alpha);
+  TargetsD t;
+  t.mask = &mask;
+  EXPECT_NEAR(NormalConsistencyLoss().Evaluate(in, t, 1, nullptr), 0.0, 1e-12);
+}
+
+TEST(LossRegistryTest, CreatesByNameAndReportsBadConfigs) {
+  Status s;
+  auto l1 = LossRegistry::Get().Create("l1", {{"buffer", "transmitted"}, {"target", "transmitted"}}, &s);
+  ASSERT_TRUE(s.ok());
+  EXPECT_EQ(l1->Name(), "l1(transmitted, transmitted)");
+  EXPECT_EQ(LossRegistry::Get().Create("l2", {}, &s), nullptr);
+  EXPECT_NE(s.message().find("unknown loss term 'l2'"), std::string::npos) << s.message();
+  EXPECT_EQ(LossRegistry::Get().Create("tv", {{"buffer", "colour"}}, &s), nullptr);
+  EXPECT_NE(s.message().find("unknown buffer 'colour'"), std::string::npos) << s.message();
+  EXPECT_EQ(LossRegistry::Get().Create("render", {{"target", "gt"}}, &s), nullptr);
+  EXPECT_NE(s.message().find("\"image\" or \"transmitted\""), std::string::npos) << s.message();
+}
+
+TEST(ProblemTest, SumsWeightedTermsOfOneBranchAndSkipsZeroWeights) {
+  Fixture f(9);
+  RenderBuffers in;
+  std::array<Image, kNumBuffers> fb;
+  for (int b = 0; b < kNumBuffers; ++b) {
+    fb[b] = f.buffers[b].Cast<float>();
+    in.Set(static_cast<Buffer>(b), &fb[b]);
+  }
+  in.camera = &f.camera;
+  const Image image = f.image.Cast<float>(), transmitted = f.transmitted.Cast<float>();
+  Targets t;
+  t.image = &image;
+  t.transmitted = &transmitted;
+  Problem problem;
+  problem.AddTerm(std::make_unique<L1Loss>(), 0.8, Branch::kGaussians3D);
+  problem.AddTerm(std::make_unique<DssimLoss>(), 0.2, Branch::kGaussians3D);
+  problem.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kTransmitted), 0.0, Branch::kGaussians3D);
+  problem.AddTerm(std::make_unique<L1Loss>(), 5.0, Branch::kSurfels2D);
+  ASSERT_TRUE(problem.Check(Branch::kGaussians3D, in, t).ok());
+  RenderGradients grad;
+  std::vector<Problem::TermValue> breakdown;
+  const double total = problem.Evaluate(Branch::kGaussians3D, in, t, &grad, &breakdown);
+  ASSERT_EQ(breakdown.size(), 2u);  // the zero-weight term is skipped, the 2D term is another branch
+  EXPECT_NEAR(total, 0.8 * breakdown[0].value + 0.2 * breakdown[1].value, 1e-9);
+  // Same as the render loss with lambda 0.8, value and gradient.
+  RenderGradients ref;
+  const double render = RenderLoss().Evaluate(in, t, 1.0, &ref);
+  EXPECT_NEAR(total, render, 1e-6);
+  for (size_t i = 0; i < grad.Get(Buffer::kColor).size(); ++i) {
+    ASSERT_NEAR(grad.Get(Buffer::kColor).data()[i], ref.Get(Buffer::kColor).data()[i], 1e-9);
+  }
+  EXPECT_TRUE(grad.Get(Buffer::kTransmitted).empty());
+  EXPECT_TRUE(problem.SetWeight("tv(transmitted, image)", Branch::kGaussians3D, 0.1));
+  problem.Evaluate(Branch::kGaussians3D, in, t, &grad, &breakdown);
+  EXPECT_EQ(breakdown.size(), 3u);
+  // A missing target is reported by name.
+  Targets none;
+  const Status s = problem.Check(Branch::kGaussians3D, in, none);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("missing image"), std::string::npos) << s.message();
+}
+
+}  // namespace
+}  // namespace mgsr
