@@ -3,6 +3,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cstdint>
 #include <cmath>
 #include <vector>
 
@@ -28,17 +29,22 @@ void BlurZeroPaddedT(const T* in, int width, int height, const std::vector<T>& k
   const int r = static_cast<int>(kernel.size()) / 2;
   scratch->resize(static_cast<size_t>(width) * height);
   T* tmp = scratch->data();
+  const int taps = static_cast<int>(kernel.size());
+  // Both passes loop over taps outside and pixels inside, so the inner loops run over contiguous
+  // memory and vectorise; rows are independent and split across threads for large images.
+#pragma omp parallel for schedule(static) if (static_cast<int64_t>(width) * height >= 65536)
   for (int y = 0; y < height; ++y) {
     const T* row = in + static_cast<size_t>(y) * width;
     T* dst = tmp + static_cast<size_t>(y) * width;
-    for (int x = 0; x < width; ++x) {
-      const int k0 = std::max(0, r - x), k1 = std::min(2 * r, width - 1 - x + r);
-      T acc = 0;
-      for (int k = k0; k <= k1; ++k) acc += kernel[k] * row[x + k - r];
-      dst[x] = acc;
+    std::fill(dst, dst + width, T(0));
+    for (int k = 0; k < taps; ++k) {
+      const T w = kernel[k];
+      const int shift = k - r;  // dst[x] += w * row[x + shift] for 0 <= x + shift < width
+      const int x0 = std::max(0, -shift), x1 = std::min(width, width - shift);
+      for (int x = x0; x < x1; ++x) dst[x] += w * row[x + shift];
     }
   }
-  // Vertical pass row by row, so the inner loop runs over contiguous x (vectorises).
+#pragma omp parallel for schedule(static) if (static_cast<int64_t>(width) * height >= 65536)
   for (int y = 0; y < height; ++y) {
     T* dst = out + static_cast<size_t>(y) * width;
     std::fill(dst, dst + width, T(0));

@@ -79,7 +79,13 @@ double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const Targets
   const int w = D.width(), h = D.height();
   const double inv_n = 1.0 / (static_cast<double>(w) * h);
   const V C = cam.Center().template cast<T>();
-  auto P = [&](int x, int y) -> V { return C + D.at(0, y, x) * internal::PixelRay<T>(cam, x, y); };
+  // World rays of every pixel, once per call.
+  std::vector<V> rays(static_cast<size_t>(w) * h);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) rays[static_cast<size_t>(y) * w + x] = internal::PixelRay<T>(cam, x, y);
+  }
+  auto ray = [&](int x, int y) -> const V& { return rays[static_cast<size_t>(y) * w + x]; };
+  auto P = [&](int x, int y) -> V { return C + D.at(0, y, x) * ray(x, y); };
   ImageT<T>* gN = grad ? &grad->Get(Buffer::kNormal, N) : nullptr;
   ImageT<T>* gD = grad ? &grad->Get(Buffer::kDepth, D) : nullptr;
   double total = 0;
@@ -109,10 +115,10 @@ double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const Targets
       const V dc = (dn - n_surf * n_surf.dot(dn)) / len;
       const V d_dy = dx.cross(dc);  // c = dy x dx
       const V d_dx = dc.cross(dy);
-      gD->at(0, y + 1, x) += d_dy.dot(internal::PixelRay<T>(cam, x, y + 1));
-      gD->at(0, y - 1, x) -= d_dy.dot(internal::PixelRay<T>(cam, x, y - 1));
-      gD->at(0, y, x + 1) += d_dx.dot(internal::PixelRay<T>(cam, x + 1, y));
-      gD->at(0, y, x - 1) -= d_dx.dot(internal::PixelRay<T>(cam, x - 1, y));
+      gD->at(0, y + 1, x) += d_dy.dot(ray(x, y + 1));
+      gD->at(0, y - 1, x) -= d_dy.dot(ray(x, y - 1));
+      gD->at(0, y, x + 1) += d_dx.dot(ray(x + 1, y));
+      gD->at(0, y, x - 1) -= d_dx.dot(ray(x - 1, y));
     }
   }
   return total * inv_n;

@@ -1,0 +1,83 @@
+// BM_LossSet3D / BM_LossSet2D: the full loss sets of the two branches (value and gradient) at
+// 256 and 512 pixels, and BM_Dssim alone, to compare with the rasterizer's forward+backward
+// (D-SSIM should stay well under a quarter of it). Argument: image width (square images).
+#include <benchmark/benchmark.h>
+
+#include "mgsr/core/rng.h"
+#include "mgsr/loss/dssim_loss.h"
+#include "mgsr/loss/edge_aware_tv_loss.h"
+#include "mgsr/loss/mutual_depth_loss.h"
+#include "mgsr/loss/normal_consistency_loss.h"
+#include "mgsr/loss/problem.h"
+#include "mgsr/loss/render_loss.h"
+#include "shell_scene.h"
+
+namespace {
+
+struct Inputs {
+  mgsr::Camera camera;
+  std::array<mgsr::Image, mgsr::kNumBuffers> buffers;
+  mgsr::Image image, transmitted, mask, other_depth;
+  mgsr::RenderBuffers in;
+  mgsr::Targets targets;
+  explicit Inputs(int w) : camera(mgsr::bench::ShellCamera(w)) {
+    mgsr::Rng rng(1);
+    auto random = [&](int c, double lo, double hi) {
+      mgsr::Image im(w, w, c);
+      for (size_t i = 0; i < im.size(); ++i) im.data()[i] = static_cast<float>(rng.Uniform(lo, hi));
+      return im;
+    };
+    for (int b = 0; b < mgsr::kNumBuffers; ++b) {
+      const auto buf = static_cast<mgsr::Buffer>(b);
+      buffers[b] = buf == mgsr::Buffer::kDepth ? random(1, 2.5, 3.5) : random(mgsr::BufferChannels(buf), 0, 1);
+      in.Set(buf, &buffers[b]);
+    }
+    in.camera = &camera;
+    image = random(3, 0, 1);
+    transmitted = random(3, 0, 1);
+    mask = random(1, 0, 1);
+    other_depth = random(1, 2.5, 3.5);
+    targets = {&image, &mask, &transmitted, &other_depth};
+  }
+};
+
+// The mutual-stage loss sets (reference 1.5): 3DGS render + mutual depth; 2DGS mutual render,
+// normal consistency, normal TV and depth TV.
+mgsr::Problem MakeProblem() {
+  using mgsr::Branch;
+  using mgsr::Buffer;
+  using mgsr::TargetKind;
+  mgsr::Problem p;
+  p.AddTerm(std::make_unique<mgsr::RenderLoss>(), 0.5, Branch::kGaussians3D);
+  p.AddTerm(std::make_unique<mgsr::MutualDepthLoss>(), 0.01, Branch::kGaussians3D);
+  p.AddTerm(std::make_unique<mgsr::MutualRenderLoss>(), 0.5, Branch::kSurfels2D);
+  p.AddTerm(std::make_unique<mgsr::NormalConsistencyLoss>(), 0.025, Branch::kSurfels2D);
+  p.AddTerm(std::make_unique<mgsr::EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kTransmitted), 0.025, Branch::kSurfels2D);
+  p.AddTerm(std::make_unique<mgsr::EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kTransmitted), 0.025, Branch::kSurfels2D);
+  return p;
+}
+
+void BM_LossSet3D(benchmark::State& state) {
+  Inputs in(static_cast<int>(state.range(0)));
+  const mgsr::Problem p = MakeProblem();
+  mgsr::RenderGradients g;
+  for (auto _ : state) benchmark::DoNotOptimize(p.Evaluate(mgsr::Branch::kGaussians3D, in.in, in.targets, &g));
+}
+void BM_LossSet2D(benchmark::State& state) {
+  Inputs in(static_cast<int>(state.range(0)));
+  const mgsr::Problem p = MakeProblem();
+  mgsr::RenderGradients g;
+  for (auto _ : state) benchmark::DoNotOptimize(p.Evaluate(mgsr::Branch::kSurfels2D, in.in, in.targets, &g));
+}
+void BM_Dssim(benchmark::State& state) {
+  Inputs in(static_cast<int>(state.range(0)));
+  const mgsr::DssimLoss dssim;
+  mgsr::RenderGradients g;
+  for (auto _ : state) benchmark::DoNotOptimize(dssim.Evaluate(in.in, in.targets, 1.0, &g));
+}
+
+BENCHMARK(BM_LossSet3D)->Arg(256)->Arg(512)->ArgName("width")->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_LossSet2D)->Arg(256)->Arg(512)->ArgName("width")->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Dssim)->Arg(256)->Arg(512)->ArgName("width")->Unit(benchmark::kMillisecond);
+
+}  // namespace
