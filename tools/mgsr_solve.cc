@@ -1,45 +1,268 @@
-// mgsr_solve: the main job. Reads a COLMAP workspace or a Blender folder and reconstructs it.
-// The optimiser (issue 6) is not in yet: today this loads and validates the scene and reports it.
+// mgsr_solve: the main job. Reads a COLMAP workspace or a Blender folder, reconstructs it with both
+// branches (warm-up with auto-stop, then the mutual stage), and writes the models, test-view renders,
+// the TSDF mesh, a training log and metrics.json into --output.
 #include <gflags/gflags.h>
 
+#include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
 
 #include "mgsr/core/timer.h"
+#include "mgsr/eval/image_metrics.h"
+#include "mgsr/eval/mesh_metrics.h"
+#include "mgsr/io/file_util.h"
+#include "mgsr/io/image_io.h"
+#include "mgsr/io/model_ply.h"
+#include "mgsr/io/ply.h"
 #include "mgsr/io/scene.h"
+#include "mgsr/mesh/tsdf_fusion.h"
+#include "solvers/mutual_boosted_solver.h"
 
 DEFINE_string(workspace, "", "COLMAP workspace (images/, sparse/0/) or Blender folder (transforms_*.json).");
-DEFINE_string(output, "", "Output folder.");
+DEFINE_string(output, "", "Output folder (created).");
+DEFINE_string(preset, "fast", "fast | paper: iteration counts and schedules.");
 DEFINE_int32(downscale, 1, "Divide the input resolution by this factor.");
 DEFINE_int32(max_width, 1600, "Cap the image width after downscaling (0: no cap).");
 DEFINE_int32(test_every, 8, "Without a split file, every Nth image (by name) is held out (0: none).");
 DEFINE_uint64(seed, 0, "Seed for every random choice.");
+DEFINE_string(mutual_mode, "alternate", "alternate (the paper) | joint (the authors' code).");
+DEFINE_int32(warmup_max_iterations, -1, "Cap of warm-up iterations per branch (-1: preset).");
+DEFINE_int32(warmup_min_iterations, -1, "Auto-stop only after this iteration (-1: preset).");
+DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");
+DEFINE_bool(auto_stop, true, "Stop each warm-up when its loss window flattens.");
+DEFINE_uint64(max_gaussians, 0, "Budget of 3DGS primitives (0: none).");
+DEFINE_uint64(max_surfels, 0, "Budget of 2DGS primitives (0: none).");
+DEFINE_double(w_2d, 0.5, "Weight of the 2DGS loss in the mutual stage.");
+DEFINE_double(w_3d, 0.5, "Weight of the 3DGS loss in the mutual stage.");
+DEFINE_double(w_depth, 0.01, "Weight of the mutual depth loss.");
+DEFINE_int32(log_every, 100, "Print progress every N iterations.");
+
+namespace {
+
+int Fail(const std::string& message) {
+  std::fprintf(stderr, "error: %s\n", message.c_str());
+  return 1;
+}
+
+// Progress lines and log.csv rows.
+class ProgressLog : public mgsr::IterationCallback {
+ public:
+  ProgressLog(const std::string& csv_path, int every, int expected_total)
+      : csv_(csv_path), every_(every), expected_(expected_total) {
+    csv_ << "stage,iteration,branch,loss,gaussians,surfels,seconds\n";
+  }
+  void operator()(const mgsr::IterationInfo& i) override {
+    const bool is2d = i.branch == mgsr::Branch::kSurfels2D;
+    const char* stage = i.stage == mgsr::Stage::kWarmup ? "warmup" : "mutual";
+    csv_ << stage << "," << i.iteration << "," << (is2d ? "2dgs" : "3dgs") << "," << i.loss << "," << i.num_gaussians
+         << "," << i.num_surfels << "," << i.seconds << "\n";
+    (is2d ? loss_2d_ : loss_3d_) = i.loss;
+    ++steps_;
+    if (i.iteration % every_ == 0 && !is2d) {
+      const double eta = steps_ > 0 ? i.seconds / steps_ * std::max(0, expected_ - steps_) : 0;
+      std::printf("[%s %5d] loss 2DGS %.4f 3DGS %.4f | surfels %zu Gaussians %zu | %.0f s, ~%.0f s left\n", stage,
+                  i.iteration, loss_2d_, loss_3d_, i.num_surfels, i.num_gaussians, i.seconds, eta);
+      std::fflush(stdout);
+    }
+  }
+
+ private:
+  std::ofstream csv_;
+  int every_, expected_, steps_ = 0;
+  double loss_2d_ = 0, loss_3d_ = 0;
+};
+
+mgsr::Image Colorize(const mgsr::Image& one, float lo, float hi) {
+  mgsr::Image out(one.width(), one.height(), 1);
+  for (size_t i = 0; i < one.size(); ++i) out.data()[i] = hi > lo ? (one.data()[i] - lo) / (hi - lo) : 0.0f;
+  return out;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
-  gflags::SetUsageMessage("mgsr_solve --workspace DIR --output DIR [options]");
+  gflags::SetUsageMessage("mgsr_solve --workspace DIR --output DIR [--preset fast|paper] [options]");
   gflags::ParseCommandLineFlags(&argc, &argv, true);
   if (FLAGS_workspace.empty()) {
     std::fprintf(stderr, "error: --workspace is required\n");
     return 2;
   }
-  mgsr::SceneOptions options;
-  options.downscale = FLAGS_downscale;
-  options.max_width = FLAGS_max_width;
-  options.test_every = FLAGS_test_every;
-  options.seed = FLAGS_seed;
-  mgsr::Timer timer;
-  mgsr::Scene scene;
-  const mgsr::Status s = mgsr::LoadScene(FLAGS_workspace, options, &scene);
-  if (!s.ok()) {
-    std::fprintf(stderr, "error: %s\n", s.message().c_str());
-    return 1;
+  if (FLAGS_output.empty()) {
+    std::fprintf(stderr, "error: --output is required\n");
+    return 2;
   }
+  mgsr::SolverOptions options;
+  if (!mgsr::SolverOptions::FromPreset(FLAGS_preset, &options)) return Fail("unknown --preset '" + FLAGS_preset + "' (fast or paper)");
+  options.mutual_mode = FLAGS_mutual_mode;
+  if (FLAGS_warmup_max_iterations >= 0) options.warmup_max_iterations = FLAGS_warmup_max_iterations;
+  if (FLAGS_warmup_min_iterations >= 0) options.warmup_min_iterations = FLAGS_warmup_min_iterations;
+  if (FLAGS_mutual_iterations >= 0) options.mutual_iterations = FLAGS_mutual_iterations;
+  options.auto_stop = FLAGS_auto_stop;
+  options.max_gaussians = FLAGS_max_gaussians;
+  options.max_surfels = FLAGS_max_surfels;
+  options.w_2d = FLAGS_w_2d;
+  options.w_3d = FLAGS_w_3d;
+  options.w_depth = FLAGS_w_depth;
+  options.seed = FLAGS_seed;
+  if (FLAGS_log_every < 1) return Fail("--log_every must be >= 1");
+  const mgsr::Status valid = options.Validate();
+  if (!valid.ok()) return Fail(valid.message());
+
+  mgsr::Timer total;
+  mgsr::SceneOptions so;
+  so.downscale = FLAGS_downscale;
+  so.max_width = FLAGS_max_width;
+  so.test_every = FLAGS_test_every;
+  so.seed = FLAGS_seed;
+  mgsr::Scene scene;
+  mgsr::Status s = mgsr::LoadScene(FLAGS_workspace, so, &scene);
+  if (!s.ok()) return Fail(s.message());
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-  const mgsr::Camera& cam = scene.views.front().camera;
-  std::printf("scene: %s (%s)\n", FLAGS_workspace.c_str(), scene.source.c_str());
-  std::printf("  views: %zu train, %zu test, %dx%d px, masks: %s\n", scene.TrainIndices().size(),
-              scene.TestIndices().size(), cam.width, cam.height, scene.has_masks() ? "yes" : "no");
-  std::printf("  points: %zu%s, extent %.3f, loaded in %.2f s\n", scene.points.size(),
-              scene.random_points ? " (random)" : "", scene.extent, timer.ElapsedSeconds());
-  std::printf("the optimiser is not implemented yet (issue 6): stopping after loading the scene\n");
+  s = mgsr::MakeDirectories(mgsr::JoinPath(FLAGS_output, "renders"));
+  if (!s.ok()) return Fail(s.message());
+  const double load_seconds = total.ElapsedSeconds();
+  const mgsr::Camera& cam0 = scene.views.front().camera;
+  std::printf("scene: %s (%s), %zu train / %zu test views, %dx%d, %zu points, masks: %s\n", FLAGS_workspace.c_str(),
+              scene.source.c_str(), scene.TrainIndices().size(), scene.TestIndices().size(), cam0.width, cam0.height,
+              scene.points.size(), scene.has_masks() ? "yes" : "no (gamma = 1, mesh not masked)");
+
+  mgsr::MutualBoostedSolver solver(options, scene);
+  ProgressLog log(mgsr::JoinPath(FLAGS_output, "log.csv"), FLAGS_log_every,
+                  2 * options.warmup_max_iterations + (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations);
+  solver.AddCallback(&log);
+  mgsr::SolveSummary summary;
+  s = solver.Solve(&summary);
+  if (!s.ok()) return Fail(s.message());
+  std::printf("%s\n", summary.BriefReport().c_str());
+
+  // Models.
+  s = mgsr::WriteSurfelPly(mgsr::JoinPath(FLAGS_output, "point_cloud_2d.ply"), solver.surfels());
+  if (s.ok()) s = mgsr::WriteGaussianPly(mgsr::JoinPath(FLAGS_output, "point_cloud_3d.ply"), solver.gaussians());
+  if (!s.ok()) return Fail(s.message());
+
+  // Test views: PSNR / SSIM of the 3DGS composite against the ground truth on its background, and
+  // the renders a person looks at.
+  mgsr::Timer eval_timer;
+  double psnr = 0, ssim = 0, depth_err = 0;
+  int depth_views = 0;
+  const auto test = scene.TestIndices();
+  nlohmann::json per_view = nlohmann::json::array();
+  for (int i : test) {
+    const mgsr::View& v = scene.views[i];
+    mgsr::GaussianRender g;
+    mgsr::SurfelRender sr;
+    solver.RenderGaussians(v.camera, &g);
+    solver.RenderSurfels(v.camera, &sr);
+    mgsr::Image gt = v.image;
+    if (!v.alpha.empty()) {
+      for (int c = 0; c < 3; ++c) {
+        for (size_t k = 0; k < gt.plane_size(); ++k) gt.plane(c)[k] *= v.alpha.plane(0)[k];  // black background
+      }
+    }
+    const double p = std::min(100.0, mgsr::Psnr(g.color, gt)), q = mgsr::Ssim(g.color, gt);
+    psnr += p;
+    ssim += q;
+    const std::string stem = mgsr::FileStem(v.name);
+    const std::string dir = mgsr::JoinPath(FLAGS_output, "renders");
+    float dmin = 1e30f, dmax = 0;
+    for (size_t k = 0; k < sr.depth.size(); ++k) {
+      if (sr.alpha.data()[k] < 0.5f) continue;
+      dmin = std::min(dmin, sr.depth.data()[k]);
+      dmax = std::max(dmax, sr.depth.data()[k]);
+    }
+    mgsr::Image normal(sr.normal_world.width(), sr.normal_world.height(), 3);
+    for (size_t k = 0; k < normal.size(); ++k) normal.data()[k] = 0.5f + 0.5f * sr.normal_world.data()[k];
+    for (const auto& [suffix, image] : std::vector<std::pair<std::string, const mgsr::Image*>>{
+             {"composite", &g.color}, {"transmitted", &g.tran}, {"reflected", &g.ref}, {"weight", &g.weight},
+             {"gt", &gt}}) {
+      s = mgsr::WriteImage(mgsr::JoinPath(dir, stem + "_" + suffix + ".png"), *image);
+      if (!s.ok()) return Fail(s.message());
+    }
+    s = mgsr::WriteImage(mgsr::JoinPath(dir, stem + "_depth2d.png"), Colorize(sr.depth, dmin, dmax));
+    if (s.ok()) s = mgsr::WriteImage(mgsr::JoinPath(dir, stem + "_normal2d.png"), normal);
+    if (!s.ok()) return Fail(s.message());
+    // Depth error against ground-truth depth maps when the scene has them (synthetic scenes).
+    mgsr::Image gt_depth;
+    double err = 0;
+    int n = 0;
+    if (mgsr::ReadPfm(mgsr::JoinPath(scene.root, "gt/depth/" + stem + ".pfm"), &gt_depth).ok() &&
+        gt_depth.SameShape(sr.depth)) {
+      for (size_t k = 0; k < gt_depth.size(); ++k) {
+        if (gt_depth.data()[k] <= 0 || (!v.mask.empty() && v.mask.data()[k] < 0.5f)) continue;
+        err += std::abs(sr.depth.data()[k] - gt_depth.data()[k]);
+        ++n;
+      }
+      if (n > 0) {
+        depth_err += err / n;
+        ++depth_views;
+      }
+    }
+    per_view.push_back({{"name", v.name}, {"psnr", p}, {"ssim", q}});
+  }
+  if (!test.empty()) {
+    psnr /= test.size();
+    ssim /= test.size();
+  }
+
+  // Mesh: TSDF fusion of the 2DGS expected depth over the training views, foreground and alpha >= 0.5,
+  // coloured by the 3DGS transmitted (reflection-free) render.
+  mgsr::Timer mesh_timer;
+  std::vector<mgsr::DepthFrame> frames;
+  for (int i : scene.TrainIndices()) {
+    const mgsr::View& v = scene.views[i];
+    mgsr::SurfelRender sr;
+    mgsr::GaussianRender g;
+    solver.RenderSurfels(v.camera, &sr);
+    solver.RenderGaussians(v.camera, &g);
+    mgsr::DepthFrame f;
+    f.camera = v.camera;
+    f.depth = sr.depth;
+    f.color = g.tran;
+    f.weight = sr.alpha;
+    if (!v.mask.empty()) {
+      for (size_t k = 0; k < f.weight.size(); ++k) f.weight.data()[k] *= v.mask.data()[k] >= 0.5f ? 1.0f : 0.0f;
+    }
+    frames.push_back(std::move(f));
+  }
+  mgsr::TriangleMesh mesh;
+  mgsr::TsdfOptions tsdf;
+  tsdf.keep_largest_component = true;
+  s = mgsr::FuseDepthMaps(frames, tsdf, &mesh);
+  const std::string mesh_path = mgsr::JoinPath(FLAGS_output, "mesh.ply");
+  if (s.ok()) s = mgsr::WriteTriangleMesh(mesh_path, mesh);
+  if (!s.ok()) std::fprintf(stderr, "warning: no mesh: %s\n", s.message().c_str());
+  const double mesh_seconds = mesh_timer.ElapsedSeconds();
+
+  nlohmann::json metrics = {
+      {"scene", FLAGS_workspace},
+      {"preset", FLAGS_preset},
+      {"mutual_mode", options.mutual_mode},
+      {"seconds", {{"load", load_seconds}, {"warmup", summary.warmup_seconds}, {"mutual", summary.mutual_seconds},
+                   {"mesh", mesh_seconds}, {"total", total.ElapsedSeconds()}}},
+      {"peak_memory_mb", mgsr::PeakMemoryBytes() / 1048576.0},
+      {"iterations", {{"warmup_2d", summary.warmup_iterations_2d}, {"warmup_3d", summary.warmup_iterations_3d},
+                      {"auto_stopped_2d", summary.auto_stopped_2d}, {"auto_stopped_3d", summary.auto_stopped_3d},
+                      {"mutual", summary.mutual_iterations}}},
+      {"counts", {{"gaussians", summary.num_gaussians}, {"surfels", summary.num_surfels}}},
+      {"test", {{"views", test.size()}, {"psnr", psnr}, {"ssim", ssim}, {"per_view", per_view}}},
+      {"mesh", {{"path", s.ok() ? mesh_path : ""}, {"vertices", mesh.vertices.size()}, {"triangles", mesh.triangles.size()}}}};
+  if (depth_views > 0) {
+    metrics["test"]["depth_abs_error"] = depth_err / depth_views;
+    metrics["test"]["depth_abs_error_over_extent"] = depth_err / depth_views / scene.extent;
+  }
+  mgsr::TriangleMesh gt_mesh;
+  if (s.ok() && mgsr::ReadTriangleMesh(mgsr::JoinPath(scene.root, "gt/mesh.ply"), &gt_mesh).ok()) {
+    const mgsr::MeshMetrics m = mgsr::EvaluateMesh(mesh, gt_mesh, mgsr::MeshMetricsOptions());
+    metrics["mesh"]["nc"] = m.normal_consistency;
+    metrics["mesh"]["cd"] = std::isfinite(m.chamfer) ? nlohmann::json(m.chamfer) : nlohmann::json();
+    std::printf("mesh vs ground truth: NC x100 %.2f, CD x1000 %.2f\n", 100 * m.normal_consistency, 1000 * m.chamfer);
+  }
+  s = mgsr::WriteStringToFileAtomic(mgsr::JoinPath(FLAGS_output, "metrics.json"), metrics.dump(2) + "\n");
+  if (!s.ok()) return Fail(s.message());
+  std::printf("test views: PSNR %.2f dB, SSIM %.4f", psnr, ssim);
+  if (depth_views > 0) std::printf(", 2DGS depth error %.4f (%.3f%% of the extent)", depth_err / depth_views, 100 * depth_err / depth_views / scene.extent);
+  std::printf("\nmesh: %s (%zu triangles); metrics: %s; total %.0f s\n", mesh_path.c_str(), mesh.triangles.size(),
+              mgsr::JoinPath(FLAGS_output, "metrics.json").c_str(), total.ElapsedSeconds());
   return 0;
 }

@@ -83,11 +83,11 @@ void GaussianGradients::ResizeAndZero(const GaussianModel& model) {
   mean2d.assign(2 * model.size(), 0.0f);
 }
 
-void ScreenGradientNorms(const GaussianGradients& grads, int width, int height, std::vector<float>* norms) {
-  const size_t n = grads.mean2d.size() / 2;
+void ScreenGradientNorms(const std::vector<float>& mean2d, int width, int height, std::vector<float>* norms) {
+  const size_t n = mean2d.size() / 2;
   norms->resize(n);
   for (size_t i = 0; i < n; ++i) {
-    const float gx = grads.mean2d[2 * i] * 0.5f * width, gy = grads.mean2d[2 * i + 1] * 0.5f * height;
+    const float gx = mean2d[2 * i] * 0.5f * width, gy = mean2d[2 * i + 1] * 0.5f * height;
     (*norms)[i] = std::sqrt(gx * gx + gy * gy);
   }
 }

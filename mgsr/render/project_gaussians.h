@@ -54,7 +54,8 @@ struct GaussianGradients {
 
 // |d loss / d screen mean| per Gaussian in NDC units (the pixel gradient times W/2 and H/2), the
 // statistic density control compares with its threshold (reference 1.10: 2e-4).
-void ScreenGradientNorms(const GaussianGradients& grads, int width, int height, std::vector<float>* norms);
+// (For the 2DGS branch pass its reference-3.8(5) statistic, SurfelGradients::mean2d.)
+void ScreenGradientNorms(const std::vector<float>& mean2d_grads, int width, int height, std::vector<float>* norms);
 
 // Adds the chain from projected-quantity gradients to every raw parameter into `grads`.
 void ProjectGaussiansBackward(const GaussianModel& model, const Camera& camera, int sh_degree,

@@ -1,0 +1,58 @@
+// Density control of both branches (reference 1.10): view-averaged screen-gradient statistics,
+// clone (small primitives) and split (large ones, two children scaled by 1/1.6 sampled from the
+// primitive's own Gaussian), pruning by opacity and world size, opacity resets (3DGS: also the
+// reflected opacity, and beta capped at 0.1), and a primitive budget so a model never grows past
+// what the user allows. The optimiser state follows every row operation.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "mgsr/core/rng.h"
+#include "mgsr/model/gaussian_model.h"
+#include "mgsr/model/surfel_model.h"
+#include "solvers/adam.h"
+
+namespace mgsr {
+
+struct DensityOptions {
+  float grad_threshold = 2e-4f;  // on the NDC screen-gradient norm
+  float percent_dense = 0.01f;   // clone below, split above this share of the scene extent
+  float min_opacity = 0.005f;    // prune below (3DGS 0.005, 2DGS 0.05)
+  float max_world_size = 0.1f;   // prune larger than this share of the extent (after the first reset)
+  size_t max_primitives = 0;     // 0 = no budget
+};
+
+// Per-primitive accumulators between density-control steps.
+struct DensityStats {
+  std::vector<float> grad_sum, count;
+
+  void Reset(size_t n) {
+    grad_sum.assign(n, 0.0f);
+    count.assign(n, 0.0f);
+  }
+  // Adds one view: the NDC screen-gradient norm of every primitive drawn in it (radius > 0).
+  void Accumulate(const std::vector<float>& grad_norms, const std::vector<float>& radii) {
+    for (size_t i = 0; i < grad_sum.size() && i < radii.size(); ++i) {
+      if (radii[i] <= 0) continue;
+      grad_sum[i] += grad_norms[i];
+      count[i] += 1;
+    }
+  }
+};
+
+struct DensifyResult {
+  size_t cloned = 0, split = 0, pruned = 0;
+};
+
+// One densify-and-prune step; `prune_large` enables the world-size test. Resets `stats`.
+DensifyResult DensifyAndPrune(GaussianModel* model, Adam* adam, DensityStats* stats, const DensityOptions& options,
+                              double extent, bool prune_large, Rng* rng);
+DensifyResult DensifyAndPrune(SurfelModel* model, Adam* adam, DensityStats* stats, const DensityOptions& options,
+                              double extent, bool prune_large, Rng* rng);
+
+// Opacity reset: opacity <= 0.01 (3DGS: reflected opacity too, beta <= 0.1); moments zeroed.
+void ResetOpacity(GaussianModel* model, Adam* adam);
+void ResetOpacity(SurfelModel* model, Adam* adam);
+
+}  // namespace mgsr

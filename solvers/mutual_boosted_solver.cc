@@ -1,0 +1,350 @@
+#include "solvers/mutual_boosted_solver.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+#include "mgsr/core/timer.h"
+#include "mgsr/loss/edge_aware_tv_loss.h"
+#include "mgsr/loss/mutual_depth_loss.h"
+#include "mgsr/loss/normal_consistency_loss.h"
+#include "mgsr/loss/render_loss.h"
+#include "mgsr/model/init_from_points.h"
+#include "solvers/auto_stop.h"
+
+namespace mgsr {
+namespace {
+
+double Now() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+// Ground truth composited onto a background with the image's alpha (reference 1.12).
+Image Composite(const View& v, float background) {
+  Image out = v.image;
+  if (v.alpha.empty()) return out;
+  for (int c = 0; c < 3; ++c) {
+    for (size_t i = 0; i < out.plane_size(); ++i) {
+      const float a = v.alpha.plane(0)[i];
+      out.plane(c)[i] = out.plane(c)[i] * a + background * (1 - a);
+    }
+  }
+  return out;
+}
+
+// Log-linear decay from init to final over max_steps (reference 1.8).
+double PositionLearningRate(const SolverOptions& o, int step, double extent) {
+  const double t = std::clamp(static_cast<double>(step) / o.position_lr_max_steps, 0.0, 1.0);
+  return extent * std::exp(std::log(o.position_lr_init) * (1 - t) + std::log(o.position_lr_final) * t);
+}
+
+Adam::LearningRates Rates(const SolverOptions& o, int step, double extent) {
+  return [&o, step, extent](const std::string& name, int width, std::vector<float>* rates) {
+    float r = 0;
+    if (name == "means") r = static_cast<float>(PositionLearningRate(o, step, extent));
+    else if (name == "log_scales") r = static_cast<float>(o.scaling_lr);
+    else if (name == "quats") r = static_cast<float>(o.rotation_lr);
+    else if (name == "opacity_logits" || name == "ref_opacity_logits" || name == "beta_logits") r = static_cast<float>(o.opacity_lr);
+    if (name == "sh" || name == "ref_sh") {
+      // Band 0 (the first 3 columns) at the feature rate, higher bands at 1/20 of it.
+      for (int k = 0; k < width; ++k) (*rates)[k] = static_cast<float>(k < 3 ? o.feature_lr : o.feature_lr / 20);
+      return;
+    }
+    std::fill(rates->begin(), rates->end(), r);
+  };
+}
+
+void MoveGradients(RenderGradients* g, GaussianRenderGrad* out) {
+  out->color = std::move(g->images[static_cast<int>(Buffer::kColor)]);
+  out->tran = std::move(g->images[static_cast<int>(Buffer::kTransmitted)]);
+  out->ref = std::move(g->images[static_cast<int>(Buffer::kReflected)]);
+  out->weight = std::move(g->images[static_cast<int>(Buffer::kWeight)]);
+  out->depth = std::move(g->images[static_cast<int>(Buffer::kDepth)]);
+  out->alpha = std::move(g->images[static_cast<int>(Buffer::kAlpha)]);
+}
+
+void MoveGradients(RenderGradients* g, SurfelRenderGrad* out) {
+  out->color = std::move(g->images[static_cast<int>(Buffer::kColor)]);
+  out->depth = std::move(g->images[static_cast<int>(Buffer::kDepth)]);
+  out->alpha = std::move(g->images[static_cast<int>(Buffer::kAlpha)]);
+  out->normal_world = std::move(g->images[static_cast<int>(Buffer::kNormal)]);
+  out->median_depth = std::move(g->images[static_cast<int>(Buffer::kMedianDepth)]);
+  out->distortion = std::move(g->images[static_cast<int>(Buffer::kDistortion)]);
+}
+
+}  // namespace
+
+std::string SolveSummary::BriefReport() const {
+  std::ostringstream s;
+  s << "warm-up: 2DGS " << warmup_iterations_2d << " it" << (auto_stopped_2d ? " (auto-stop)" : "") << ", 3DGS "
+    << warmup_iterations_3d << " it" << (auto_stopped_3d ? " (auto-stop)" : "") << ", " << warmup_seconds
+    << " s; mutual: " << mutual_iterations << " it, " << mutual_seconds << " s; " << num_surfels << " surfels, "
+    << num_gaussians << " Gaussians";
+  return s.str();
+}
+
+MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Scene& scene)
+    : options_(options), scene_(scene), rng_(options.seed) {
+  train_ = scene.TrainIndices();
+  for (const View& v : scene.views) {
+    ViewTargets t;
+    t.gt_2d = Composite(v, options.white_background_2d ? 1.0f : 0.0f);
+    t.gt_3d = Composite(v, options.white_background_3d ? 1.0f : 0.0f);
+    t.gt_white = Composite(v, 1.0f);
+    targets_.push_back(std::move(t));
+  }
+  // Initial points: a seeded subset when there are more than the options allow.
+  std::vector<Eigen::Vector3f> points = scene.points, colors = scene.point_colors;
+  if (points.size() > options.max_init_points) {
+    std::vector<size_t> order(points.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    for (size_t i = 0; i < options.max_init_points; ++i) std::swap(order[i], order[i + rng_.UniformInt(order.size() - i)]);
+    std::vector<Eigen::Vector3f> p, c;
+    for (size_t i = 0; i < options.max_init_points; ++i) {
+      p.push_back(points[order[i]]);
+      c.push_back(colors[order[i]]);
+    }
+    points.swap(p);
+    colors.swap(c);
+  }
+  InitGaussiansFromPoints(points, colors, options.sh_degree, &gaussians_);
+  InitSurfelsFromPoints(points, colors, options.sh_degree, options.seed + 1, &surfels_);
+  stats_3d_.Reset(gaussians_.size());
+  stats_2d_.Reset(surfels_.size());
+}
+
+int MutualBoostedSolver::NextView() {
+  // A shuffled stack of the training views, refilled when empty (reference 1.3).
+  if (view_stack_.empty()) {
+    view_stack_ = train_;
+    for (size_t i = view_stack_.size(); i > 1; --i) std::swap(view_stack_[i - 1], view_stack_[rng_.UniformInt(i)]);
+  }
+  const int v = view_stack_.back();
+  view_stack_.pop_back();
+  return v;
+}
+
+void MutualBoostedSolver::Notify(Stage stage, int iteration, Branch branch, double loss) {
+  IterationInfo info{stage, iteration, branch, loss, gaussians_.size(), surfels_.size(), Now() - start_time_};
+  for (IterationCallback* c : callbacks_) (*c)(info);
+}
+
+void MutualBoostedSolver::RenderGaussians(const Camera& camera, GaussianRender* out) {
+  GaussianRenderOptions o;
+  o.camera = camera;
+  o.sh_degree = sh_degree_;
+  const float bg = options_.white_background_3d ? 1.0f : 0.0f;
+  o.background[0] = o.background[1] = o.background[2] = bg;
+  gaussian_renderer_.Forward(gaussians_, o, out);
+}
+
+void MutualBoostedSolver::RenderSurfels(const Camera& camera, SurfelRender* out) {
+  SurfelRenderOptions o;
+  o.camera = camera;
+  o.sh_degree = sh_degree_;
+  const float bg = options_.white_background_2d ? 1.0f : 0.0f;
+  o.background[0] = o.background[1] = o.background[2] = bg;
+  surfel_renderer_.Forward(surfels_, o, out);
+}
+
+double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Image* transmitted) {
+  const View& v = scene_.views[view];
+  const SolverOptions& o = options_;
+  SurfelRenderOptions ro;
+  ro.camera = v.camera;
+  ro.sh_degree = sh_degree_;
+  const float bg = o.white_background_2d ? 1.0f : 0.0f;
+  ro.background[0] = ro.background[1] = ro.background[2] = bg;
+  SurfelRender render;
+  surfel_renderer_.Forward(surfels_, ro, &render);
+
+  // The 2DGS loss of the stage (reference 1.3 warm-up, 1.5 mutual).
+  Problem p;
+  Targets t;
+  t.mask = v.mask.empty() ? nullptr : &v.mask;
+  if (stage == Stage::kWarmup) {
+    const double ln = it > o.normal_from_iteration ? o.lambda_normal : 0.0;
+    t.image = &targets_[view].gt_2d;
+    p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, o.lambda_l1), 1.0, Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kImage), o.depth_tv_warmup_2d, Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<NormalConsistencyLoss>(), ln, Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kImage), ln, Branch::kSurfels2D);
+  } else {
+    t.image = &targets_[view].gt_white;
+    t.transmitted = transmitted;
+    const double w = o.w_2d;
+    p.AddTerm(std::make_unique<MutualRenderLoss>(o.mutual_transmitted_weight, o.mutual_image_weight, o.lambda_l1), w,
+              Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<NormalConsistencyLoss>(), w * o.lambda_normal, Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kTransmitted), w * o.lambda_normal,
+              Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kTransmitted), w * o.depth_tv_mutual_2d,
+              Branch::kSurfels2D);
+  }
+  RenderBuffers in;
+  in.camera = &v.camera;
+  in.Set(Buffer::kColor, &render.color);
+  in.Set(Buffer::kDepth, &render.depth);
+  in.Set(Buffer::kAlpha, &render.alpha);
+  in.Set(Buffer::kNormal, &render.normal_world);
+  in.Set(Buffer::kMedianDepth, &render.median_depth);
+  in.Set(Buffer::kDistortion, &render.distortion);
+  RenderGradients g;
+  const double loss = p.Evaluate(Branch::kSurfels2D, in, t, &g);
+  SurfelRenderGrad rg;
+  MoveGradients(&g, &rg);
+  SurfelGradients grads;
+  surfel_renderer_.Backward(surfels_, ro, render, rg, &grads);
+
+  // Densification statistics, the Adam step, then density control on its schedule.
+  const BranchSchedule& s = o.schedule_2d;
+  if (it < s.densify_until) {
+    std::vector<float> norms;
+    ScreenGradientNorms(grads.mean2d, v.camera.width, v.camera.height, &norms);
+    stats_2d_.Accumulate(norms, surfel_renderer_.projected().radius);
+  }
+  adam_2d_.Step(surfels_.Blocks(), grads.params.Blocks(), Rates(o, it, scene_.extent));
+  if (it > s.densify_from && it < s.densify_until && it % s.densify_interval == 0) {
+    DensityOptions d;
+    d.grad_threshold = o.densify_grad_threshold;
+    d.percent_dense = o.percent_dense;
+    d.min_opacity = s.min_opacity;
+    d.max_primitives = o.max_surfels;
+    DensifyAndPrune(&surfels_, &adam_2d_, &stats_2d_, d, scene_.extent, it > s.opacity_reset_interval, &rng_);
+  }
+  if (it < s.densify_until && it % s.opacity_reset_interval == 0) ResetOpacity(&surfels_, &adam_2d_);
+  return loss;
+}
+
+double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it, const Image* surfel_depth) {
+  const View& v = scene_.views[view];
+  const SolverOptions& o = options_;
+  GaussianRenderOptions ro;
+  ro.camera = v.camera;
+  ro.sh_degree = sh_degree_;
+  const float bg = o.white_background_3d ? 1.0f : 0.0f;
+  ro.background[0] = ro.background[1] = ro.background[2] = bg;
+  GaussianRender render;
+  gaussian_renderer_.Forward(gaussians_, ro, &render);
+
+  // The 3DGS loss of the stage (reference 1.4 warm-up, 1.5 mutual).
+  Problem p;
+  Targets t;
+  t.image = &targets_[view].gt_3d;
+  t.mask = v.mask.empty() ? nullptr : &v.mask;
+  if (stage == Stage::kWarmup) {
+    p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, o.lambda_l1), 1.0, Branch::kGaussians3D);
+    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kTransmitted, TargetKind::kImage), o.transmitted_tv_3d,
+              Branch::kGaussians3D);
+    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kImage), o.depth_tv_3d, Branch::kGaussians3D);
+  } else {
+    t.other_depth = surfel_depth;
+    p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, o.lambda_l1), o.w_3d, Branch::kGaussians3D);
+    p.AddTerm(std::make_unique<MutualDepthLoss>(false), o.w_depth, Branch::kGaussians3D);
+  }
+  RenderBuffers in;
+  in.camera = &v.camera;
+  in.Set(Buffer::kColor, &render.color);
+  in.Set(Buffer::kTransmitted, &render.tran);
+  in.Set(Buffer::kReflected, &render.ref);
+  in.Set(Buffer::kWeight, &render.weight);
+  in.Set(Buffer::kDepth, &render.depth);
+  in.Set(Buffer::kAlpha, &render.alpha);
+  RenderGradients g;
+  const double loss = p.Evaluate(Branch::kGaussians3D, in, t, &g);
+  GaussianRenderGrad rg;
+  MoveGradients(&g, &rg);
+  GaussianGradients grads;
+  gaussian_renderer_.Backward(gaussians_, ro, render, rg, &grads);
+
+  const BranchSchedule& s = o.schedule_3d;
+  if (it < s.densify_until) {
+    std::vector<float> norms;
+    ScreenGradientNorms(grads.mean2d, v.camera.width, v.camera.height, &norms);
+    stats_3d_.Accumulate(norms, gaussian_renderer_.projected().radius);
+  }
+  adam_3d_.Step(gaussians_.Blocks(), grads.params.Blocks(), Rates(o, it, scene_.extent));
+  if (it > s.densify_from && it < s.densify_until && it % s.densify_interval == 0) {
+    DensityOptions d;
+    d.grad_threshold = o.densify_grad_threshold;
+    d.percent_dense = o.percent_dense;
+    d.min_opacity = s.min_opacity;
+    d.max_primitives = o.max_gaussians;
+    DensifyAndPrune(&gaussians_, &adam_3d_, &stats_3d_, d, scene_.extent, it > s.opacity_reset_interval, &rng_);
+  }
+  if (it < s.densify_until && it % s.opacity_reset_interval == 0) ResetOpacity(&gaussians_, &adam_3d_);
+  return loss;
+}
+
+Status MutualBoostedSolver::Solve(SolveSummary* summary) {
+  MGSR_RETURN_IF_ERROR(options_.Validate());
+  if (train_.empty()) return Status::Error("the scene has no training views");
+  if (gaussians_.size() == 0) return Status::Error("the scene has no initial points");
+  *summary = SolveSummary();
+  start_time_ = Now();
+  const SolverOptions& o = options_;
+
+  // Warm-up: the branches step in turn; each stops on its own.
+  Timer warmup;
+  AutoStop stop_2d(o.warmup_min_iterations, o.auto_stop_window, o.auto_stop_range);
+  AutoStop stop_3d(o.warmup_min_iterations, o.auto_stop_window, o.auto_stop_range);
+  bool done_2d = false, done_3d = false;
+  for (int it = 1; !(done_2d && done_3d); ++it) {
+    sh_degree_ = std::min(o.sh_degree, it / o.sh_interval);
+    const int view = NextView();
+    if (!done_2d) {
+      summary->final_loss_2d = StepSurfels(view, Stage::kWarmup, it, nullptr);
+      summary->warmup_iterations_2d = it;
+      Notify(Stage::kWarmup, it, Branch::kSurfels2D, summary->final_loss_2d);
+      summary->auto_stopped_2d = o.auto_stop && stop_2d.Update(it, summary->final_loss_2d);
+      done_2d = summary->auto_stopped_2d || it >= o.warmup_max_iterations;
+    }
+    if (!done_3d) {
+      summary->final_loss_3d = StepGaussians(view, Stage::kWarmup, it, nullptr);
+      summary->warmup_iterations_3d = it;
+      Notify(Stage::kWarmup, it, Branch::kGaussians3D, summary->final_loss_3d);
+      summary->auto_stopped_3d = o.auto_stop && stop_3d.Update(it, summary->final_loss_3d);
+      done_3d = summary->auto_stopped_3d || it >= o.warmup_max_iterations;
+    }
+  }
+  sh_degree_ = o.sh_degree;
+  summary->warmup_seconds = warmup.ElapsedSeconds();
+
+  // Mutual stage: the supervising branch's render is a constant target.
+  Timer mutual;
+  for (int it = 1; it <= o.mutual_iterations; ++it) {
+    const int view = NextView();
+    const bool joint = o.mutual_mode == "joint";
+    const bool step_2d = joint || it % 2 == 1, step_3d = joint || it % 2 == 0;
+    if (step_2d) {
+      GaussianRender g;
+      RenderGaussians(scene_.views[view].camera, &g);
+      // Transmitted target, white where the mask is background (reference 1.5).
+      Image target = std::move(g.tran);
+      const Image& mask = scene_.views[view].mask;
+      if (!mask.empty()) {
+        for (int c = 0; c < 3; ++c) {
+          for (size_t i = 0; i < target.plane_size(); ++i) {
+            if (mask.plane(0)[i] == 0.0f) target.plane(c)[i] = 1.0f;
+          }
+        }
+      }
+      summary->final_loss_2d = StepSurfels(view, Stage::kMutual, it, &target);
+      Notify(Stage::kMutual, it, Branch::kSurfels2D, summary->final_loss_2d);
+    }
+    if (step_3d) {
+      SurfelRender s;
+      RenderSurfels(scene_.views[view].camera, &s);
+      summary->final_loss_3d = StepGaussians(view, Stage::kMutual, it, &s.depth);
+      Notify(Stage::kMutual, it, Branch::kGaussians3D, summary->final_loss_3d);
+    }
+    summary->mutual_iterations = it;
+  }
+  summary->mutual_seconds = mutual.ElapsedSeconds();
+  summary->num_gaussians = gaussians_.size();
+  summary->num_surfels = surfels_.size();
+  return Status::Ok();
+}
+
+}  // namespace mgsr

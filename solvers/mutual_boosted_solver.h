@@ -1,0 +1,95 @@
+// MutualBoostedSolver: MGSR's optimisation (DESIGN.md section 4). Both branches warm up in turn,
+// each stopping on its own when its loss flattens (auto-stop) or at a cap; then the mutual stage:
+// the 2DGS branch learns from the 3DGS branch's transmitted image and the 3DGS branch from the
+// 2DGS depth, each held constant while it supervises (one-way back-propagation). `alternate`
+// steps one branch per iteration (the paper), `joint` both (the authors' code).
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "mgsr/core/image.h"
+#include "mgsr/core/rng.h"
+#include "mgsr/io/scene.h"
+#include "mgsr/loss/problem.h"
+#include "mgsr/model/gaussian_model.h"
+#include "mgsr/model/surfel_model.h"
+#include "mgsr/render/gaussian_renderer.h"
+#include "mgsr/render/surfel_renderer.h"
+#include "solvers/adam.h"
+#include "solvers/density_control.h"
+#include "solvers/solver_options.h"
+
+namespace mgsr {
+
+enum class Stage { kWarmup, kMutual };
+
+// What an iteration callback sees (Ceres' IterationSummary).
+struct IterationInfo {
+  Stage stage;
+  int iteration;        // within the stage
+  Branch branch;
+  double loss;
+  size_t num_gaussians, num_surfels;
+  double seconds;       // since Solve started
+};
+
+class IterationCallback {
+ public:
+  virtual ~IterationCallback() = default;
+  virtual void operator()(const IterationInfo& info) = 0;
+};
+
+struct SolveSummary {
+  int warmup_iterations_2d = 0, warmup_iterations_3d = 0, mutual_iterations = 0;
+  bool auto_stopped_2d = false, auto_stopped_3d = false;
+  double warmup_seconds = 0, mutual_seconds = 0;
+  size_t num_gaussians = 0, num_surfels = 0;
+  double final_loss_2d = 0, final_loss_3d = 0;
+  std::string BriefReport() const;
+};
+
+class MutualBoostedSolver {
+ public:
+  MutualBoostedSolver(const SolverOptions& options, const Scene& scene);
+
+  void AddCallback(IterationCallback* callback) { callbacks_.push_back(callback); }
+  Status Solve(SolveSummary* summary);
+
+  const GaussianModel& gaussians() const { return gaussians_; }
+  const SurfelModel& surfels() const { return surfels_; }
+  int active_sh_degree() const { return sh_degree_; }
+
+  // Renders of one view with the trained models (for outputs and evaluation).
+  void RenderGaussians(const Camera& camera, GaussianRender* out);
+  void RenderSurfels(const Camera& camera, SurfelRender* out);
+
+ private:
+  struct ViewTargets {
+    Image gt_2d, gt_3d, gt_white;  // ground truth on each branch's background, and on white
+  };
+  double StepSurfels(int view, Stage stage, int iteration, const Image* transmitted_target);
+  double StepGaussians(int view, Stage stage, int iteration, const Image* surfel_depth);
+  int NextView();
+  void Notify(Stage stage, int iteration, Branch branch, double loss);
+
+  SolverOptions options_;
+  const Scene& scene_;
+  std::vector<int> train_;
+  std::vector<ViewTargets> targets_;
+  GaussianModel gaussians_;
+  SurfelModel surfels_;
+  Adam adam_3d_, adam_2d_;
+  DensityStats stats_3d_, stats_2d_;
+  GaussianRenderer gaussian_renderer_;
+  SurfelRenderer surfel_renderer_;
+  Rng rng_;
+  std::vector<int> view_stack_;
+  int sh_degree_ = 0;
+  std::vector<IterationCallback*> callbacks_;
+  double start_time_ = 0;
+};
+
+}  // namespace mgsr

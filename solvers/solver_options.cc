@@ -1,0 +1,56 @@
+#include "solvers/solver_options.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace mgsr {
+namespace {
+
+int Scaled(int value, double factor) { return std::max(1, static_cast<int>(std::lround(value * factor))); }
+
+}  // namespace
+
+bool SolverOptions::FromPreset(const std::string& name, SolverOptions* o) {
+  *o = SolverOptions();
+  if (name == "paper") return true;
+  if (name != "fast") return false;
+  // 20,000 -> 1,500 iterations per stage; every schedule keeps its place in the run.
+  const double f = 0.075;
+  o->warmup_min_iterations = Scaled(o->warmup_min_iterations, f);
+  o->warmup_max_iterations = Scaled(o->warmup_max_iterations, f);
+  o->mutual_iterations = Scaled(o->mutual_iterations, f);
+  o->normal_from_iteration = Scaled(o->normal_from_iteration, f);
+  o->position_lr_max_steps = Scaled(o->position_lr_max_steps, f);
+  o->sh_interval = Scaled(o->sh_interval, f);
+  o->auto_stop_window = 50;
+  // Density control keeps the reference's intervals (they set how long opacities have to recover
+  // from a reset before the next prune) and ends at two thirds of the warm-up cap, like the reference.
+  o->schedule_2d = {100, 1000, 100, 500, 0.05f};
+  o->schedule_3d = {50, 1000, 20, 500, 0.005f};
+  // Fewer, larger steps need a little more room per step to move.
+  o->max_init_points = 20000;
+  return true;
+}
+
+Status SolverOptions::Validate() const {
+  if (warmup_max_iterations < 1) return Status::Error("--warmup_max_iterations must be >= 1");
+  if (warmup_min_iterations < 0 || warmup_min_iterations > warmup_max_iterations) {
+    return Status::Error("--warmup_min_iterations must be in [0, --warmup_max_iterations]");
+  }
+  if (mutual_iterations < 0) return Status::Error("--mutual_iterations must be >= 0");
+  if (mutual_mode != "alternate" && mutual_mode != "joint") {
+    return Status::Error("--mutual_mode must be alternate or joint, not '" + mutual_mode + "'");
+  }
+  if (bidirectional) return Status::Error("--bidirectional is not implemented yet (issue 6)");
+  if (auto_stop_window < 2) return Status::Error("--auto_stop_window must be >= 2");
+  if (!(lambda_l1 >= 0 && lambda_l1 <= 1)) return Status::Error("--lambda_l1 must be in [0, 1]");
+  if (sh_degree < 0 || sh_degree > 3) return Status::Error("--sh_degree must be in [0, 3]");
+  if (sh_interval < 1) return Status::Error("--sh_interval must be >= 1");
+  for (double w : {w_2d, w_3d, w_depth, lambda_normal}) {
+    if (!(w >= 0) || !std::isfinite(w)) return Status::Error("loss weights must be finite and >= 0");
+  }
+  if (max_init_points < 1) return Status::Error("--max_init_points must be >= 1");
+  return Status::Ok();
+}
+
+}  // namespace mgsr

@@ -1,0 +1,63 @@
+// SolverOptions: every schedule, weight and rate of MGSR's optimisation, with the reference defaults
+// (MGSR_REFERENCE.md 1.1-1.13), and presets that scale them. A plain struct with a validating check,
+// like ceres::Solver::Options.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "mgsr/core/status.h"
+
+namespace mgsr {
+
+struct BranchSchedule {
+  int densify_from = 500, densify_until = 15000, densify_interval = 100;
+  int opacity_reset_interval = 3000;  // resets while densifying
+  float min_opacity = 0.05f;          // prune threshold
+};
+
+struct SolverOptions {
+  // Warm-up: each branch steps until its loss window flattens (after a minimum iteration) or a cap.
+  bool auto_stop = true;
+  int warmup_min_iterations = 15000;
+  int warmup_max_iterations = 20000;
+  int auto_stop_window = 100;
+  double auto_stop_range = 0.01;
+  // Mutual stage.
+  int mutual_iterations = 20000;
+  std::string mutual_mode = "alternate";  // alternate | joint
+  bool bidirectional = false;
+  // Loss weights (reference 1.3-1.7).
+  double lambda_l1 = 0.8;               // render loss: lambda L1 + (1 - lambda) D-SSIM
+  double lambda_normal = 0.05;          // normal consistency and normal TV
+  int normal_from_iteration = 7000;     // warm-up: normal terms off before this
+  double depth_tv_warmup_2d = 1.0;
+  double depth_tv_mutual_2d = 0.05;
+  double transmitted_tv_3d = 0.1;
+  double depth_tv_3d = 0.05;
+  double w_2d = 0.5, w_3d = 0.5, w_depth = 0.01;
+  double mutual_transmitted_weight = 0.2, mutual_image_weight = 0.8;
+  // Density control.
+  BranchSchedule schedule_2d{500, 15000, 100, 3000, 0.05f};
+  BranchSchedule schedule_3d{50, 2500, 20, 500, 0.005f};
+  float densify_grad_threshold = 2e-4f;
+  float percent_dense = 0.01f;
+  size_t max_gaussians = 0, max_surfels = 0;  // 0 = no budget
+  // Learning rates (reference 1.8); positions scale with the scene extent and decay log-linearly.
+  double position_lr_init = 1.6e-4, position_lr_final = 1.6e-6;
+  int position_lr_max_steps = 30000;
+  double feature_lr = 2.5e-3, opacity_lr = 0.05, scaling_lr = 5e-3, rotation_lr = 1e-3;
+  // SH degree grows by one every `sh_interval` warm-up iterations up to `sh_degree`.
+  int sh_degree = 3, sh_interval = 1000;
+  // Backgrounds: 2DGS white, 3DGS black (reference 1.12, OmniObject3D setting).
+  bool white_background_2d = true, white_background_3d = false;
+  size_t max_init_points = 100000;
+  uint64_t seed = 0;
+
+  // "paper": the reference counts; "fast": every iteration count scaled to minutes on a laptop CPU.
+  static bool FromPreset(const std::string& name, SolverOptions* options);
+  Status Validate() const;
+};
+
+}  // namespace mgsr
