@@ -1,0 +1,214 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "mgsr/core/rng.h"
+#include "mgsr/eval/image_metrics.h"
+#include "mgsr/io/scene.h"
+#include "mgsr/model/activations.h"
+#include "solvers/adam.h"
+#include "solvers/auto_stop.h"
+#include "solvers/density_control.h"
+#include "solvers/mutual_boosted_solver.h"
+#include "test_util.h"
+
+namespace mgsr {
+namespace {
+
+TEST(AdamTest, FirstStepsMatchTheFormula) {
+  std::vector<float> x = {1.0f, -2.0f, 0.5f, 3.0f}, g = {0.5f, -1.0f, 0.0f, 2.0f};
+  Adam adam;
+  const std::vector<ParamBlock> p = {{"b", &x, 2}}, gr = {{"b", &g, 2}};
+  auto rates = [](const std::string&, int width, std::vector<float>* r) {
+    (*r)[0] = 0.1f;
+    if (width > 1) (*r)[1] = 0.01f;  // per-column rates
+  };
+  adam.Step(p, gr, rates);
+  // Step 1: m_hat = g, v_hat = g^2, so x -= lr * sign(g) (g != 0).
+  EXPECT_NEAR(x[0], 1.0f - 0.1f, 1e-6f);
+  EXPECT_NEAR(x[1], -2.0f + 0.01f, 1e-6f);
+  EXPECT_NEAR(x[2], 0.5f, 1e-6f);
+  EXPECT_NEAR(x[3], 3.0f - 0.01f, 1e-6f);
+  adam.Step(p, gr, rates);  // same gradient again: the same step
+  EXPECT_NEAR(x[0], 1.0f - 0.2f, 1e-5f);
+  // Rows follow density control: keep row 1, add a zero row.
+  adam.KeepRows({0, 1});
+  adam.AppendZeroRows(1);
+  EXPECT_EQ(adam.state().at("b").m.size(), 4u);
+  EXPECT_EQ(adam.state().at("b").m[2], 0.0f);
+  EXPECT_EQ(adam.state().at("b").m[0], 0.0f);  // kept row 1: its first column had zero gradient
+  EXPECT_NE(adam.state().at("b").m[1], 0.0f);
+}
+
+TEST(AutoStopTest, FiresOnAFlatWindowNotOnAFallingOne) {
+  AutoStop flat(10, 20, 0.01);
+  bool fired = false;
+  int at = 0;
+  for (int it = 1; it <= 100 && !fired; ++it) {
+    fired = flat.Update(it, 0.5 + 0.001 * std::sin(it));
+    at = it;
+  }
+  EXPECT_TRUE(fired);
+  EXPECT_EQ(at, 30);  // not before the minimum iteration plus a full window
+  AutoStop falling(10, 20, 0.01);
+  for (int it = 1; it <= 200; ++it) EXPECT_FALSE(falling.Update(it, 1.0 - 0.002 * it)) << it;
+}
+
+TEST(DensityControlTest, ClonesSplitsPrunesAndKeepsTheBudget) {
+  GaussianModel m;
+  m.Resize(4);
+  std::fill(m.sh.begin(), m.sh.end(), 0.0f);
+  for (int i = 0; i < 4; ++i) {
+    m.means[3 * i] = static_cast<float>(i);
+    m.quats[4 * i] = 1.0f;
+    m.opacity_logits[i] = 0.0f;
+  }
+  for (int k = 0; k < 3; ++k) {
+    m.log_scales[k] = std::log(0.001f);      // 0: small, high gradient -> clone
+    m.log_scales[3 + k] = std::log(0.5f);    // 1: large, high gradient -> split
+    m.log_scales[6 + k] = std::log(0.001f);  // 2: low gradient -> untouched
+    m.log_scales[9 + k] = std::log(0.001f);  // 3: transparent -> pruned
+  }
+  m.opacity_logits[3] = -10.0f;
+  Adam adam;
+  GaussianGradients g;
+  g.ResizeAndZero(m);
+  adam.Step(m.Blocks(), g.params.Blocks(), [](const std::string&, int, std::vector<float>* r) { r->assign(r->size(), 0.1f); });
+  DensityStats stats;
+  stats.Reset(4);
+  stats.Accumulate({1e-3f, 1e-3f, 1e-6f, 1e-6f}, {1, 1, 1, 1});
+  DensityOptions o;
+  Rng rng(1);
+  const DensifyResult r = DensifyAndPrune(&m, &adam, &stats, o, /*extent=*/1.0, false, &rng);
+  EXPECT_EQ(r.cloned, 1u);
+  EXPECT_EQ(r.split, 1u);
+  EXPECT_EQ(r.pruned, 1u);
+  EXPECT_EQ(m.size(), 4u + 1 + 2 - 1 - 1);  // + clone + 2 children - parent - pruned
+  for (const auto& [name, s] : adam.state()) EXPECT_EQ(s.m.size(), m.size() * s.width) << name;
+  // Children are smaller than their parent by 1.6.
+  EXPECT_NEAR(std::exp(m.log_scales[3 * (m.size() - 1)]), 0.5f / 1.6f, 1e-5f);
+  // A budget caps the growth.
+  stats.Reset(m.size());
+  std::vector<float> high(m.size(), 1e-3f), radii(m.size(), 1.0f);
+  stats.Accumulate(high, radii);
+  o.max_primitives = m.size() + 1;
+  DensifyAndPrune(&m, &adam, &stats, o, 1.0, false, &rng);
+  EXPECT_LE(m.size(), o.max_primitives);
+  // Opacity reset caps opacity, reflected opacity and beta.
+  ResetOpacity(&m, &adam);
+  for (size_t i = 0; i < m.size(); ++i) {
+    EXPECT_LE(Sigmoid(m.opacity_logits[i]), 0.0100001f);
+    EXPECT_LE(Sigmoid(m.beta_logits[i]), 0.100001f);
+  }
+}
+
+class Recorder : public IterationCallback {
+ public:
+  void operator()(const IterationInfo& i) override { calls.push_back(i); }
+  std::vector<IterationInfo> calls;
+};
+
+SolverOptions TinyOptions() {
+  SolverOptions o;
+  SolverOptions::FromPreset("fast", &o);
+  o.warmup_min_iterations = 0;
+  o.warmup_max_iterations = 120;
+  o.mutual_iterations = 20;
+  o.auto_stop = false;
+  o.schedule_2d = {20, 100, 20, 1000, 0.05f};
+  o.schedule_3d = {20, 100, 10, 1000, 0.005f};
+  o.sh_interval = 40;
+  return o;
+}
+
+// A small scene under constant light, so test views are predictable.
+Scene TinyScene(const std::string& dir) {
+  SynthOptions so = testing::SmallSynthOptions();
+  so.width = so.height = 48;
+  so.varying_light = false;
+  so.num_views = 16;
+  EXPECT_TRUE(WriteSyntheticScene(so, dir).ok());
+  Scene scene;
+  EXPECT_TRUE(LoadScene(dir, SceneOptions(), &scene).ok());
+  return scene;
+}
+
+double TestPsnr(MutualBoostedSolver* solver, const Scene& scene) {
+  double psnr = 0;
+  for (int i : scene.TestIndices()) {
+    GaussianRender r;
+    solver->RenderGaussians(scene.views[i].camera, &r);
+    Image gt = scene.views[i].image;
+    for (int c = 0; c < 3; ++c) {
+      for (size_t k = 0; k < gt.plane_size(); ++k) gt.plane(c)[k] *= scene.views[i].alpha.plane(0)[k];
+    }
+    psnr += Psnr(r.color, gt);
+  }
+  return psnr / scene.TestIndices().size();
+}
+
+TEST(MutualBoostedSolverTest, EndToEndLossFallsAndPsnrRises) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  SolverOptions o = TinyOptions();
+  MutualBoostedSolver solver(o, scene);
+  const double psnr_before = TestPsnr(&solver, scene);
+  Recorder rec;
+  solver.AddCallback(&rec);
+  SolveSummary summary;
+  ASSERT_TRUE(solver.Solve(&summary).ok());
+  const double psnr_after = TestPsnr(&solver, scene);
+  // Mean 3DGS loss over the first and the last 20 warm-up iterations.
+  double first = 0, last = 0;
+  int nf = 0, nl = 0;
+  for (const IterationInfo& i : rec.calls) {
+    if (i.stage != Stage::kWarmup || i.branch != Branch::kGaussians3D) continue;
+    if (i.iteration <= 20) first += i.loss, ++nf;
+    if (i.iteration > 100) last += i.loss, ++nl;
+  }
+  EXPECT_LT(last / nl, 0.7 * first / nf);
+  EXPECT_GT(psnr_after, psnr_before + 3) << psnr_before << " -> " << psnr_after;
+  EXPECT_EQ(summary.warmup_iterations_2d, 120);
+  EXPECT_EQ(summary.mutual_iterations, 20);
+}
+
+TEST(MutualBoostedSolverTest, AlternateAndJointCallOrder) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  for (const char* mode : {"alternate", "joint"}) {
+    SolverOptions o = TinyOptions();
+    o.warmup_max_iterations = 4;
+    o.mutual_iterations = 6;
+    o.mutual_mode = mode;
+    MutualBoostedSolver solver(o, scene);
+    Recorder rec;
+    solver.AddCallback(&rec);
+    SolveSummary summary;
+    ASSERT_TRUE(solver.Solve(&summary).ok());
+    std::string order;
+    for (const IterationInfo& i : rec.calls) {
+      if (i.stage == Stage::kMutual) order += i.branch == Branch::kSurfels2D ? "2" : "3";
+    }
+    // Warm-up interleaves the branches in both modes.
+    ASSERT_GE(rec.calls.size(), 8u);
+    EXPECT_EQ(rec.calls[0].branch, Branch::kSurfels2D);
+    EXPECT_EQ(rec.calls[1].branch, Branch::kGaussians3D);
+    if (std::string(mode) == "alternate") {
+      EXPECT_EQ(order, "232323");
+    } else {
+      EXPECT_EQ(order, "232323232323");
+    }
+  }
+}
+
+TEST(MutualBoostedSolverTest, InvalidOptionsAreRejected) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  SolverOptions o = TinyOptions();
+  o.mutual_mode = "sometimes";
+  MutualBoostedSolver solver(o, scene);
+  SolveSummary summary;
+  const Status s = solver.Solve(&summary);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("--mutual_mode must be alternate or joint"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace mgsr
