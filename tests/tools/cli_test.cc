@@ -53,10 +53,33 @@ class CliTest : public ::testing::Test {
 };
 std::string CliTest::base_;
 
-TEST_F(CliTest, SolveLoadsAGoodScene) {
-  const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + Copy() + "/out");
-  EXPECT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_NE(r.output.find("views: 8 train, 2 test, 32x32 px, masks: yes"), std::string::npos) << r.output;
+TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
+  const std::string out = Copy() + "/out";
+  const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + out +
+                                     " --warmup_max_iterations 40 --warmup_min_iterations 0 --mutual_iterations 10 --log_every 20");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("8 train / 2 test views, 32x32, 100 points, masks: yes"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("test views: PSNR"), std::string::npos) << r.output;
+  for (const char* f : {"metrics.json", "log.csv", "point_cloud_2d.ply", "point_cloud_3d.ply", "mesh.ply",
+                        "renders/v000_composite.png", "renders/v000_depth2d.png"}) {
+    EXPECT_TRUE(FileExists(out + "/" + f)) << f;
+  }
+  std::string metrics;
+  ASSERT_TRUE(ReadFileToString(out + "/metrics.json", &metrics).ok());
+  EXPECT_NE(metrics.find("\"psnr\""), std::string::npos);
+  EXPECT_NE(metrics.find("\"nc\""), std::string::npos);  // the synthetic scene has a ground-truth mesh
+}
+
+TEST_F(CliTest, SolveRejectsBadOptions) {
+  auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("--output is required"), std::string::npos);
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output /tmp/x --preset slow");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.output, "error: unknown --preset 'slow' (fast or paper)\n");
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output /tmp/x --mutual_mode both");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("--mutual_mode must be alternate or joint"), std::string::npos) << r.output;
 }
 
 TEST_F(CliTest, MissingWorkspaceFlagAndFolder) {
@@ -126,7 +149,8 @@ TEST_F(CliTest, EmptyPointsIsAWarningNotAnError) {
       im.point3D_ids.clear();
     }
   });
-  const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir + "/out");
+  const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
+                                     "/out --warmup_max_iterations 5 --warmup_min_iterations 0 --mutual_iterations 2");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("warning: " + dir + "/sparse/0: points3D is empty"), std::string::npos) << r.output;
 }
