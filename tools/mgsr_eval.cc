@@ -2,10 +2,12 @@
 // ground-truth images (PSNR, SSIM), prints a table and optionally writes JSON.
 //   mgsr_eval --mesh pred.ply --gt gt.ply [--json out.json]
 //   mgsr_eval --renders DIR --gt_images DIR [--background black|white] [--json out.json]
-// (Scoring a whole mgsr_solve output folder comes with the solver, issue 6/7.)
+//   mgsr_eval --run OUTPUT_DIR [--gt gt.ply]   an mgsr_solve output folder: the paper's table row
+//                                                (NC x100, CD x1000, PSNR, SSIM, time)
 #include <gflags/gflags.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -26,6 +28,7 @@ DEFINE_string(renders, "", "Folder of rendered images.");
 DEFINE_string(gt_images, "", "Folder of ground-truth images with the same file names.");
 DEFINE_string(background, "black", "Background that RGBA images are composited onto: black | white.");
 DEFINE_string(json, "", "Write the results to this JSON file.");
+DEFINE_string(run, "", "An mgsr_solve output folder (mesh.ply, metrics.json); --gt defaults to the scene's gt/mesh.ply.");
 
 namespace {
 
@@ -117,16 +120,53 @@ int EvaluateImages(nlohmann::json* report) {
   return 0;
 }
 
+int EvaluateRun(nlohmann::json* report) {
+  const std::string metrics_path = mgsr::JoinPath(FLAGS_run, "metrics.json");
+  std::string text;
+  mgsr::Status s = mgsr::ReadFileToString(metrics_path, &text);
+  if (!s.ok()) return Fail(s.message() + " (is --run an mgsr_solve output folder?)");
+  nlohmann::json run;
+  try {
+    run = nlohmann::json::parse(text);
+  } catch (const nlohmann::json::exception& e) {
+    return Fail(metrics_path + ": invalid JSON: " + e.what());
+  }
+  std::string gt_path = FLAGS_gt;
+  if (gt_path.empty() && run.contains("scene") && run["scene"].is_string()) {
+    gt_path = mgsr::JoinPath(run["scene"].get<std::string>(), "gt/mesh.ply");
+  }
+  mgsr::TriangleMesh pred, gt;
+  s = mgsr::ReadTriangleMesh(mgsr::JoinPath(FLAGS_run, "mesh.ply"), &pred);
+  if (!s.ok()) return Fail(s.message());
+  s = mgsr::ReadTriangleMesh(gt_path, &gt);
+  if (!s.ok()) return Fail(s.message() + " (pass --gt)");
+  mgsr::MeshMetricsOptions o;
+  o.num_samples = FLAGS_samples;
+  o.seed = FLAGS_seed;
+  o.fscore_threshold = FLAGS_fscore_threshold;
+  const mgsr::MeshMetrics m = mgsr::EvaluateMesh(pred, gt, o);
+  const double psnr = run["test"].value("psnr", 0.0), ssim = run["test"].value("ssim", 0.0);
+  const double seconds = run["seconds"].value("total", 0.0);
+  std::printf("%-24s %8s %9s %8s %8s %9s\n", "run", "NC x100", "CD x1000", "PSNR", "SSIM", "time (s)");
+  std::printf("%-24s %8.2f %9.3f %8.2f %8.4f %9.1f%s\n", mgsr::FileStem(FLAGS_run).c_str(), 100 * m.normal_consistency,
+              1000 * m.chamfer, psnr, ssim, seconds, m.ok ? "" : ("  (" + m.failure + ")").c_str());
+  (*report)["run"] = {{"folder", FLAGS_run}, {"ground_truth", gt_path}, {"nc", m.normal_consistency},
+                      {"cd", std::isfinite(m.chamfer) ? nlohmann::json(m.chamfer) : nlohmann::json()},
+                      {"fscore", m.fscore}, {"psnr", psnr}, {"ssim", ssim}, {"seconds", seconds}};
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   gflags::SetUsageMessage(
-      "mgsr_eval --mesh pred.ply --gt gt.ply | --renders DIR --gt_images DIR  [--json out.json]");
+      "mgsr_eval --mesh pred.ply --gt gt.ply | --renders DIR --gt_images DIR | --run DIR [--gt gt.ply]  [--json out.json]");
   gflags::ParseCommandLineFlags(&argc, &argv, true);
-  const bool mesh_mode = !FLAGS_mesh.empty() || !FLAGS_gt.empty();
+  const bool run_mode = !FLAGS_run.empty();
+  const bool mesh_mode = !run_mode && (!FLAGS_mesh.empty() || !FLAGS_gt.empty());
   const bool image_mode = !FLAGS_renders.empty() || !FLAGS_gt_images.empty();
-  if (!mesh_mode && !image_mode) {
-    std::fprintf(stderr, "error: give --mesh and --gt, or --renders and --gt_images\n");
+  if (!mesh_mode && !image_mode && !run_mode) {
+    std::fprintf(stderr, "error: give --mesh and --gt, --renders and --gt_images, or --run\n");
     return 2;
   }
   if (mesh_mode && (FLAGS_mesh.empty() || FLAGS_gt.empty())) {
@@ -140,6 +180,7 @@ int main(int argc, char** argv) {
   if (FLAGS_samples < 1) return Fail("--samples must be >= 1");
   nlohmann::json report;
   mgsr::Timer timer;
+  if (run_mode && EvaluateRun(&report) != 0) return 1;
   if (mesh_mode && EvaluateMeshes(&report) != 0) return 1;
   if (image_mode && EvaluateImages(&report) != 0) return 1;
   report["seconds"] = timer.ElapsedSeconds();

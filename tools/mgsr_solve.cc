@@ -37,6 +37,9 @@ DEFINE_double(w_2d, 0.5, "Weight of the 2DGS loss in the mutual stage.");
 DEFINE_double(w_3d, 0.5, "Weight of the 3DGS loss in the mutual stage.");
 DEFINE_double(w_depth, 0.01, "Weight of the mutual depth loss.");
 DEFINE_int32(log_every, 100, "Print progress every N iterations.");
+DEFINE_string(mesh_depth, "expected", "Depth fused into the mesh: expected (MGSR) | median (2DGS).");
+DEFINE_string(mesh_color, "transmitted", "Mesh colours: transmitted (3DGS, reflection-free) | surfel (2DGS render).");
+DEFINE_double(voxel_size, 0, "TSDF voxel (0: the pixel footprint at the object).");
 
 namespace {
 
@@ -106,6 +109,9 @@ int main(int argc, char** argv) {
   options.w_depth = FLAGS_w_depth;
   options.seed = FLAGS_seed;
   if (FLAGS_log_every < 1) return Fail("--log_every must be >= 1");
+  if (FLAGS_mesh_depth != "expected" && FLAGS_mesh_depth != "median") return Fail("--mesh_depth must be expected or median");
+  if (FLAGS_mesh_color != "transmitted" && FLAGS_mesh_color != "surfel") return Fail("--mesh_color must be transmitted or surfel");
+  if (!(FLAGS_voxel_size >= 0)) return Fail("--voxel_size must be >= 0");
   const mgsr::Status valid = options.Validate();
   if (!valid.ok()) return Fail(valid.message());
 
@@ -217,8 +223,8 @@ int main(int argc, char** argv) {
     solver.RenderGaussians(v.camera, &g);
     mgsr::DepthFrame f;
     f.camera = v.camera;
-    f.depth = sr.depth;
-    f.color = g.tran;
+    f.depth = FLAGS_mesh_depth == "median" ? sr.median_depth : sr.depth;
+    f.color = FLAGS_mesh_color == "surfel" ? sr.color : g.tran;
     f.weight = sr.alpha;
     if (!v.mask.empty()) {
       for (size_t k = 0; k < f.weight.size(); ++k) f.weight.data()[k] *= v.mask.data()[k] >= 0.5f ? 1.0f : 0.0f;
@@ -228,6 +234,7 @@ int main(int argc, char** argv) {
   mgsr::TriangleMesh mesh;
   mgsr::TsdfOptions tsdf;
   tsdf.keep_largest_component = true;
+  tsdf.voxel_size = FLAGS_voxel_size;
   s = mgsr::FuseDepthMaps(frames, tsdf, &mesh);
   const std::string mesh_path = mgsr::JoinPath(FLAGS_output, "mesh.ply");
   if (s.ok()) s = mgsr::WriteTriangleMesh(mesh_path, mesh);

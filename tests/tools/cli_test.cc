@@ -68,6 +68,15 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
   ASSERT_TRUE(ReadFileToString(out + "/metrics.json", &metrics).ok());
   EXPECT_NE(metrics.find("\"psnr\""), std::string::npos);
   EXPECT_NE(metrics.find("\"nc\""), std::string::npos);  // the synthetic scene has a ground-truth mesh
+  // mgsr_eval scores the run folder: NC, CD, PSNR, SSIM, time.
+  const auto e = testing::RunCommand(kTools + "/mgsr_eval --run " + out + " --json " + out + "/eval.json");
+  ASSERT_EQ(e.exit_code, 0) << e.output;
+  EXPECT_NE(e.output.find("NC x100"), std::string::npos) << e.output;
+  ASSERT_TRUE(ReadFileToString(out + "/eval.json", &metrics).ok());
+  EXPECT_NE(metrics.find("\"cd\""), std::string::npos);
+  const auto bad = testing::RunCommand(kTools + "/mgsr_eval --run " + base_);
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_NE(bad.output.find("metrics.json: cannot open"), std::string::npos) << bad.output;
 }
 
 TEST_F(CliTest, SolveRejectsBadOptions) {
