@@ -1,18 +1,49 @@
 // Per-thread scratch memory shared by the tile rasterizers, reused between calls so that a warm
-// renderer does not allocate.
+// renderer does not allocate, and the deterministic reduction of per-tile gradients.
 #pragma once
 
+#include <omp.h>
+
+#include <algorithm>
+#include <cstdint>
 #include <vector>
+
+#include "mgsr/render/tile_binning.h"
 
 namespace mgsr {
 
-// Per-thread scratch of the rasterizer (reused between calls).
 struct RasterScratch {
   std::vector<float> packed;                    // per primitive: the fields the pixel loops read
   std::vector<std::vector<float>> pixel_state;  // per thread: pixel state of the current tile
-  std::vector<std::vector<float>> tile_data;  // per thread: gathered Gaussians of the current tile
-  std::vector<std::vector<float>> tile_grad;  // per thread: gradients of the current tile
-  std::vector<std::vector<float>> grads;      // per thread: N x kGradStride accumulators
+  std::vector<std::vector<float>> tile_data;    // per thread: gathered primitives of the current tile
+  std::vector<float> entry_grads;               // per tile entry: gradient fields (stride floats)
+  std::vector<uint32_t> tile_used;              // per tile: entries [0, used) hold gradients
+  std::vector<float> per_primitive;             // per primitive: reduced gradient fields
 };
+
+// Sums the per-entry gradients of every tile into per-primitive rows (N x stride), in tile and
+// entry order whatever the thread count, so backward passes are bitwise reproducible. Threads own
+// disjoint primitive ranges and each scans the entry list once.
+inline void ReduceEntryGradients(const TileBins& bins, const std::vector<uint32_t>& tile_used,
+                                 const std::vector<float>& entry_grads, int stride, size_t num,
+                                 std::vector<float>* out) {
+  out->assign(num * stride, 0.0f);
+  const int threads = omp_get_max_threads();
+#pragma omp parallel num_threads(threads)
+  {
+    const int t = omp_get_thread_num();
+    const uint32_t lo = static_cast<uint32_t>(num * t / threads), hi = static_cast<uint32_t>(num * (t + 1) / threads);
+    for (int tile = 0; tile < bins.num_tiles(); ++tile) {
+      const uint32_t begin = bins.tile_start[tile];
+      for (uint32_t j = 0; j < tile_used[tile]; ++j) {
+        const uint32_t id = bins.ids[begin + j];
+        if (id < lo || id >= hi) continue;
+        const float* src = entry_grads.data() + static_cast<size_t>(begin + j) * stride;
+        float* dst = out->data() + static_cast<size_t>(id) * stride;
+        for (int q = 0; q < stride; ++q) dst[q] += src[q];
+      }
+    }
+  }
+}
 
 }  // namespace mgsr

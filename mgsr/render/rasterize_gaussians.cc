@@ -57,8 +57,6 @@ void GatherTile(const float* packed, const uint32_t* ids, int n, std::vector<flo
 void EnsureScratch(RasterScratch* s, int threads) {
   if (static_cast<int>(s->tile_data.size()) < threads) {
     s->tile_data.resize(threads);
-    s->tile_grad.resize(threads);
-    s->grads.resize(threads);
     s->pixel_state.resize(threads);
   }
 }
@@ -264,11 +262,11 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
   PackGaussians(p, &scratch->packed);
   const float* packed = scratch->packed.data();
 
+  scratch->entry_grads.resize(bins.ids.size() * kGradStride);
+  scratch->tile_used.assign(bins.num_tiles(), 0);
 #pragma omp parallel num_threads(threads)
   {
     const int thread = omp_get_thread_num();
-    std::vector<float>& acc = scratch->grads[thread];
-    acc.assign(num * kGradStride, 0.0f);
 #pragma omp for schedule(dynamic, 1)
     for (int tile = 0; tile < bins.num_tiles(); ++tile) {
       const int tx = tile % bins.tiles_x, ty = tile / bins.tiles_x;
@@ -279,8 +277,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
       std::vector<float>& buffer = scratch->tile_data[thread];
       GatherTile(packed, ids, n, &buffer);
       const float* f = buffer.data();
-      std::vector<float>& tg = scratch->tile_grad[thread];
-      tg.assign(static_cast<size_t>(n) * kGradStride, 0.0f);
+      float* tg = scratch->entry_grads.data() + static_cast<size_t>(begin) * kGradStride;
       const int x0 = tx * kTileSize, y0 = ty * kTileSize;
       const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
       const I16 lanes_ok = lanes < static_cast<float>(x_end - x0);
@@ -407,7 +404,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
           g_cb += -dpower * dx * dy;
           g_cc += -0.5f * dpower * dy * dy;
         }
-        float* dst = tg.data() + static_cast<size_t>(j) * kGradStride;
+        float* dst = tg + static_cast<size_t>(j) * kGradStride;
         dst[gMx] = simd::Sum(g_mx);
         dst[gMy] = simd::Sum(g_my);
         dst[gCa] = simd::Sum(g_ca);
@@ -424,22 +421,14 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
         dst[gCr1] = simd::Sum(g_cr1);
         dst[gCr2] = simd::Sum(g_cr2);
       }
-      // Scatter this tile's gradients to the thread's per-Gaussian accumulators.
-      for (int j = 0; j < max_last; ++j) {
-        float* dst = acc.data() + static_cast<size_t>(ids[j]) * kGradStride;
-        const float* src = tg.data() + static_cast<size_t>(j) * kGradStride;
-        for (int q = 0; q < kGradStride; ++q) dst[q] += src[q];
-      }
+      scratch->tile_used[tile] = static_cast<uint32_t>(max_last);
     }
   }
-  // Reduce the per-thread accumulators into the projected-quantity gradients.
+  // Deterministic reduction (tile and entry order) into the projected-quantity gradients.
+  ReduceEntryGradients(bins, scratch->tile_used, scratch->entry_grads, kGradStride, num, &scratch->per_primitive);
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < static_cast<int64_t>(num); ++i) {
-    float s[kGradStride] = {};
-    for (int t = 0; t < threads; ++t) {
-      const float* src = scratch->grads[t].data() + static_cast<size_t>(i) * kGradStride;
-      for (int k = 0; k < kGradStride; ++k) s[k] += src[k];
-    }
+    const float* s = scratch->per_primitive.data() + static_cast<size_t>(i) * kGradStride;
     d->mean2d[2 * i] += s[gMx];
     d->mean2d[2 * i + 1] += s[gMy];
     d->conic[3 * i] += s[gCa];

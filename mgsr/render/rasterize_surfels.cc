@@ -44,8 +44,6 @@ void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, std::vect
 void EnsureScratch(RasterScratch* s, int threads) {
   if (static_cast<int>(s->tile_data.size()) < threads) {
     s->tile_data.resize(threads);
-    s->tile_grad.resize(threads);
-    s->grads.resize(threads);
     s->pixel_state.resize(threads);
   }
 }
@@ -269,11 +267,11 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins, c
   const F16 lanes = simd::Lanes();
   constexpr float kDmDzScale = kSurfelFar * kSurfelNear / (kSurfelFar - kSurfelNear);
 
+  scratch->entry_grads.resize(bins.ids.size() * kGradStride);
+  scratch->tile_used.assign(bins.num_tiles(), 0);
 #pragma omp parallel num_threads(threads)
   {
     const int thread = omp_get_thread_num();
-    std::vector<float>& acc = scratch->grads[thread];
-    acc.assign(num * kGradStride, 0.0f);
 #pragma omp for schedule(dynamic, 1)
     for (int tile = 0; tile < bins.num_tiles(); ++tile) {
       const int tx = tile % bins.tiles_x, ty = tile / bins.tiles_x;
@@ -282,8 +280,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins, c
       if (n == 0) continue;
       std::vector<float>& buffer = scratch->tile_data[thread];
       GatherTile(p, bins.ids.data() + begin, n, &buffer);
-      std::vector<float>& tg = scratch->tile_grad[thread];
-      tg.assign(static_cast<size_t>(n) * kGradStride, 0.0f);
+      float* tg = scratch->entry_grads.data() + static_cast<size_t>(begin) * kGradStride;
       const float* f = buffer.data();
       const int x0 = tx * kTileSize, y0 = ty * kTileSize;
       const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
@@ -433,26 +430,19 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins, c
           gmx -= s.tw[0] * dk0 + s.tw[1] * dk1 + s.tw[2] * dk2;
           gmy -= s.tw[0] * dl0 + s.tw[1] * dl1 + s.tw[2] * dl2;
         }
-        float* dst = tg.data() + static_cast<size_t>(j) * kGradStride;
+        float* dst = tg + static_cast<size_t>(j) * kGradStride;
         const F16* accs[kGradStride] = {&gTu0, &gTu1, &gTu2, &gTv0, &gTv1, &gTv2, &gTw0, &gTw1, &gTw2,
                                         &gmx,  &gmy,  &gop,  &gn0,  &gn1,  &gn2,  &gc0,  &gc1,  &gc2};
         for (int q = 0; q < kGradStride; ++q) dst[q] = simd::Sum(*accs[q]);
       }
-      const uint32_t* ids = bins.ids.data() + begin;
-      for (int j = 0; j < max_last; ++j) {
-        float* dst = acc.data() + static_cast<size_t>(ids[j]) * kGradStride;
-        const float* src = tg.data() + static_cast<size_t>(j) * kGradStride;
-        for (int q = 0; q < kGradStride; ++q) dst[q] += src[q];
-      }
+      scratch->tile_used[tile] = static_cast<uint32_t>(max_last);
     }
   }
+  // Deterministic reduction (tile and entry order) into the projected-quantity gradients.
+  ReduceEntryGradients(bins, scratch->tile_used, scratch->entry_grads, kGradStride, num, &scratch->per_primitive);
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < static_cast<int64_t>(num); ++i) {
-    float s[kGradStride] = {};
-    for (int t = 0; t < threads; ++t) {
-      const float* src = scratch->grads[t].data() + static_cast<size_t>(i) * kGradStride;
-      for (int q = 0; q < kGradStride; ++q) s[q] += src[q];
-    }
+    const float* s = scratch->per_primitive.data() + static_cast<size_t>(i) * kGradStride;
     for (int q = 0; q < 9; ++q) d->M[9 * i + q] += s[gTu0 + q];
     d->center[2 * i] += s[gMx];
     d->center[2 * i + 1] += s[gMy];
