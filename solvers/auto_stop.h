@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <deque>
+#include <utility>
 
 namespace mgsr {
 
@@ -11,6 +12,9 @@ class AutoStop {
  public:
   AutoStop(int min_iteration, int window, double range) : min_iteration_(min_iteration), window_(window), range_(range) {}
   // Records the loss of `iteration`; true once the window has flattened.
+  const std::deque<double>& window() const { return losses_; }
+  void set_window(std::deque<double> w) { losses_ = std::move(w); }
+
   bool Update(int iteration, double loss) {
     if (iteration <= min_iteration_) return false;
     losses_.push_back(loss);

@@ -11,7 +11,6 @@
 #include "mgsr/loss/normal_consistency_loss.h"
 #include "mgsr/loss/render_loss.h"
 #include "mgsr/model/init_from_points.h"
-#include "solvers/auto_stop.h"
 
 namespace mgsr {
 namespace {
@@ -85,7 +84,11 @@ std::string SolveSummary::BriefReport() const {
 }
 
 MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Scene& scene)
-    : options_(options), scene_(scene), rng_(options.seed) {
+    : options_(options),
+      scene_(scene),
+      rng_(options.seed),
+      stop_2d_(options.warmup_min_iterations, options.auto_stop_window, options.auto_stop_range),
+      stop_3d_(options.warmup_min_iterations, options.auto_stop_window, options.auto_stop_range) {
   train_ = scene.TrainIndices();
   for (const View& v : scene.views) {
     ViewTargets t;
@@ -281,39 +284,53 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
   MGSR_RETURN_IF_ERROR(options_.Validate());
   if (train_.empty()) return Status::Error("the scene has no training views");
   if (gaussians_.size() == 0) return Status::Error("the scene has no initial points");
-  *summary = SolveSummary();
-  start_time_ = Now();
+  stop_requested_ = 0;
+  start_time_ = Now() - summary_.warmup_seconds - summary_.mutual_seconds;
   const SolverOptions& o = options_;
+  SolveSummary& sum = summary_;
+  auto interrupted = [&]() {
+    *summary = sum;
+    return Status::Error("interrupted at " + std::string(stage_ == Stage::kWarmup ? "warm-up" : "mutual") +
+                         " iteration " + std::to_string(next_iteration_ - 1));
+  };
 
   // Warm-up: the branches step in turn; each stops on its own.
   Timer warmup;
-  AutoStop stop_2d(o.warmup_min_iterations, o.auto_stop_window, o.auto_stop_range);
-  AutoStop stop_3d(o.warmup_min_iterations, o.auto_stop_window, o.auto_stop_range);
-  bool done_2d = false, done_3d = false;
-  for (int it = 1; !(done_2d && done_3d); ++it) {
+  const double warmup_before = sum.warmup_seconds;
+  while (stage_ == Stage::kWarmup) {
+    const bool done_2d = sum.auto_stopped_2d || sum.warmup_iterations_2d >= o.warmup_max_iterations;
+    const bool done_3d = sum.auto_stopped_3d || sum.warmup_iterations_3d >= o.warmup_max_iterations;
+    if (done_2d && done_3d) {
+      stage_ = Stage::kMutual;
+      next_iteration_ = 1;
+      break;
+    }
+    const int it = next_iteration_;
     sh_degree_ = std::min(o.sh_degree, it / o.sh_interval);
     const int view = NextView();
     if (!done_2d) {
-      summary->final_loss_2d = StepSurfels(view, Stage::kWarmup, it, nullptr);
-      summary->warmup_iterations_2d = it;
-      Notify(Stage::kWarmup, it, Branch::kSurfels2D, summary->final_loss_2d);
-      summary->auto_stopped_2d = o.auto_stop && stop_2d.Update(it, summary->final_loss_2d);
-      done_2d = summary->auto_stopped_2d || it >= o.warmup_max_iterations;
+      sum.final_loss_2d = StepSurfels(view, Stage::kWarmup, it, nullptr);
+      sum.warmup_iterations_2d = it;
+      Notify(Stage::kWarmup, it, Branch::kSurfels2D, sum.final_loss_2d);
+      sum.auto_stopped_2d = o.auto_stop && stop_2d_.Update(it, sum.final_loss_2d);
     }
     if (!done_3d) {
-      summary->final_loss_3d = StepGaussians(view, Stage::kWarmup, it, nullptr);
-      summary->warmup_iterations_3d = it;
-      Notify(Stage::kWarmup, it, Branch::kGaussians3D, summary->final_loss_3d);
-      summary->auto_stopped_3d = o.auto_stop && stop_3d.Update(it, summary->final_loss_3d);
-      done_3d = summary->auto_stopped_3d || it >= o.warmup_max_iterations;
+      sum.final_loss_3d = StepGaussians(view, Stage::kWarmup, it, nullptr);
+      sum.warmup_iterations_3d = it;
+      Notify(Stage::kWarmup, it, Branch::kGaussians3D, sum.final_loss_3d);
+      sum.auto_stopped_3d = o.auto_stop && stop_3d_.Update(it, sum.final_loss_3d);
     }
+    ++next_iteration_;
+    sum.warmup_seconds = warmup_before + warmup.ElapsedSeconds();
+    if (stop_requested_) return interrupted();
   }
   sh_degree_ = o.sh_degree;
-  summary->warmup_seconds = warmup.ElapsedSeconds();
 
   // Mutual stage: the supervising branch's render is a constant target.
   Timer mutual;
-  for (int it = 1; it <= o.mutual_iterations; ++it) {
+  const double mutual_before = sum.mutual_seconds;
+  while (next_iteration_ <= o.mutual_iterations) {
+    const int it = next_iteration_;
     const int view = NextView();
     const bool joint = o.mutual_mode == "joint";
     const bool step_2d = joint || it % 2 == 1, step_3d = joint || it % 2 == 0;
@@ -330,20 +347,24 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
           }
         }
       }
-      summary->final_loss_2d = StepSurfels(view, Stage::kMutual, it, &target);
-      Notify(Stage::kMutual, it, Branch::kSurfels2D, summary->final_loss_2d);
+      sum.final_loss_2d = StepSurfels(view, Stage::kMutual, it, &target);
+      Notify(Stage::kMutual, it, Branch::kSurfels2D, sum.final_loss_2d);
     }
     if (step_3d) {
       SurfelRender s;
       RenderSurfels(scene_.views[view].camera, &s);
-      summary->final_loss_3d = StepGaussians(view, Stage::kMutual, it, &s.depth);
-      Notify(Stage::kMutual, it, Branch::kGaussians3D, summary->final_loss_3d);
+      sum.final_loss_3d = StepGaussians(view, Stage::kMutual, it, &s.depth);
+      Notify(Stage::kMutual, it, Branch::kGaussians3D, sum.final_loss_3d);
     }
-    summary->mutual_iterations = it;
+    sum.mutual_iterations = it;
+    ++next_iteration_;
+    sum.mutual_seconds = mutual_before + mutual.ElapsedSeconds();
+    if (stop_requested_ && next_iteration_ <= o.mutual_iterations) return interrupted();
   }
-  summary->mutual_seconds = mutual.ElapsedSeconds();
-  summary->num_gaussians = gaussians_.size();
-  summary->num_surfels = surfels_.size();
+  finished_ = true;
+  sum.num_gaussians = gaussians_.size();
+  sum.num_surfels = surfels_.size();
+  *summary = sum;
   return Status::Ok();
 }
 

@@ -5,6 +5,7 @@
 // steps one branch per iteration (the paper), `joint` both (the authors' code).
 #pragma once
 
+#include <csignal>
 #include <functional>
 #include <memory>
 #include <string>
@@ -19,6 +20,7 @@
 #include "mgsr/render/gaussian_renderer.h"
 #include "mgsr/render/surfel_renderer.h"
 #include "solvers/adam.h"
+#include "solvers/auto_stop.h"
 #include "solvers/density_control.h"
 #include "solvers/solver_options.h"
 
@@ -56,7 +58,17 @@ class MutualBoostedSolver {
   MutualBoostedSolver(const SolverOptions& options, const Scene& scene);
 
   void AddCallback(IterationCallback* callback) { callbacks_.push_back(callback); }
+  // Runs (or continues, after LoadCheckpoint or an interruption) to the end. Returns an error
+  // whose message starts with "interrupted" when RequestStop() was called; the state is then at
+  // an iteration boundary and can be saved.
   Status Solve(SolveSummary* summary);
+  // Asks Solve to stop after the current iteration (safe from a signal handler or a callback).
+  void RequestStop() { stop_requested_ = 1; }
+
+  // Everything needed to continue exactly: models, optimiser states, density statistics, the
+  // random generator, the view order, the stage and iteration, the auto-stop windows.
+  Status SaveCheckpoint(const std::string& path) const;
+  Status LoadCheckpoint(const std::string& path);
 
   const GaussianModel& gaussians() const { return gaussians_; }
   const SurfelModel& surfels() const { return surfels_; }
@@ -90,6 +102,13 @@ class MutualBoostedSolver {
   int sh_degree_ = 0;
   std::vector<IterationCallback*> callbacks_;
   double start_time_ = 0;
+  // Loop state (checkpointed).
+  Stage stage_ = Stage::kWarmup;
+  int next_iteration_ = 1;
+  bool finished_ = false;
+  AutoStop stop_2d_, stop_3d_;
+  SolveSummary summary_;
+  volatile std::sig_atomic_t stop_requested_ = 0;
 };
 
 }  // namespace mgsr

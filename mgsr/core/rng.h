@@ -32,6 +32,10 @@ class Rng {
   }
   double Normal(double mean, double stddev) { return mean + stddev * Normal(); }
 
+  // The whole generator state, for checkpoints.
+  uint64_t state() const { return state_; }
+  void set_state(uint64_t s) { state_ = s; }
+
  private:
   uint64_t state_;
 };

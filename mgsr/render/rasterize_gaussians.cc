@@ -327,7 +327,10 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
       for (int j = max_last - 1; j >= 0; --j) {
         const Splat s(f + static_cast<size_t>(j) * kNumFields);
         const float min_power = MinPower(s.op, s.rop, refl);
-        if (!(min_power < 0.0f)) continue;
+        if (!(min_power < 0.0f)) {  // invisible everywhere: no gradient (the row must still be written)
+          std::fill(tg + static_cast<size_t>(j) * kGradStride, tg + static_cast<size_t>(j + 1) * kGradStride, 0.0f);
+          continue;
+        }
         int ya, yb;
         BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
         const float jf = static_cast<float>(j);

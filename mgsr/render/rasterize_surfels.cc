@@ -333,7 +333,10 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins, c
       }
       for (int j = max_last - 1; j >= 0; --j) {
         const Surfel s(f, n, j);
-        if (!(s.op > kMinAlpha)) continue;
+        if (!(s.op > kMinAlpha)) {  // invisible everywhere: no gradient (the row must still be written)
+          std::fill(tg + static_cast<size_t>(j) * kGradStride, tg + static_cast<size_t>(j + 1) * kGradStride, 0.0f);
+          continue;
+        }
         const float min_power = std::log(kMinAlpha / s.op);
         int ya, yb;
         BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);

@@ -4,6 +4,7 @@
 
 #include "mgsr/core/rng.h"
 #include "mgsr/eval/image_metrics.h"
+#include "mgsr/io/file_util.h"
 #include "mgsr/io/scene.h"
 #include "mgsr/model/activations.h"
 #include "solvers/adam.h"
@@ -210,5 +211,103 @@ TEST(MutualBoostedSolverTest, InvalidOptionsAreRejected) {
   EXPECT_NE(s.message().find("--mutual_mode must be alternate or joint"), std::string::npos);
 }
 
+}  // namespace
+}  // namespace mgsr
+
+namespace mgsr {
+namespace {
+
+class StopAt : public IterationCallback {
+ public:
+  StopAt(MutualBoostedSolver* solver, Stage stage, int iteration) : solver_(solver), stage_(stage), iteration_(iteration) {}
+  void operator()(const IterationInfo& i) override {
+    if (i.stage == stage_ && i.iteration == iteration_) solver_->RequestStop();
+  }
+
+ private:
+  MutualBoostedSolver* solver_;
+  Stage stage_;
+  int iteration_;
+};
+
+void ExpectSameModels(const MutualBoostedSolver& a, const MutualBoostedSolver& b) {
+  GaussianModel ga = a.gaussians(), gb = b.gaussians();
+  SurfelModel sa = a.surfels(), sb = b.surfels();
+  ASSERT_EQ(ga.size(), gb.size());
+  ASSERT_EQ(sa.size(), sb.size());
+  const auto ba = ga.Blocks(), bb = gb.Blocks();
+  for (size_t k = 0; k < ba.size(); ++k) EXPECT_EQ(*ba[k].data, *bb[k].data) << ba[k].name;
+  const auto ca = sa.Blocks(), cb = sb.Blocks();
+  for (size_t k = 0; k < ca.size(); ++k) EXPECT_EQ(*ca[k].data, *cb[k].data) << ca[k].name;
+}
+
+TEST(CheckpointTest, InterruptedAndResumedRunEqualsAnUninterruptedOne) {
+  const std::string dir = testing::ScratchDir();
+  const Scene scene = TinyScene(dir + "/scene");
+  SolverOptions o = TinyOptions();
+  o.warmup_max_iterations = 60;
+  o.mutual_iterations = 16;
+  o.schedule_2d = {10, 50, 10, 30, 0.05f};
+  o.schedule_3d = {10, 50, 5, 30, 0.005f};
+  MutualBoostedSolver full(o, scene);
+  SolveSummary s_full;
+  ASSERT_TRUE(full.Solve(&s_full).ok());
+  for (Stage stage : {Stage::kWarmup, Stage::kMutual}) {
+    const int at = stage == Stage::kWarmup ? 37 : 7;
+    MutualBoostedSolver first(o, scene);
+    StopAt stop(&first, stage, at);
+    first.AddCallback(&stop);
+    SolveSummary s1;
+    const Status interrupted = first.Solve(&s1);
+    ASSERT_FALSE(interrupted.ok());
+    EXPECT_EQ(interrupted.message().rfind("interrupted", 0), 0u) << interrupted.message();
+    const std::string ckpt = dir + "/run.ckpt";
+    ASSERT_TRUE(first.SaveCheckpoint(ckpt).ok());
+    // A fresh solver (a new process, in practice) continues from the file.
+    MutualBoostedSolver second(o, scene);
+    ASSERT_TRUE(second.LoadCheckpoint(ckpt).ok());
+    SolveSummary s2;
+    ASSERT_TRUE(second.Solve(&s2).ok());
+    ExpectSameModels(full, second);
+    EXPECT_EQ(s2.warmup_iterations_2d, s_full.warmup_iterations_2d);
+    EXPECT_EQ(s2.mutual_iterations, s_full.mutual_iterations);
+  }
+}
+
+TEST(CheckpointTest, BadCheckpointsAreRefused) {
+  const std::string dir = testing::ScratchDir();
+  const Scene scene = TinyScene(dir + "/scene");
+  MutualBoostedSolver solver(TinyOptions(), scene);
+  ASSERT_TRUE(solver.SaveCheckpoint(dir + "/ok.ckpt").ok());
+  std::string data;
+  ASSERT_TRUE(ReadFileToString(dir + "/ok.ckpt", &data).ok());
+  ASSERT_TRUE(WriteStringToFileAtomic(dir + "/cut.ckpt", data.substr(0, data.size() / 2)).ok());
+  Status s = solver.LoadCheckpoint(dir + "/cut.ckpt");
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("truncated"), std::string::npos) << s.message();
+  ASSERT_TRUE(WriteStringToFileAtomic(dir + "/junk.ckpt", "hello world, not a checkpoint").ok());
+  s = solver.LoadCheckpoint(dir + "/junk.ckpt");
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("not an MGSR checkpoint"), std::string::npos) << s.message();
+  EXPECT_TRUE(solver.LoadCheckpoint(dir + "/ok.ckpt").ok());
+}
+
+}  // namespace
+}  // namespace mgsr
+
+namespace mgsr {
+namespace {
+TEST(CheckpointTest, TwoRunsAreIdentical) {
+  const std::string dir = testing::ScratchDir();
+  const Scene scene = TinyScene(dir + "/scene");
+  SolverOptions o = TinyOptions();
+  o.warmup_max_iterations = 60;
+  o.mutual_iterations = 16;
+  MutualBoostedSolver a(o, scene), b(o, scene);
+  SolveSummary sa, sb;
+  ASSERT_TRUE(a.Solve(&sa).ok());
+  ASSERT_TRUE(b.Solve(&sb).ok());
+  ExpectSameModels(a, b);
+}
 }  // namespace
 }  // namespace mgsr
