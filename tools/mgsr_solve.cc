@@ -4,6 +4,7 @@
 #include <gflags/gflags.h>
 
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -40,8 +41,35 @@ DEFINE_int32(log_every, 100, "Print progress every N iterations.");
 DEFINE_string(mesh_depth, "expected", "Depth fused into the mesh: expected (MGSR) | median (2DGS).");
 DEFINE_string(mesh_color, "transmitted", "Mesh colours: transmitted (3DGS, reflection-free) | surfel (2DGS render).");
 DEFINE_double(voxel_size, 0, "TSDF voxel (0: the pixel footprint at the object).");
+DEFINE_int32(checkpoint_every, 500, "Write OUTPUT/checkpoints/latest.ckpt every N iterations (0: only on Ctrl-C).");
+DEFINE_bool(resume, false, "Continue from OUTPUT/checkpoints/latest.ckpt (same options and scene).");
 
 namespace {
+
+mgsr::MutualBoostedSolver* g_solver = nullptr;
+volatile std::sig_atomic_t g_interrupted = 0;
+
+void OnSigint(int) {
+  g_interrupted = 1;
+  if (g_solver != nullptr) g_solver->RequestStop();
+}
+
+// Requests a stop every `every` iterations so the caller can write a checkpoint and continue.
+class PeriodicStop : public mgsr::IterationCallback {
+ public:
+  PeriodicStop(mgsr::MutualBoostedSolver* solver, int every) : solver_(solver), every_(every) {}
+  void operator()(const mgsr::IterationInfo& i) override {
+    if (every_ <= 0 || (i.iteration == last_ && i.stage == stage_)) return;
+    last_ = i.iteration;
+    stage_ = i.stage;
+    if (++count_ % every_ == 0) solver_->RequestStop();
+  }
+
+ private:
+  mgsr::MutualBoostedSolver* solver_;
+  int every_, count_ = 0, last_ = -1;
+  mgsr::Stage stage_ = mgsr::Stage::kWarmup;
+};
 
 int Fail(const std::string& message) {
   std::fprintf(stderr, "error: %s\n", message.c_str());
@@ -51,9 +79,9 @@ int Fail(const std::string& message) {
 // Progress lines and log.csv rows.
 class ProgressLog : public mgsr::IterationCallback {
  public:
-  ProgressLog(const std::string& csv_path, int every, int expected_total)
-      : csv_(csv_path), every_(every), expected_(expected_total) {
-    csv_ << "stage,iteration,branch,loss,gaussians,surfels,seconds\n";
+  ProgressLog(const std::string& csv_path, int every, int expected_total, bool append)
+      : csv_(csv_path, append ? std::ios::app : std::ios::trunc), every_(every), expected_(expected_total) {
+    if (!append) csv_ << "stage,iteration,branch,loss,gaussians,surfels,seconds\n";
   }
   void operator()(const mgsr::IterationInfo& i) override {
     const bool is2d = i.branch == mgsr::Branch::kSurfels2D;
@@ -112,6 +140,7 @@ int main(int argc, char** argv) {
   if (FLAGS_mesh_depth != "expected" && FLAGS_mesh_depth != "median") return Fail("--mesh_depth must be expected or median");
   if (FLAGS_mesh_color != "transmitted" && FLAGS_mesh_color != "surfel") return Fail("--mesh_color must be transmitted or surfel");
   if (!(FLAGS_voxel_size >= 0)) return Fail("--voxel_size must be >= 0");
+  if (FLAGS_checkpoint_every < 0) return Fail("--checkpoint_every must be >= 0");
   const mgsr::Status valid = options.Validate();
   if (!valid.ok()) return Fail(valid.message());
 
@@ -134,12 +163,38 @@ int main(int argc, char** argv) {
               scene.points.size(), scene.has_masks() ? "yes" : "no (gamma = 1, mesh not masked)");
 
   mgsr::MutualBoostedSolver solver(options, scene);
-  ProgressLog log(mgsr::JoinPath(FLAGS_output, "log.csv"), FLAGS_log_every,
-                  2 * options.warmup_max_iterations + (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations);
-  solver.AddCallback(&log);
-  mgsr::SolveSummary summary;
-  s = solver.Solve(&summary);
+  const std::string ckpt_dir = mgsr::JoinPath(FLAGS_output, "checkpoints");
+  const std::string ckpt = mgsr::JoinPath(ckpt_dir, "latest.ckpt");
+  s = mgsr::MakeDirectories(ckpt_dir);
   if (!s.ok()) return Fail(s.message());
+  if (FLAGS_resume) {
+    if (!mgsr::FileExists(ckpt)) return Fail(ckpt + ": no checkpoint to resume from");
+    s = solver.LoadCheckpoint(ckpt);
+    if (!s.ok()) return Fail(s.message());
+    std::printf("resuming from %s\n", ckpt.c_str());
+  }
+  ProgressLog log(mgsr::JoinPath(FLAGS_output, "log.csv"), FLAGS_log_every,
+                  2 * options.warmup_max_iterations + (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations,
+                  FLAGS_resume);
+  solver.AddCallback(&log);
+  PeriodicStop periodic(&solver, FLAGS_checkpoint_every);
+  solver.AddCallback(&periodic);
+  g_solver = &solver;
+  std::signal(SIGINT, OnSigint);
+  mgsr::SolveSummary summary;
+  while (true) {
+    s = solver.Solve(&summary);
+    if (s.ok()) break;
+    if (s.message().rfind("interrupted", 0) != 0) return Fail(s.message());
+    const mgsr::Status saved = solver.SaveCheckpoint(ckpt);
+    if (!saved.ok()) return Fail(saved.message());
+    if (g_interrupted) {
+      std::fprintf(stderr, "%s: checkpoint written to %s; run again with --resume to continue\n", s.message().c_str(),
+                   ckpt.c_str());
+      return 130;
+    }
+  }
+  g_solver = nullptr;
   std::printf("%s\n", summary.BriefReport().c_str());
 
   // Models.

@@ -79,6 +79,30 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
   EXPECT_NE(bad.output.find("metrics.json: cannot open"), std::string::npos) << bad.output;
 }
 
+TEST_F(CliTest, SolveResumesFromItsCheckpointToTheSameResult) {
+  const std::string dir = Copy();
+  const std::string common = kTools + "/mgsr_solve --workspace " + base_ +
+                             " --warmup_max_iterations 30 --warmup_min_iterations 0 --mutual_iterations 12 --log_every 100";
+  auto r = testing::RunCommand(common + " --output " + dir + "/a");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  // A run that leaves a checkpoint every 7 iterations, then a resume from the last one.
+  r = testing::RunCommand(common + " --output " + dir + "/b --checkpoint_every 7");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_TRUE(FileExists(dir + "/b/checkpoints/latest.ckpt"));
+  r = testing::RunCommand(common + " --output " + dir + "/b --resume");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("resuming from"), std::string::npos) << r.output;
+  for (const char* f : {"point_cloud_2d.ply", "point_cloud_3d.ply"}) {
+    std::string a, b;
+    ASSERT_TRUE(ReadFileToString(dir + "/a/" + f, &a).ok());
+    ASSERT_TRUE(ReadFileToString(dir + "/b/" + f, &b).ok());
+    EXPECT_TRUE(a == b) << f << " differs after resuming";
+  }
+  r = testing::RunCommand(common + " --output " + dir + "/c --resume");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("no checkpoint to resume from"), std::string::npos) << r.output;
+}
+
 TEST_F(CliTest, SolveRejectsBadOptions) {
   auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_);
   EXPECT_EQ(r.exit_code, 2);
