@@ -44,6 +44,10 @@ Status SolverOptions::Validate() const {
   if (bidirectional) return Status::Error("--bidirectional is not implemented yet (issue 6)");
   if (auto_stop_window < 2) return Status::Error("--auto_stop_window must be >= 2");
   if (!(lambda_l1 >= 0 && lambda_l1 <= 1)) return Status::Error("--lambda_l1 must be in [0, 1]");
+  if (!(mutual_transmitted_weight >= 0 && mutual_transmitted_weight <= 1)) {
+    return Status::Error("--mutual_transmitted_weight must be in [0, 1]");
+  }
+  if (!(auto_stop_range >= 0)) return Status::Error("--auto_stop_range must be >= 0");
   if (sh_degree < 0 || sh_degree > 3) return Status::Error("--sh_degree must be in [0, 3]");
   if (sh_interval < 1) return Status::Error("--sh_interval must be >= 1");
   for (double w : {w_2d, w_3d, w_depth, lambda_normal}) {
