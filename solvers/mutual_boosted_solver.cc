@@ -280,6 +280,34 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it, const I
   return loss;
 }
 
+void MutualBoostedSolver::BackpropIntoGaussians(int view, int it, GaussianRender* render, Image d_transmitted) {
+  const View& v = scene_.views[view];
+  GaussianRenderOptions ro;
+  ro.camera = v.camera;
+  ro.sh_degree = sh_degree_;
+  const float bg = options_.white_background_3d ? 1.0f : 0.0f;
+  ro.background[0] = ro.background[1] = ro.background[2] = bg;
+  GaussianRenderGrad rg;
+  rg.tran = std::move(d_transmitted);
+  GaussianGradients grads;
+  gaussian_renderer_.Backward(gaussians_, ro, *render, rg, &grads);
+  adam_3d_.Step(gaussians_.Blocks(), grads.params.Blocks(), Rates(options_, it, scene_.extent));
+}
+
+void MutualBoostedSolver::BackpropIntoSurfels(int view, int it, SurfelRender* render, Image d_depth) {
+  const View& v = scene_.views[view];
+  SurfelRenderOptions ro;
+  ro.camera = v.camera;
+  ro.sh_degree = sh_degree_;
+  const float bg = options_.white_background_2d ? 1.0f : 0.0f;
+  ro.background[0] = ro.background[1] = ro.background[2] = bg;
+  SurfelRenderGrad rg;
+  rg.depth = std::move(d_depth);
+  SurfelGradients grads;
+  surfel_renderer_.Backward(surfels_, ro, *render, rg, &grads);
+  adam_2d_.Step(surfels_.Blocks(), grads.params.Blocks(), Rates(options_, it, scene_.extent));
+}
+
 Status MutualBoostedSolver::Solve(SolveSummary* summary) {
   MGSR_RETURN_IF_ERROR(options_.Validate());
   if (train_.empty()) return Status::Error("the scene has no training views");
@@ -347,13 +375,59 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
           }
         }
       }
+      // Bidirectional: the 2DGS image the loss compares with C_tran, before the 2DGS step.
+      SurfelRender s2;
+      if (o.bidirectional) RenderSurfels(scene_.views[view].camera, &s2);
       sum.final_loss_2d = StepSurfels(view, Stage::kMutual, it, &target);
+      if (o.bidirectional) {
+        // d L_2D / d C_tran: the render loss is symmetric in its two images, so it is the gradient
+        // of the same loss with the roles swapped (the 2DGS render as the target). Pixels forced to
+        // white are constants.
+        RenderLoss swapped(Buffer::kColor, TargetKind::kImage, o.lambda_l1);
+        RenderBuffers in;
+        in.Set(Buffer::kColor, &target);
+        Targets t;
+        t.image = &s2.color;
+        RenderGradients d;
+        swapped.Evaluate(in, t, o.w_2d * o.mutual_transmitted_weight, &d);
+        Image dt = std::move(d.images[static_cast<int>(Buffer::kColor)]);
+        if (!mask.empty()) {
+          for (int c = 0; c < 3; ++c) {
+            for (size_t i = 0; i < dt.plane_size(); ++i) {
+              if (mask.plane(0)[i] == 0.0f) dt.plane(c)[i] = 0.0f;
+            }
+          }
+        }
+        RenderGaussians(scene_.views[view].camera, &g);
+        BackpropIntoGaussians(view, it, &g, std::move(dt));
+      }
       Notify(Stage::kMutual, it, Branch::kSurfels2D, sum.final_loss_2d);
     }
     if (step_3d) {
       SurfelRender s;
       RenderSurfels(scene_.views[view].camera, &s);
+      // Bidirectional: the 3DGS depth the loss used, before the 3DGS step.
+      GaussianRender g3;
+      if (o.bidirectional) RenderGaussians(scene_.views[view].camera, &g3);
       sum.final_loss_3d = StepGaussians(view, Stage::kMutual, it, &s.depth);
+      if (o.bidirectional) {
+        // d L_Z / d Z2D for L_Z = mean((D / max D - Z / max Z)^2), maxima held constant. The surfel
+        // renderer still holds the forward state of `s` (the 3DGS step does not use it).
+        float max_d = 0, max_z = 0;
+        for (size_t i = 0; i < s.depth.size(); ++i) {
+          max_d = std::max(max_d, g3.depth.data()[i]);
+          max_z = std::max(max_z, s.depth.data()[i]);
+        }
+        if (max_d > 0 && max_z > 0) {
+          Image dz(s.depth.width(), s.depth.height(), 1);
+          const float scale = static_cast<float>(o.w_depth * 2.0 / s.depth.size());
+          for (size_t i = 0; i < dz.size(); ++i) {
+            const float r = g3.depth.data()[i] / max_d - s.depth.data()[i] / max_z;
+            dz.data()[i] = -scale * r / max_z;
+          }
+          BackpropIntoSurfels(view, it, &s, std::move(dz));
+        }
+      }
       Notify(Stage::kMutual, it, Branch::kGaussians3D, sum.final_loss_3d);
     }
     sum.mutual_iterations = it;

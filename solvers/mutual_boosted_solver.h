@@ -84,6 +84,10 @@ class MutualBoostedSolver {
   };
   double StepSurfels(int view, Stage stage, int iteration, const Image* transmitted_target);
   double StepGaussians(int view, Stage stage, int iteration, const Image* surfel_depth);
+  // Bidirectional mode: back-propagates a gradient on the other branch's render (whose forward
+  // state its renderer still holds) and steps that branch.
+  void BackpropIntoGaussians(int view, int iteration, GaussianRender* render, Image d_transmitted);
+  void BackpropIntoSurfels(int view, int iteration, SurfelRender* render, Image d_depth);
   int NextView();
   void Notify(Stage stage, int iteration, Branch branch, double loss);
 

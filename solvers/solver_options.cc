@@ -41,7 +41,6 @@ Status SolverOptions::Validate() const {
   if (mutual_mode != "alternate" && mutual_mode != "joint") {
     return Status::Error("--mutual_mode must be alternate or joint, not '" + mutual_mode + "'");
   }
-  if (bidirectional) return Status::Error("--bidirectional is not implemented yet (issue 6)");
   if (auto_stop_window < 2) return Status::Error("--auto_stop_window must be >= 2");
   if (!(lambda_l1 >= 0 && lambda_l1 <= 1)) return Status::Error("--lambda_l1 must be in [0, 1]");
   if (!(mutual_transmitted_weight >= 0 && mutual_transmitted_weight <= 1)) {

@@ -27,6 +27,9 @@ struct SolverOptions {
   // Mutual stage.
   int mutual_iterations = 20000;
   std::string mutual_mode = "alternate";  // alternate | joint
+  // Ablation K: the supervising branch also receives the gradient of the supervision (through the
+  // 3DGS transmitted image for the 2DGS render loss, through the 2DGS depth for the depth loss) and
+  // steps with it. The TV guides stay constant.
   bool bidirectional = false;
   // Loss weights (reference 1.3-1.7).
   double lambda_l1 = 0.8;               // render loss: lambda L1 + (1 - lambda) D-SSIM

@@ -32,6 +32,7 @@ DEFINE_int32(warmup_max_iterations, -1, "Cap of warm-up iterations per branch (-
 DEFINE_int32(warmup_min_iterations, -1, "Auto-stop only after this iteration (-1: preset).");
 DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");
 DEFINE_bool(auto_stop, true, "Stop each warm-up when its loss window flattens.");
+DEFINE_bool(bidirectional, false, "Ablation K: the supervising branch also learns from the supervision.");
 DEFINE_uint64(max_gaussians, 0, "Budget of 3DGS primitives (0: none).");
 DEFINE_uint64(max_surfels, 0, "Budget of 2DGS primitives (0: none).");
 DEFINE_double(w_2d, 0.5, "Weight of the 2DGS loss in the mutual stage.");
@@ -135,6 +136,7 @@ int main(int argc, char** argv) {
   if (FLAGS_warmup_min_iterations >= 0) options.warmup_min_iterations = FLAGS_warmup_min_iterations;
   if (FLAGS_mutual_iterations >= 0) options.mutual_iterations = FLAGS_mutual_iterations;
   options.auto_stop = FLAGS_auto_stop;
+  options.bidirectional = FLAGS_bidirectional;
   options.max_gaussians = FLAGS_max_gaussians;
   options.max_surfels = FLAGS_max_surfels;
   options.w_2d = FLAGS_w_2d;

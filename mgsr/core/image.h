@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstddef>
+#include <utility>
 #include <vector>
 
 namespace mgsr {
@@ -14,6 +15,25 @@ class ImageT {
   ImageT(int width, int height, int channels, T fill = T(0))
       : width_(width), height_(height), channels_(channels),
         data_(static_cast<size_t>(width) * height * channels, fill) {}
+  ImageT(const ImageT&) = default;
+  ImageT& operator=(const ImageT&) = default;
+  // A moved-from image is empty (0 x 0 x 0), not a shape without data.
+  ImageT(ImageT&& o) noexcept
+      : width_(o.width_), height_(o.height_), channels_(o.channels_), data_(std::move(o.data_)) {
+    o.width_ = o.height_ = o.channels_ = 0;
+    o.data_.clear();
+  }
+  ImageT& operator=(ImageT&& o) noexcept {
+    if (this != &o) {
+      width_ = o.width_;
+      height_ = o.height_;
+      channels_ = o.channels_;
+      data_ = std::move(o.data_);
+      o.width_ = o.height_ = o.channels_ = 0;
+      o.data_.clear();
+    }
+    return *this;
+  }
 
   int width() const { return width_; }
   int height() const { return height_; }

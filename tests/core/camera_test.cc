@@ -68,3 +68,24 @@ TEST(CameraTest, InvalidCamerasAreDetected) {
 
 }  // namespace
 }  // namespace mgsr
+
+#include "mgsr/core/image.h"
+
+namespace mgsr {
+namespace {
+
+TEST(ImageTest, MovedFromImageIsEmpty) {
+  Image a(4, 3, 2, 1.0f);
+  Image b = std::move(a);
+  EXPECT_EQ(b.width(), 4);
+  EXPECT_EQ(b.size(), 24u);
+  EXPECT_TRUE(a.empty());
+  EXPECT_EQ(a.width(), 0);  // a shape without data would invite writes past the end
+  Image c;
+  c = std::move(b);
+  EXPECT_EQ(c.channels(), 2);
+  EXPECT_EQ(b.channels(), 0);
+}
+
+}  // namespace
+}  // namespace mgsr

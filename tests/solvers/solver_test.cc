@@ -311,3 +311,48 @@ TEST(CheckpointTest, TwoRunsAreIdentical) {
 }
 }  // namespace
 }  // namespace mgsr
+
+namespace mgsr {
+namespace {
+
+// Snapshots both models at every mutual-stage notification.
+class Snapshots : public IterationCallback {
+ public:
+  explicit Snapshots(const MutualBoostedSolver* s) : solver_(s) {}
+  void operator()(const IterationInfo& i) override {
+    if (i.stage != Stage::kMutual) return;
+    branches.push_back(i.branch);
+    gaussian_means.push_back(solver_->gaussians().means);
+    surfel_means.push_back(solver_->surfels().means);
+  }
+  std::vector<Branch> branches;
+  std::vector<std::vector<float>> gaussian_means, surfel_means;
+
+ private:
+  const MutualBoostedSolver* solver_;
+};
+
+TEST(MutualBoostedSolverTest, BidirectionalChangesWhichBranchesLearn) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  for (bool bidirectional : {false, true}) {
+    SolverOptions o = TinyOptions();
+    o.warmup_max_iterations = 6;
+    o.mutual_iterations = 3;  // alternate: 2DGS, 3DGS, 2DGS
+    o.bidirectional = bidirectional;
+    MutualBoostedSolver solver(o, scene);
+    Snapshots snap(&solver);
+    solver.AddCallback(&snap);
+    SolveSummary summary;
+    ASSERT_TRUE(solver.Solve(&summary).ok());
+    ASSERT_EQ(snap.branches.size(), 3u);
+    // Iteration 2 steps the 3DGS branch: does the 2DGS branch move too?
+    const bool surfels_moved = snap.surfel_means[1] != snap.surfel_means[0];
+    // Iteration 3 steps the 2DGS branch: does the 3DGS branch move too?
+    const bool gaussians_moved = snap.gaussian_means[2] != snap.gaussian_means[1];
+    EXPECT_EQ(surfels_moved, bidirectional);
+    EXPECT_EQ(gaussians_moved, bidirectional);
+  }
+}
+
+}  // namespace
+}  // namespace mgsr
