@@ -44,6 +44,7 @@ DEFINE_double(mutual_transmitted_weight, 0.2, "2DGS mutual loss: weight of the r
 DEFINE_int32(auto_stop_window, -1, "Auto-stop window in iterations (-1: preset).");
 DEFINE_double(auto_stop_range, 0.01, "Auto-stop when max - min of the window's losses falls below this.");
 DEFINE_int32(log_every, 100, "Print progress every N iterations.");
+DEFINE_int32(eval_every, 500, "Print the test-view PSNR every N iterations (0: only at the end).");
 DEFINE_string(mesh_depth, "expected", "Depth fused into the mesh: expected (MGSR) | median (2DGS).");
 DEFINE_string(mesh_color, "transmitted", "Mesh colours: transmitted (3DGS, reflection-free) | surfel (2DGS render).");
 DEFINE_double(voxel_size, 0, "TSDF voxel (0: the pixel footprint at the object).");
@@ -75,6 +76,39 @@ class PeriodicStop : public mgsr::IterationCallback {
   mgsr::MutualBoostedSolver* solver_;
   int every_, count_ = 0, last_ = -1;
   mgsr::Stage stage_ = mgsr::Stage::kWarmup;
+};
+
+// Test-view PSNR of the 3DGS composite every N iterations (after a 3DGS step, when the renderer's
+// state is free to reuse).
+class TestEvaluation : public mgsr::IterationCallback {
+ public:
+  TestEvaluation(mgsr::MutualBoostedSolver* solver, const mgsr::Scene& scene, int every)
+      : solver_(solver), scene_(scene), every_(every) {}
+  void operator()(const mgsr::IterationInfo& i) override {
+    if (every_ <= 0 || i.branch != mgsr::Branch::kGaussians3D || i.iteration % every_ != 0) return;
+    const auto test = scene_.TestIndices();
+    if (test.empty()) return;
+    double psnr = 0;
+    for (int v : test) {
+      mgsr::GaussianRender r;
+      solver_->RenderGaussians(scene_.views[v].camera, &r);
+      mgsr::Image gt = scene_.views[v].image;
+      if (!scene_.views[v].alpha.empty()) {
+        for (int c = 0; c < 3; ++c) {
+          for (size_t k = 0; k < gt.plane_size(); ++k) gt.plane(c)[k] *= scene_.views[v].alpha.plane(0)[k];
+        }
+      }
+      psnr += std::min(100.0, mgsr::Psnr(r.color, gt));
+    }
+    std::printf("[%s %5d] test PSNR %.2f dB (%zu views)\n", i.stage == mgsr::Stage::kWarmup ? "warmup" : "mutual",
+                i.iteration, psnr / test.size(), test.size());
+    std::fflush(stdout);
+  }
+
+ private:
+  mgsr::MutualBoostedSolver* solver_;
+  const mgsr::Scene& scene_;
+  int every_;
 };
 
 int Fail(const std::string& message) {
@@ -154,6 +188,7 @@ int main(int argc, char** argv) {
   if (FLAGS_mesh_color != "transmitted" && FLAGS_mesh_color != "surfel") return Fail("--mesh_color must be transmitted or surfel");
   if (!(FLAGS_voxel_size >= 0)) return Fail("--voxel_size must be >= 0");
   if (FLAGS_checkpoint_every < 0) return Fail("--checkpoint_every must be >= 0");
+  if (FLAGS_eval_every < 0) return Fail("--eval_every must be >= 0");
   const mgsr::Status valid = options.Validate();
   if (!valid.ok()) return Fail(valid.message());
 
@@ -190,6 +225,8 @@ int main(int argc, char** argv) {
                   2 * options.warmup_max_iterations + (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations,
                   FLAGS_resume);
   solver.AddCallback(&log);
+  TestEvaluation evaluation(&solver, scene, FLAGS_eval_every);
+  solver.AddCallback(&evaluation);
   PeriodicStop periodic(&solver, FLAGS_checkpoint_every);
   solver.AddCallback(&periodic);
   g_solver = &solver;
