@@ -72,6 +72,30 @@ void MoveGradients(RenderGradients* g, SurfelRenderGrad* out) {
   out->distortion = std::move(g->images[static_cast<int>(Buffer::kDistortion)]);
 }
 
+// After a branch's backward: densification statistics, the Adam step, then density control and
+// opacity resets on the branch's schedule (reference 1.10). The same for both branches.
+template <typename Model>
+void OptimizeAndControlDensity(const SolverOptions& o, const BranchSchedule& s, size_t budget, int it,
+                               const Camera& camera, const std::vector<float>& mean2d_grads,
+                               const std::vector<float>& radii, double extent, Model& grads, Model* model, Adam* adam,
+                               DensityStats* stats, Rng* rng) {
+  if (it < s.densify_until) {
+    std::vector<float> norms;
+    ScreenGradientNorms(mean2d_grads, camera.width, camera.height, &norms);
+    stats->Accumulate(norms, radii);
+  }
+  adam->Step(model->Blocks(), grads.Blocks(), Rates(o, it, extent));
+  if (it > s.densify_from && it < s.densify_until && it % s.densify_interval == 0) {
+    DensityOptions d;
+    d.grad_threshold = o.densify_grad_threshold;
+    d.percent_dense = o.percent_dense;
+    d.min_opacity = s.min_opacity;
+    d.max_primitives = budget;
+    DensifyAndPrune(model, adam, stats, d, extent, it > s.opacity_reset_interval, rng);
+  }
+  if (it < s.densify_until && it % s.opacity_reset_interval == 0) ResetOpacity(model, adam);
+}
+
 }  // namespace
 
 std::string SolveSummary::BriefReport() const {
@@ -200,23 +224,9 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
   SurfelGradients grads;
   surfel_renderer_.Backward(surfels_, ro, render, rg, &grads);
 
-  // Densification statistics, the Adam step, then density control on its schedule.
-  const BranchSchedule& s = o.schedule_2d;
-  if (it < s.densify_until) {
-    std::vector<float> norms;
-    ScreenGradientNorms(grads.mean2d, v.camera.width, v.camera.height, &norms);
-    stats_2d_.Accumulate(norms, surfel_renderer_.projected().radius);
-  }
-  adam_2d_.Step(surfels_.Blocks(), grads.params.Blocks(), Rates(o, it, scene_.extent));
-  if (it > s.densify_from && it < s.densify_until && it % s.densify_interval == 0) {
-    DensityOptions d;
-    d.grad_threshold = o.densify_grad_threshold;
-    d.percent_dense = o.percent_dense;
-    d.min_opacity = s.min_opacity;
-    d.max_primitives = o.max_surfels;
-    DensifyAndPrune(&surfels_, &adam_2d_, &stats_2d_, d, scene_.extent, it > s.opacity_reset_interval, &rng_);
-  }
-  if (it < s.densify_until && it % s.opacity_reset_interval == 0) ResetOpacity(&surfels_, &adam_2d_);
+  OptimizeAndControlDensity(o, o.schedule_2d, o.max_surfels, it, v.camera, grads.mean2d,
+                            surfel_renderer_.projected().radius, scene_.extent, grads.params, &surfels_, &adam_2d_,
+                            &stats_2d_, &rng_);
   return loss;
 }
 
@@ -261,22 +271,9 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it, const I
   GaussianGradients grads;
   gaussian_renderer_.Backward(gaussians_, ro, render, rg, &grads);
 
-  const BranchSchedule& s = o.schedule_3d;
-  if (it < s.densify_until) {
-    std::vector<float> norms;
-    ScreenGradientNorms(grads.mean2d, v.camera.width, v.camera.height, &norms);
-    stats_3d_.Accumulate(norms, gaussian_renderer_.projected().radius);
-  }
-  adam_3d_.Step(gaussians_.Blocks(), grads.params.Blocks(), Rates(o, it, scene_.extent));
-  if (it > s.densify_from && it < s.densify_until && it % s.densify_interval == 0) {
-    DensityOptions d;
-    d.grad_threshold = o.densify_grad_threshold;
-    d.percent_dense = o.percent_dense;
-    d.min_opacity = s.min_opacity;
-    d.max_primitives = o.max_gaussians;
-    DensifyAndPrune(&gaussians_, &adam_3d_, &stats_3d_, d, scene_.extent, it > s.opacity_reset_interval, &rng_);
-  }
-  if (it < s.densify_until && it % s.opacity_reset_interval == 0) ResetOpacity(&gaussians_, &adam_3d_);
+  OptimizeAndControlDensity(o, o.schedule_3d, o.max_gaussians, it, v.camera, grads.mean2d,
+                            gaussian_renderer_.projected().radius, scene_.extent, grads.params, &gaussians_, &adam_3d_,
+                            &stats_3d_, &rng_);
   return loss;
 }
 

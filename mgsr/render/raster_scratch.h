@@ -5,9 +5,11 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
+#include "mgsr/core/image.h"
 #include "mgsr/render/tile_binning.h"
 
 namespace mgsr {
@@ -20,6 +22,46 @@ struct RasterScratch {
   std::vector<uint32_t> tile_used;              // per tile: entries [0, used) hold gradients
   std::vector<float> per_primitive;             // per primitive: reduced gradient fields
 };
+
+// Helpers shared by the two tile rasterizers.
+namespace raster_internal {
+
+constexpr int kTilePixels = kTileSize * kTileSize;
+
+inline void EnsureScratch(RasterScratch* s, int threads) {
+  if (static_cast<int>(s->tile_data.size()) < threads) {
+    s->tile_data.resize(threads);
+    s->pixel_state.resize(threads);
+  }
+}
+
+inline void EnsureImage(Image* im, int w, int h, int c) {
+  if (im->width() != w || im->height() != h || im->channels() != c) *im = Image(w, h, c);
+}
+
+// Rows [lo, hi] (clamped to [first, last]) whose centres y + 0.5 may lie within radius r of m;
+// one row of slack on each side, the exact tests run per pixel.
+inline void BoxRange(float m, float r, int first, int last, int* lo, int* hi) {
+  *lo = std::max(first, static_cast<int>(std::floor(m - r - 0.5f)) - 1);
+  *hi = std::min(last, static_cast<int>(std::ceil(m - 0.5f + r)) + 1);
+}
+
+// Per-pixel arrays of a tile (index k = row * 16 + column) carved out of one per-thread buffer,
+// without allocating per tile.
+class PixelArrays {
+ public:
+  static constexpr int kMaxArrays = 32;
+  PixelArrays(std::vector<float>* buffer, int count) {
+    buffer->resize(static_cast<size_t>(count) * kTilePixels);
+    for (int i = 0; i < count && i < kMaxArrays; ++i) arrays_[i] = buffer->data() + static_cast<size_t>(i) * kTilePixels;
+  }
+  float* operator[](int i) const { return arrays_[i]; }
+
+ private:
+  float* arrays_[kMaxArrays] = {};
+};
+
+}  // namespace raster_internal
 
 // Sums the per-entry gradients of every tile into per-primitive rows (N x stride), in tile and
 // entry order whatever the thread count, so backward passes are bitwise reproducible. Threads own

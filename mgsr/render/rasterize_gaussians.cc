@@ -54,26 +54,16 @@ void GatherTile(const float* packed, const uint32_t* ids, int n, std::vector<flo
   }
 }
 
-void EnsureScratch(RasterScratch* s, int threads) {
-  if (static_cast<int>(s->tile_data.size()) < threads) {
-    s->tile_data.resize(threads);
-    s->pixel_state.resize(threads);
-  }
-}
-
 
 using simd::F16;
 using simd::I16;
+using raster_internal::BoxRange;
+using raster_internal::EnsureImage;
+using raster_internal::EnsureScratch;
+using raster_internal::kTilePixels;
+using raster_internal::PixelArrays;
 
-constexpr int kTilePixels = kTileSize * kTileSize;
 static_assert(kTileSize == 16, "one tile row is one 16-lane vector");
-
-// Rows [lo, hi] (clamped to [first, last]) whose centres y + 0.5 may lie within radius r of m;
-// one row of slack on each side, the exact tests run per pixel.
-inline void BoxRange(float m, float r, int first, int last, int* lo, int* hi) {
-  *lo = std::max(first, static_cast<int>(std::floor(m - r - 0.5f)) - 1);
-  *hi = std::min(last, static_cast<int>(std::ceil(m - 0.5f + r)) + 1);
-}
 
 // Below this exponent neither chain's alpha reaches 1/255, so the pixel is skipped.
 inline float MinPower(float opacity, float ref_opacity, bool reflection) {
@@ -106,14 +96,6 @@ inline F16 RowPower(const Splat& s, F16 dx, float dy, float min_power, I16 lanes
 }
 
 // Per-pixel arrays of a tile carved out of one per-thread buffer (index k = row * 16 + column).
-struct PixelArrays {
-  std::vector<float*> arrays;
-  PixelArrays(std::vector<float>* buffer, int count) {
-    buffer->resize(static_cast<size_t>(count) * kTilePixels);
-    for (int i = 0; i < count; ++i) arrays.push_back(buffer->data() + static_cast<size_t>(i) * kTilePixels);
-  }
-  float* operator[](int i) const { return arrays[i]; }
-};
 
 }  // namespace
 
@@ -125,12 +107,8 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins, const
                         GaussianRender* out, RasterScratch* scratch) {
   const int W = o.camera.width, H = o.camera.height;
   const size_t npix = static_cast<size_t>(W) * H;
-  for (Image* im : {&out->color, &out->tran, &out->ref}) {
-    if (im->width() != W || im->height() != H || im->channels() != 3) *im = Image(W, H, 3);
-  }
-  for (Image* im : {&out->weight, &out->depth, &out->alpha}) {
-    if (im->width() != W || im->height() != H || im->channels() != 1) *im = Image(W, H, 1);
-  }
+  for (Image* im : {&out->color, &out->tran, &out->ref}) EnsureImage(im, W, H, 3);
+  for (Image* im : {&out->weight, &out->depth, &out->alpha}) EnsureImage(im, W, H, 1);
   out->final_t.resize(npix);
   out->final_tr.resize(npix);
   out->depth_sum.resize(npix);

@@ -12,8 +12,12 @@ namespace {
 
 using simd::F16;
 using simd::I16;
+using raster_internal::BoxRange;
+using raster_internal::EnsureImage;
+using raster_internal::EnsureScratch;
+using raster_internal::kTilePixels;
+using raster_internal::PixelArrays;
 
-constexpr int kTilePixels = kTileSize * kTileSize;
 
 // Gathered per-tile fields (structure of arrays over the tile's surfels).
 enum Field {
@@ -39,18 +43,6 @@ void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, std::vect
       f[(kC0 + c) * n + j] = p.color[3 * g + c];
     }
   }
-}
-
-void EnsureScratch(RasterScratch* s, int threads) {
-  if (static_cast<int>(s->tile_data.size()) < threads) {
-    s->tile_data.resize(threads);
-    s->pixel_state.resize(threads);
-  }
-}
-
-inline void BoxRange(float m, float r, int first, int last, int* lo, int* hi) {
-  *lo = std::max(first, static_cast<int>(std::floor(m - r - 0.5f)) - 1);
-  *hi = std::min(last, static_cast<int>(std::ceil(m - 0.5f + r)) + 1);
 }
 
 struct Surfel {
@@ -116,18 +108,7 @@ inline void IntersectRow(const Surfel& s, F16 px, float py, float min_power, I16
 
 inline F16 NdcDepth(F16 z) { return (kSurfelFar / (kSurfelFar - kSurfelNear)) * (1.0f - kSurfelNear / z); }
 
-struct PixelArrays {
-  std::vector<float*> arrays;
-  PixelArrays(std::vector<float>* buffer, int count) {
-    buffer->resize(static_cast<size_t>(count) * kTilePixels);
-    for (int i = 0; i < count; ++i) arrays.push_back(buffer->data() + static_cast<size_t>(i) * kTilePixels);
-  }
-  float* operator[](int i) const { return arrays[i]; }
-};
 
-void EnsureImage(Image* im, int w, int h, int c) {
-  if (im->width() != w || im->height() != h || im->channels() != c) *im = Image(w, h, c);
-}
 
 }  // namespace
 
