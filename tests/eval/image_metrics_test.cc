@@ -71,3 +71,42 @@ TEST(ImageMetricsTest, SsimMatchesADirectImplementation) {
 
 }  // namespace
 }  // namespace mgsr
+
+#include "mgsr/eval/exposure_alignment.h"
+
+namespace mgsr {
+namespace {
+
+TEST(ExposureAlignmentTest, RecoversAKnownAffineColourTransform) {
+  const Image render = RandomImage(32, 24, 3, 11);
+  Eigen::Matrix<double, 3, 4> truth;
+  truth << 1.8, 0.1, 0.0, 0.02, 0.0, 1.5, 0.05, -0.01, 0.02, 0.0, 0.7, 0.03;
+  const Image target = ApplyAffineColor(render, truth);
+  const AlignedScores s = ExposureAlignedScores(render, target);
+  EXPECT_NEAR((s.transform - truth).norm(), 0.0, 1e-4);
+  EXPECT_GT(s.psnr, 50.0);  // issue 10: a render against a gain-scaled copy of itself
+  EXPECT_GT(s.ssim, 0.9999);
+  EXPECT_LT(Psnr(render, target), 20.0);  // unaligned, the same pair scores badly
+}
+
+TEST(ExposureAlignmentTest, MaskLimitsTheFitAndDegenerateInputsFallBackToIdentity) {
+  const Image render = RandomImage(16, 16, 3, 12);
+  Image target = render;
+  Image mask(16, 16, 1, 0.0f);
+  for (int y = 0; y < 8; ++y) {
+    for (int x = 0; x < 16; ++x) mask.at(0, y, x) = 1.0f;
+  }
+  for (int y = 8; y < 16; ++y) {
+    for (int x = 0; x < 16; ++x) {
+      for (int c = 0; c < 3; ++c) target.at(c, y, x) = 0.0f;  // background differs; masked out
+    }
+  }
+  const auto M = FitAffineColor(render, target, &mask);
+  EXPECT_NEAR((M.leftCols<3>() - Eigen::Matrix3d::Identity()).norm(), 0.0, 1e-6);
+  const Image empty_mask(16, 16, 1, 0.0f);
+  const auto I = FitAffineColor(render, target, &empty_mask);
+  EXPECT_EQ(I.leftCols<3>(), Eigen::Matrix3d::Identity());
+}
+
+}  // namespace
+}  // namespace mgsr

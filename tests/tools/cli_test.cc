@@ -67,6 +67,7 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
   std::string metrics;
   ASSERT_TRUE(ReadFileToString(out + "/metrics.json", &metrics).ok());
   EXPECT_NE(metrics.find("\"psnr\""), std::string::npos);
+  EXPECT_NE(metrics.find("\"psnr_aligned\""), std::string::npos);
   EXPECT_NE(metrics.find("\"nc\""), std::string::npos);  // the synthetic scene has a ground-truth mesh
   // mgsr_eval scores the run folder: NC, CD, PSNR, SSIM, time.
   const auto e = testing::RunCommand(kTools + "/mgsr_eval --run " + out + " --json " + out + "/eval.json");
@@ -208,7 +209,7 @@ TEST_F(CliTest, EvalScoresMeshesAndImagesAndWritesJson) {
   r = testing::RunCommand(kTools + "/mgsr_eval --renders " + base_ + "/images --gt_images " + base_ +
                           "/images --json " + out + "/images.json");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_NE(r.output.find("mean                      100.000   1.0000"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("mean                      100.000   1.0000    100.000     1.0000"), std::string::npos) << r.output;
 }
 
 TEST_F(CliTest, EvalBadInput) {

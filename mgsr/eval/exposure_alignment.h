@@ -1,0 +1,24 @@
+// Exposure-aligned image scores, as in-the-wild novel-view benchmarks report them: per test image,
+// fit the affine colour transform target ~ A render + b (3x3 gain and 3 offsets) by least squares,
+// over the mask when one is given, then score the transformed render. This separates exposure and
+// white-balance differences (which no model of the scene can predict for an unseen view) from
+// reconstruction error.
+#pragma once
+
+#include <Eigen/Core>
+
+#include "mgsr/core/image.h"
+
+namespace mgsr {
+
+// M = [A | b] (3 x 4). Falls back to the identity when there are too few pixels to fit.
+Eigen::Matrix<double, 3, 4> FitAffineColor(const Image& render, const Image& target, const Image* mask = nullptr);
+Image ApplyAffineColor(const Image& render, const Eigen::Matrix<double, 3, 4>& M);
+
+struct AlignedScores {
+  double psnr = 0, ssim = 0;
+  Eigen::Matrix<double, 3, 4> transform;
+};
+AlignedScores ExposureAlignedScores(const Image& render, const Image& target, const Image* mask = nullptr);
+
+}  // namespace mgsr
