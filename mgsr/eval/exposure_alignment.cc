@@ -29,9 +29,10 @@ Eigen::Matrix<double, 3, 4> FitAffineColor(const Image& render, const Image& tar
   return X.transpose();
 }
 
-Image ApplyAffineColor(const Image& render, const Eigen::Matrix<double, 3, 4>& M) {
-  Image out(render.width(), render.height(), 3);
+Image ApplyAffineColor(const Image& render, const Eigen::Matrix<double, 3, 4>& M, const Image* mask) {
+  Image out = render;
   for (size_t i = 0; i < render.plane_size(); ++i) {
+    if (mask != nullptr && mask->plane(0)[i] < 0.5f) continue;
     const Eigen::Vector4d r(render.plane(0)[i], render.plane(1)[i], render.plane(2)[i], 1.0);
     const Eigen::Vector3d t = M * r;
     for (int c = 0; c < 3; ++c) out.plane(c)[i] = static_cast<float>(t[c]);
@@ -42,7 +43,7 @@ Image ApplyAffineColor(const Image& render, const Eigen::Matrix<double, 3, 4>& M
 AlignedScores ExposureAlignedScores(const Image& render, const Image& target, const Image* mask) {
   AlignedScores s;
   s.transform = FitAffineColor(render, target, mask);
-  const Image aligned = ApplyAffineColor(render, s.transform);
+  const Image aligned = ApplyAffineColor(render, s.transform, mask);
   s.psnr = Psnr(aligned, target);
   s.ssim = Ssim(aligned, target);
   return s;

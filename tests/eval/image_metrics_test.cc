@@ -103,6 +103,12 @@ TEST(ExposureAlignmentTest, MaskLimitsTheFitAndDegenerateInputsFallBackToIdentit
   }
   const auto M = FitAffineColor(render, target, &mask);
   EXPECT_NEAR((M.leftCols<3>() - Eigen::Matrix3d::Identity()).norm(), 0.0, 1e-6);
+  // Applied inside the mask only: the background keeps the render's values.
+  Eigen::Matrix<double, 3, 4> gain = Eigen::Matrix<double, 3, 4>::Zero();
+  gain.leftCols<3>() = 2 * Eigen::Matrix3d::Identity();
+  const Image applied = ApplyAffineColor(render, gain, &mask);
+  EXPECT_FLOAT_EQ(applied.at(1, 2, 3), 2 * render.at(1, 2, 3));
+  EXPECT_FLOAT_EQ(applied.at(1, 12, 3), render.at(1, 12, 3));
   const Image empty_mask(16, 16, 1, 0.0f);
   const auto I = FitAffineColor(render, target, &empty_mask);
   EXPECT_EQ(I.leftCols<3>(), Eigen::Matrix3d::Identity());
