@@ -26,7 +26,8 @@ Fixture MakeFixture(int width, int count) {
   f.options.reflection = true;
   f.grad.color = mgsr::Image(width, width, 3);
   mgsr::Rng rng(2);
-  for (size_t i = 0; i < f.grad.color.size(); ++i) f.grad.color.data()[i] = static_cast<float>(rng.Uniform(-1, 1)) * 1e-5f;
+  for (size_t i = 0; i < f.grad.color.size(); ++i)
+    f.grad.color.data()[i] = static_cast<float>(rng.Uniform(-1, 1)) * 1e-5f;
   return f;
 }
 

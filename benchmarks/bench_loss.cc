@@ -29,7 +29,8 @@ struct Inputs {
     };
     for (int b = 0; b < mgsr::kNumBuffers; ++b) {
       const auto buf = static_cast<mgsr::Buffer>(b);
-      buffers[b] = buf == mgsr::Buffer::kDepth ? random(1, 2.5, 3.5) : random(mgsr::BufferChannels(buf), 0, 1);
+      buffers[b] = buf == mgsr::Buffer::kDepth ? random(1, 2.5, 3.5)
+                                               : random(mgsr::BufferChannels(buf), 0, 1);
       in.Set(buf, &buffers[b]);
     }
     in.camera = &camera;
@@ -52,8 +53,10 @@ mgsr::Problem MakeProblem() {
   p.AddTerm(std::make_unique<mgsr::MutualDepthLoss>(), 0.01, Branch::kGaussians3D);
   p.AddTerm(std::make_unique<mgsr::MutualRenderLoss>(), 0.5, Branch::kSurfels2D);
   p.AddTerm(std::make_unique<mgsr::NormalConsistencyLoss>(), 0.025, Branch::kSurfels2D);
-  p.AddTerm(std::make_unique<mgsr::EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kTransmitted), 0.025, Branch::kSurfels2D);
-  p.AddTerm(std::make_unique<mgsr::EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kTransmitted), 0.025, Branch::kSurfels2D);
+  p.AddTerm(std::make_unique<mgsr::EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kTransmitted),
+            0.025, Branch::kSurfels2D);
+  p.AddTerm(std::make_unique<mgsr::EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kTransmitted),
+            0.025, Branch::kSurfels2D);
   return p;
 }
 
@@ -61,13 +64,15 @@ void BM_LossSet3D(benchmark::State& state) {
   Inputs in(static_cast<int>(state.range(0)));
   const mgsr::Problem p = MakeProblem();
   mgsr::RenderGradients g;
-  for (auto _ : state) benchmark::DoNotOptimize(p.Evaluate(mgsr::Branch::kGaussians3D, in.in, in.targets, &g));
+  for (auto _ : state)
+    benchmark::DoNotOptimize(p.Evaluate(mgsr::Branch::kGaussians3D, in.in, in.targets, &g));
 }
 void BM_LossSet2D(benchmark::State& state) {
   Inputs in(static_cast<int>(state.range(0)));
   const mgsr::Problem p = MakeProblem();
   mgsr::RenderGradients g;
-  for (auto _ : state) benchmark::DoNotOptimize(p.Evaluate(mgsr::Branch::kSurfels2D, in.in, in.targets, &g));
+  for (auto _ : state)
+    benchmark::DoNotOptimize(p.Evaluate(mgsr::Branch::kSurfels2D, in.in, in.targets, &g));
 }
 void BM_Dssim(benchmark::State& state) {
   Inputs in(static_cast<int>(state.range(0)));

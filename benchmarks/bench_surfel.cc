@@ -25,10 +25,12 @@ Fixture MakeFixture(int width, int count) {
   // Upstream gradients on the outputs the MGSR losses read: colour, depth and world normals.
   for (mgsr::Image* im : {&f.grad.color, &f.grad.normal_world}) {
     *im = mgsr::Image(width, width, 3);
-    for (size_t i = 0; i < im->size(); ++i) im->data()[i] = static_cast<float>(rng.Uniform(-1, 1)) * 1e-5f;
+    for (size_t i = 0; i < im->size(); ++i)
+      im->data()[i] = static_cast<float>(rng.Uniform(-1, 1)) * 1e-5f;
   }
   f.grad.depth = mgsr::Image(width, width, 1);
-  for (size_t i = 0; i < f.grad.depth.size(); ++i) f.grad.depth.data()[i] = static_cast<float>(rng.Uniform(-1, 1)) * 1e-5f;
+  for (size_t i = 0; i < f.grad.depth.size(); ++i)
+    f.grad.depth.data()[i] = static_cast<float>(rng.Uniform(-1, 1)) * 1e-5f;
   return f;
 }
 

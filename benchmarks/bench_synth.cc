@@ -29,7 +29,8 @@ void BM_SyntheticView(benchmark::State& state) {
   mgsr::RayCaster caster(scene.mesh);
   mgsr::Image rgba, depth, normal;
   for (auto _ : state) {
-    mgsr::RenderSyntheticView(caster, scene.mesh, scene.cameras[0], scene.lights[0], o, &rgba, &depth, &normal);
+    mgsr::RenderSyntheticView(caster, scene.mesh, scene.cameras[0], scene.lights[0], o, &rgba,
+                              &depth, &normal);
   }
 }
 BENCHMARK(BM_SyntheticView)->Arg(128)->Arg(256)->Unit(benchmark::kMillisecond);

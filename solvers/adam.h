@@ -22,7 +22,8 @@ class Adam {
 
   // Per-column learning rates of a block (size = block width; all 0 = frozen). Columns allow
   // different rates inside one block, e.g. SH band 0 and the higher bands.
-  using LearningRates = std::function<void(const std::string& name, int width, std::vector<float>* rates)>;
+  using LearningRates =
+      std::function<void(const std::string& name, int width, std::vector<float>* rates)>;
 
   // One update of every block.
   void Step(const std::vector<ParamBlock>& params, const std::vector<ParamBlock>& grads,

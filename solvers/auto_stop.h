@@ -10,7 +10,8 @@ namespace mgsr {
 
 class AutoStop {
  public:
-  AutoStop(int min_iteration, int window, double range) : min_iteration_(min_iteration), window_(window), range_(range) {}
+  AutoStop(int min_iteration, int window, double range)
+      : min_iteration_(min_iteration), window_(window), range_(range) {}
   // Records the loss of `iteration`; true once the window has flattened.
   const std::deque<double>& window() const { return losses_; }
   void set_window(std::deque<double> w) { losses_ = std::move(w); }

@@ -43,12 +43,14 @@ Status ReadModel(BinaryReader* r, Model* m) {
   int32_t degree = 0;
   uint32_t count = 0;
   MGSR_RETURN_IF_ERROR(r->Read(&degree));
-  if (degree < 0 || degree > 3) return Status::Error(r->path() + ": corrupt checkpoint (SH degree)");
+  if (degree < 0 || degree > 3)
+    return Status::Error(r->path() + ": corrupt checkpoint (SH degree)");
   m->max_sh_degree = degree;
   m->Resize(0);
   const std::vector<ParamBlock> blocks = m->Blocks();
   MGSR_RETURN_IF_ERROR(r->Read(&count));
-  if (count != blocks.size()) return Status::Error(r->path() + ": checkpoint does not match this model layout");
+  if (count != blocks.size())
+    return Status::Error(r->path() + ": checkpoint does not match this model layout");
   size_t rows = 0;
   for (size_t k = 0; k < blocks.size(); ++k) {
     std::string name;
@@ -56,7 +58,8 @@ Status ReadModel(BinaryReader* r, Model* m) {
     MGSR_RETURN_IF_ERROR(r->ReadCString(&name));
     MGSR_RETURN_IF_ERROR(r->Read(&width));
     if (name != blocks[k].name || width != blocks[k].width) {
-      return Status::Error(r->path() + ": checkpoint block '" + name + "' does not match '" + blocks[k].name + "'");
+      return Status::Error(r->path() + ": checkpoint block '" + name + "' does not match '" +
+                           blocks[k].name + "'");
     }
     MGSR_RETURN_IF_ERROR(ReadVector(r, blocks[k].data));
     if (blocks[k].data->size() % width != 0 || (k > 0 && blocks[k].data->size() / width != rows)) {
@@ -114,7 +117,8 @@ Status MutualBoostedSolver::SaveCheckpoint(const std::string& path) const {
   w.Write<int32_t>(s.mutual_iterations);
   w.Write<uint8_t>(s.auto_stopped_2d);
   w.Write<uint8_t>(s.auto_stopped_3d);
-  for (double x : {s.warmup_seconds, s.mutual_seconds, s.final_loss_2d, s.final_loss_3d}) w.Write<double>(x);
+  for (double x : {s.warmup_seconds, s.mutual_seconds, s.final_loss_2d, s.final_loss_3d})
+    w.Write<double>(x);
   w.Write<uint64_t>(rng_.state());
   WriteVector(&w, view_stack_);
   WriteVector(&w, std::vector<double>(stop_2d_.window().begin(), stop_2d_.window().end()));
@@ -142,8 +146,8 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
   uint32_t views = 0;
   MGSR_RETURN_IF_ERROR(r.Read(&views));
   if (views != train_.size()) {
-    return Status::Error(path + ": checkpoint was written for " + std::to_string(views) + " training views, this scene has " +
-                         std::to_string(train_.size()));
+    return Status::Error(path + ": checkpoint was written for " + std::to_string(views) +
+                         " training views, this scene has " + std::to_string(train_.size()));
   }
   int32_t stage = 0, next = 0, sh = 0;
   uint8_t finished = 0, a2 = 0, a3 = 0;
@@ -183,7 +187,8 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
   }
   if (!r.AtEnd()) return Status::Error(path + ": trailing bytes (corrupt checkpoint)");
   for (int v : stack) {
-    if (v < 0 || v >= static_cast<int>(scene_.views.size())) return Status::Error(path + ": corrupt checkpoint (view order)");
+    if (v < 0 || v >= static_cast<int>(scene_.views.size()))
+      return Status::Error(path + ": corrupt checkpoint (view order)");
   }
   // Everything read: commit.
   stage_ = stage == 0 ? Stage::kWarmup : Stage::kMutual;

@@ -19,14 +19,15 @@ struct SurfelTraits {
 };
 
 template <typename Model, typename Traits>
-DensifyResult Densify(Model* m, Adam* adam, DensityStats* stats, const DensityOptions& o, double extent,
-                      bool prune_large, Rng* rng) {
+DensifyResult Densify(Model* m, Adam* adam, DensityStats* stats, const DensityOptions& o,
+                      double extent, bool prune_large, Rng* rng) {
   DensifyResult result;
   const size_t n = m->size();
   const float dense = static_cast<float>(o.percent_dense * extent);
   auto max_scale = [&](size_t i) {
     float s = m->log_scales[Traits::kScales * i];
-    for (int k = 1; k < Traits::kScales; ++k) s = std::max(s, m->log_scales[Traits::kScales * i + k]);
+    for (int k = 1; k < Traits::kScales; ++k)
+      s = std::max(s, m->log_scales[Traits::kScales * i + k]);
     return std::exp(s);
   };
   // Candidates by average screen gradient, highest first so a budget keeps the most needed.
@@ -36,12 +37,14 @@ DensifyResult Densify(Model* m, Adam* adam, DensityStats* stats, const DensityOp
     avg[i] = stats->count[i] > 0 ? stats->grad_sum[i] / stats->count[i] : 0.0f;
     if (avg[i] >= o.grad_threshold) candidates.push_back(i);
   }
-  std::stable_sort(candidates.begin(), candidates.end(), [&](size_t a, size_t b) { return avg[a] > avg[b]; });
+  std::stable_sort(candidates.begin(), candidates.end(),
+                   [&](size_t a, size_t b) { return avg[a] > avg[b]; });
   size_t room = o.max_primitives > 0 ? (o.max_primitives > n ? o.max_primitives - n : 0) : SIZE_MAX;
   std::vector<int> clone, split;
   for (size_t i : candidates) {
     const bool small = max_scale(i) <= dense;
-    const size_t cost = 1;  // a clone adds one row; a split adds two children and removes the parent
+    const size_t cost =
+        1;  // a clone adds one row; a split adds two children and removes the parent
     if (room < cost) break;
     room -= cost;
     (small ? clone : split).push_back(static_cast<int>(i));
@@ -68,12 +71,15 @@ DensifyResult Densify(Model* m, Adam* adam, DensityStats* stats, const DensityOp
       QuaternionToRotation(&m->quats[4 * row], R, q_unit);
       float local[3] = {0, 0, 0};
       for (int k = 0; k < Traits::kScales; ++k) {
-        local[k] = static_cast<float>(rng->Normal()) * std::exp(m->log_scales[Traits::kScales * row + k]);
+        local[k] =
+            static_cast<float>(rng->Normal()) * std::exp(m->log_scales[Traits::kScales * row + k]);
       }
       for (int r = 0; r < 3; ++r) {
-        m->means[3 * row + r] += R[3 * r] * local[0] + R[3 * r + 1] * local[1] + R[3 * r + 2] * local[2];
+        m->means[3 * row + r] +=
+            R[3 * r] * local[0] + R[3 * r + 1] * local[1] + R[3 * r + 2] * local[2];
       }
-      for (int k = 0; k < Traits::kScales; ++k) m->log_scales[Traits::kScales * row + k] -= std::log(1.6f);
+      for (int k = 0; k < Traits::kScales; ++k)
+        m->log_scales[Traits::kScales * row + k] -= std::log(1.6f);
     }
     std::vector<uint8_t> keep(m->size(), 1);
     for (int i : split) keep[i] = 0;
@@ -108,13 +114,16 @@ void CapLogit(std::vector<float>* logits, float max_value) {
 
 }  // namespace
 
-DensifyResult DensifyAndPrune(GaussianModel* model, Adam* adam, DensityStats* stats, const DensityOptions& options,
-                              double extent, bool prune_large, Rng* rng) {
-  return Densify<GaussianModel, GaussianTraits>(model, adam, stats, options, extent, prune_large, rng);
+DensifyResult DensifyAndPrune(GaussianModel* model, Adam* adam, DensityStats* stats,
+                              const DensityOptions& options, double extent, bool prune_large,
+                              Rng* rng) {
+  return Densify<GaussianModel, GaussianTraits>(model, adam, stats, options, extent, prune_large,
+                                                rng);
 }
 
-DensifyResult DensifyAndPrune(SurfelModel* model, Adam* adam, DensityStats* stats, const DensityOptions& options,
-                              double extent, bool prune_large, Rng* rng) {
+DensifyResult DensifyAndPrune(SurfelModel* model, Adam* adam, DensityStats* stats,
+                              const DensityOptions& options, double extent, bool prune_large,
+                              Rng* rng) {
   return Densify<SurfelModel, SurfelTraits>(model, adam, stats, options, extent, prune_large, rng);
 }
 

@@ -19,8 +19,9 @@ struct DensityOptions {
   float grad_threshold = 2e-4f;  // on the NDC screen-gradient norm
   float percent_dense = 0.01f;   // clone below, split above this share of the scene extent
   float min_opacity = 0.005f;    // prune below (3DGS 0.005, 2DGS 0.05)
-  float max_world_size = 0.1f;   // prune larger than this share of the extent (after the first reset)
-  size_t max_primitives = 0;     // 0 = no budget
+  float max_world_size =
+      0.1f;                   // prune larger than this share of the extent (after the first reset)
+  size_t max_primitives = 0;  // 0 = no budget
 };
 
 // Per-primitive accumulators between density-control steps.
@@ -46,10 +47,12 @@ struct DensifyResult {
 };
 
 // One densify-and-prune step; `prune_large` enables the world-size test. Resets `stats`.
-DensifyResult DensifyAndPrune(GaussianModel* model, Adam* adam, DensityStats* stats, const DensityOptions& options,
-                              double extent, bool prune_large, Rng* rng);
-DensifyResult DensifyAndPrune(SurfelModel* model, Adam* adam, DensityStats* stats, const DensityOptions& options,
-                              double extent, bool prune_large, Rng* rng);
+DensifyResult DensifyAndPrune(GaussianModel* model, Adam* adam, DensityStats* stats,
+                              const DensityOptions& options, double extent, bool prune_large,
+                              Rng* rng);
+DensifyResult DensifyAndPrune(SurfelModel* model, Adam* adam, DensityStats* stats,
+                              const DensityOptions& options, double extent, bool prune_large,
+                              Rng* rng);
 
 // Opacity reset: opacity <= 0.01 (3DGS: reflected opacity too, beta <= 0.1); moments zeroed.
 void ResetOpacity(GaussianModel* model, Adam* adam);

@@ -35,19 +35,25 @@ Image Composite(const View& v, float background) {
 // Log-linear decay from init to final over max_steps (reference 1.8).
 double PositionLearningRate(const SolverOptions& o, int step, double extent) {
   const double t = std::clamp(static_cast<double>(step) / o.position_lr_max_steps, 0.0, 1.0);
-  return extent * std::exp(std::log(o.position_lr_init) * (1 - t) + std::log(o.position_lr_final) * t);
+  return extent *
+         std::exp(std::log(o.position_lr_init) * (1 - t) + std::log(o.position_lr_final) * t);
 }
 
 Adam::LearningRates Rates(const SolverOptions& o, int step, double extent) {
   return [&o, step, extent](const std::string& name, int width, std::vector<float>* rates) {
     float r = 0;
-    if (name == "means") r = static_cast<float>(PositionLearningRate(o, step, extent));
-    else if (name == "log_scales") r = static_cast<float>(o.scaling_lr);
-    else if (name == "quats") r = static_cast<float>(o.rotation_lr);
-    else if (name == "opacity_logits" || name == "ref_opacity_logits" || name == "beta_logits") r = static_cast<float>(o.opacity_lr);
+    if (name == "means")
+      r = static_cast<float>(PositionLearningRate(o, step, extent));
+    else if (name == "log_scales")
+      r = static_cast<float>(o.scaling_lr);
+    else if (name == "quats")
+      r = static_cast<float>(o.rotation_lr);
+    else if (name == "opacity_logits" || name == "ref_opacity_logits" || name == "beta_logits")
+      r = static_cast<float>(o.opacity_lr);
     if (name == "sh" || name == "ref_sh") {
       // Band 0 (the first 3 columns) at the feature rate, higher bands at 1/20 of it.
-      for (int k = 0; k < width; ++k) (*rates)[k] = static_cast<float>(k < 3 ? o.feature_lr : o.feature_lr / 20);
+      for (int k = 0; k < width; ++k)
+        (*rates)[k] = static_cast<float>(k < 3 ? o.feature_lr : o.feature_lr / 20);
       return;
     }
     std::fill(rates->begin(), rates->end(), r);
@@ -75,10 +81,10 @@ void MoveGradients(RenderGradients* g, SurfelRenderGrad* out) {
 // After a branch's backward: densification statistics, the Adam step, then density control and
 // opacity resets on the branch's schedule (reference 1.10). The same for both branches.
 template <typename Model>
-void OptimizeAndControlDensity(const SolverOptions& o, const BranchSchedule& s, size_t budget, int it,
-                               const Camera& camera, const std::vector<float>& mean2d_grads,
-                               const std::vector<float>& radii, double extent, Model& grads, Model* model, Adam* adam,
-                               DensityStats* stats, Rng* rng) {
+void OptimizeAndControlDensity(const SolverOptions& o, const BranchSchedule& s, size_t budget,
+                               int it, const Camera& camera, const std::vector<float>& mean2d_grads,
+                               const std::vector<float>& radii, double extent, Model& grads,
+                               Model* model, Adam* adam, DensityStats* stats, Rng* rng) {
   if (it < s.densify_until) {
     std::vector<float> norms;
     ScreenGradientNorms(mean2d_grads, camera.width, camera.height, &norms);
@@ -100,10 +106,10 @@ void OptimizeAndControlDensity(const SolverOptions& o, const BranchSchedule& s, 
 
 std::string SolveSummary::BriefReport() const {
   std::ostringstream s;
-  s << "warm-up: 2DGS " << warmup_iterations_2d << " it" << (auto_stopped_2d ? " (auto-stop)" : "") << ", 3DGS "
-    << warmup_iterations_3d << " it" << (auto_stopped_3d ? " (auto-stop)" : "") << ", " << warmup_seconds
-    << " s; mutual: " << mutual_iterations << " it, " << mutual_seconds << " s; " << num_surfels << " surfels, "
-    << num_gaussians << " Gaussians";
+  s << "warm-up: 2DGS " << warmup_iterations_2d << " it" << (auto_stopped_2d ? " (auto-stop)" : "")
+    << ", 3DGS " << warmup_iterations_3d << " it" << (auto_stopped_3d ? " (auto-stop)" : "") << ", "
+    << warmup_seconds << " s; mutual: " << mutual_iterations << " it, " << mutual_seconds << " s; "
+    << num_surfels << " surfels, " << num_gaussians << " Gaussians";
   return s.str();
 }
 
@@ -126,7 +132,8 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   if (points.size() > options.max_init_points) {
     std::vector<size_t> order(points.size());
     for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-    for (size_t i = 0; i < options.max_init_points; ++i) std::swap(order[i], order[i + rng_.UniformInt(order.size() - i)]);
+    for (size_t i = 0; i < options.max_init_points; ++i)
+      std::swap(order[i], order[i + rng_.UniformInt(order.size() - i)]);
     std::vector<Eigen::Vector3f> p, c;
     for (size_t i = 0; i < options.max_init_points; ++i) {
       p.push_back(points[order[i]]);
@@ -145,7 +152,8 @@ int MutualBoostedSolver::NextView() {
   // A shuffled stack of the training views, refilled when empty (reference 1.3).
   if (view_stack_.empty()) {
     view_stack_ = train_;
-    for (size_t i = view_stack_.size(); i > 1; --i) std::swap(view_stack_[i - 1], view_stack_[rng_.UniformInt(i)]);
+    for (size_t i = view_stack_.size(); i > 1; --i)
+      std::swap(view_stack_[i - 1], view_stack_[rng_.UniformInt(i)]);
   }
   const int v = view_stack_.back();
   view_stack_.pop_back();
@@ -153,7 +161,8 @@ int MutualBoostedSolver::NextView() {
 }
 
 void MutualBoostedSolver::Notify(Stage stage, int iteration, Branch branch, double loss) {
-  IterationInfo info{stage, iteration, branch, loss, gaussians_.size(), surfels_.size(), Now() - start_time_};
+  IterationInfo info{stage,           iteration,          branch, loss, gaussians_.size(),
+                     surfels_.size(), Now() - start_time_};
   for (IterationCallback* c : callbacks_) (*c)(info);
 }
 
@@ -193,21 +202,25 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
   if (stage == Stage::kWarmup) {
     const double ln = it > o.normal_from_iteration ? o.lambda_normal : 0.0;
     t.image = &targets_[view].gt_2d;
-    p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, o.lambda_l1), 1.0, Branch::kSurfels2D);
-    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kImage), o.depth_tv_warmup_2d, Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, o.lambda_l1), 1.0,
+              Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kImage),
+              o.depth_tv_warmup_2d, Branch::kSurfels2D);
     p.AddTerm(std::make_unique<NormalConsistencyLoss>(), ln, Branch::kSurfels2D);
-    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kImage), ln, Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kImage), ln,
+              Branch::kSurfels2D);
   } else {
     t.image = &targets_[view].gt_white;
     t.transmitted = transmitted;
     const double w = o.w_2d;
-    p.AddTerm(std::make_unique<MutualRenderLoss>(o.mutual_transmitted_weight, o.mutual_image_weight, o.lambda_l1), w,
-              Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<MutualRenderLoss>(o.mutual_transmitted_weight, o.mutual_image_weight,
+                                                 o.lambda_l1),
+              w, Branch::kSurfels2D);
     p.AddTerm(std::make_unique<NormalConsistencyLoss>(), w * o.lambda_normal, Branch::kSurfels2D);
-    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kTransmitted), w * o.lambda_normal,
-              Branch::kSurfels2D);
-    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kTransmitted), w * o.depth_tv_mutual_2d,
-              Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kTransmitted),
+              w * o.lambda_normal, Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kTransmitted),
+              w * o.depth_tv_mutual_2d, Branch::kSurfels2D);
   }
   RenderBuffers in;
   in.camera = &v.camera;
@@ -225,12 +238,13 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
   surfel_renderer_.Backward(surfels_, ro, render, rg, &grads);
 
   OptimizeAndControlDensity(o, o.schedule_2d, o.max_surfels, it, v.camera, grads.mean2d,
-                            surfel_renderer_.projected().radius, scene_.extent, grads.params, &surfels_, &adam_2d_,
-                            &stats_2d_, &rng_);
+                            surfel_renderer_.projected().radius, scene_.extent, grads.params,
+                            &surfels_, &adam_2d_, &stats_2d_, &rng_);
   return loss;
 }
 
-double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it, const Image* surfel_depth) {
+double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it,
+                                          const Image* surfel_depth) {
   const View& v = scene_.views[view];
   const SolverOptions& o = options_;
   GaussianRenderOptions ro;
@@ -247,13 +261,16 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it, const I
   t.image = &targets_[view].gt_3d;
   t.mask = v.mask.empty() ? nullptr : &v.mask;
   if (stage == Stage::kWarmup) {
-    p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, o.lambda_l1), 1.0, Branch::kGaussians3D);
-    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kTransmitted, TargetKind::kImage), o.transmitted_tv_3d,
+    p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, o.lambda_l1), 1.0,
               Branch::kGaussians3D);
-    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kImage), o.depth_tv_3d, Branch::kGaussians3D);
+    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kTransmitted, TargetKind::kImage),
+              o.transmitted_tv_3d, Branch::kGaussians3D);
+    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kImage), o.depth_tv_3d,
+              Branch::kGaussians3D);
   } else {
     t.other_depth = surfel_depth;
-    p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, o.lambda_l1), o.w_3d, Branch::kGaussians3D);
+    p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, o.lambda_l1), o.w_3d,
+              Branch::kGaussians3D);
     p.AddTerm(std::make_unique<MutualDepthLoss>(false), o.w_depth, Branch::kGaussians3D);
   }
   RenderBuffers in;
@@ -272,12 +289,13 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it, const I
   gaussian_renderer_.Backward(gaussians_, ro, render, rg, &grads);
 
   OptimizeAndControlDensity(o, o.schedule_3d, o.max_gaussians, it, v.camera, grads.mean2d,
-                            gaussian_renderer_.projected().radius, scene_.extent, grads.params, &gaussians_, &adam_3d_,
-                            &stats_3d_, &rng_);
+                            gaussian_renderer_.projected().radius, scene_.extent, grads.params,
+                            &gaussians_, &adam_3d_, &stats_3d_, &rng_);
   return loss;
 }
 
-void MutualBoostedSolver::BackpropIntoGaussians(int view, int it, GaussianRender* render, Image d_transmitted) {
+void MutualBoostedSolver::BackpropIntoGaussians(int view, int it, GaussianRender* render,
+                                                Image d_transmitted) {
   const View& v = scene_.views[view];
   GaussianRenderOptions ro;
   ro.camera = v.camera;
@@ -291,7 +309,8 @@ void MutualBoostedSolver::BackpropIntoGaussians(int view, int it, GaussianRender
   adam_3d_.Step(gaussians_.Blocks(), grads.params.Blocks(), Rates(options_, it, scene_.extent));
 }
 
-void MutualBoostedSolver::BackpropIntoSurfels(int view, int it, SurfelRender* render, Image d_depth) {
+void MutualBoostedSolver::BackpropIntoSurfels(int view, int it, SurfelRender* render,
+                                              Image d_depth) {
   const View& v = scene_.views[view];
   SurfelRenderOptions ro;
   ro.camera = v.camera;
@@ -315,7 +334,8 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
   SolveSummary& sum = summary_;
   auto interrupted = [&]() {
     *summary = sum;
-    return Status::Error("interrupted at " + std::string(stage_ == Stage::kWarmup ? "warm-up" : "mutual") +
+    return Status::Error("interrupted at " +
+                         std::string(stage_ == Stage::kWarmup ? "warm-up" : "mutual") +
                          " iteration " + std::to_string(next_iteration_ - 1));
   };
 

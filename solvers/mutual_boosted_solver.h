@@ -31,11 +31,11 @@ enum class Stage { kWarmup, kMutual };
 // What an iteration callback sees (Ceres' IterationSummary).
 struct IterationInfo {
   Stage stage;
-  int iteration;        // within the stage
+  int iteration;  // within the stage
   Branch branch;
   double loss;
   size_t num_gaussians, num_surfels;
-  double seconds;       // since Solve started
+  double seconds;  // since Solve started
 };
 
 class IterationCallback {

@@ -6,7 +6,9 @@
 namespace mgsr {
 namespace {
 
-int Scaled(int value, double factor) { return std::max(1, static_cast<int>(std::lround(value * factor))); }
+int Scaled(int value, double factor) {
+  return std::max(1, static_cast<int>(std::lround(value * factor)));
+}
 
 }  // namespace
 
@@ -24,7 +26,8 @@ bool SolverOptions::FromPreset(const std::string& name, SolverOptions* o) {
   o->sh_interval = Scaled(o->sh_interval, f);
   o->auto_stop_window = 50;
   // Density control keeps the reference's intervals (they set how long opacities have to recover
-  // from a reset before the next prune) and ends at two thirds of the warm-up cap, like the reference.
+  // from a reset before the next prune) and ends at two thirds of the warm-up cap, like the
+  // reference.
   o->schedule_2d = {100, 1000, 100, 500, 0.05f};
   o->schedule_3d = {50, 1000, 20, 500, 0.005f};
   // Fewer, larger steps need a little more room per step to move.
@@ -50,7 +53,8 @@ Status SolverOptions::Validate() const {
   if (sh_degree < 0 || sh_degree > 3) return Status::Error("--sh_degree must be in [0, 3]");
   if (sh_interval < 1) return Status::Error("--sh_interval must be >= 1");
   for (double w : {w_2d, w_3d, w_depth, lambda_normal}) {
-    if (!(w >= 0) || !std::isfinite(w)) return Status::Error("loss weights must be finite and >= 0");
+    if (!(w >= 0) || !std::isfinite(w))
+      return Status::Error("loss weights must be finite and >= 0");
   }
   if (max_init_points < 1) return Status::Error("--max_init_points must be >= 1");
   return Status::Ok();

@@ -1,6 +1,6 @@
-// SolverOptions: every schedule, weight and rate of MGSR's optimisation, with the reference defaults
-// (MGSR_REFERENCE.md 1.1-1.13), and presets that scale them. A plain struct with a validating check,
-// like ceres::Solver::Options.
+// SolverOptions: every schedule, weight and rate of MGSR's optimisation, with the reference
+// defaults (MGSR_REFERENCE.md 1.1-1.13), and presets that scale them. A plain struct with a
+// validating check, like ceres::Solver::Options.
 #pragma once
 
 #include <cstddef>
@@ -32,9 +32,9 @@ struct SolverOptions {
   // steps with it. The TV guides stay constant.
   bool bidirectional = false;
   // Loss weights (reference 1.3-1.7).
-  double lambda_l1 = 0.8;               // render loss: lambda L1 + (1 - lambda) D-SSIM
-  double lambda_normal = 0.05;          // normal consistency and normal TV
-  int normal_from_iteration = 7000;     // warm-up: normal terms off before this
+  double lambda_l1 = 0.8;            // render loss: lambda L1 + (1 - lambda) D-SSIM
+  double lambda_normal = 0.05;       // normal consistency and normal TV
+  int normal_from_iteration = 7000;  // warm-up: normal terms off before this
   double depth_tv_warmup_2d = 1.0;
   double depth_tv_mutual_2d = 0.05;
   double transmitted_tv_3d = 0.1;

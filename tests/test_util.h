@@ -18,7 +18,8 @@ inline std::string ScratchDir(const std::string& tag = "") {
   for (char& c : name) {
     if (c == '/') c = '_';
   }
-  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "mgsr_tests" / name;
+  const std::filesystem::path dir =
+      std::filesystem::path(::testing::TempDir()) / "mgsr_tests" / name;
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir.string();

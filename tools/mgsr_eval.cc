@@ -27,9 +27,12 @@ DEFINE_double(fscore_threshold, 0.01, "Distance threshold of the F-score, in sce
 DEFINE_uint64(seed, 0, "Sampling seed.");
 DEFINE_string(renders, "", "Folder of rendered images.");
 DEFINE_string(gt_images, "", "Folder of ground-truth images with the same file names.");
-DEFINE_string(background, "black", "Background that RGBA images are composited onto: black | white.");
+DEFINE_string(background, "black",
+              "Background that RGBA images are composited onto: black | white.");
 DEFINE_string(json, "", "Write the results to this JSON file.");
-DEFINE_string(run, "", "An mgsr_solve output folder (mesh.ply, metrics.json); --gt defaults to the scene's gt/mesh.ply.");
+DEFINE_string(run, "",
+              "An mgsr_solve output folder (mesh.ply, metrics.json); --gt defaults to the scene's "
+              "gt/mesh.ply.");
 
 namespace {
 
@@ -65,28 +68,41 @@ int EvaluateMeshes(nlohmann::json* report) {
   const mgsr::MeshMetrics m = mgsr::EvaluateMesh(pred, gt, o);
   std::printf("%-12s %10s %10s %10s %10s %10s %10s\n", "mesh", "NC x100", "CD x1000", "acc x1000",
               "comp x1000", "F-score", "status");
-  std::printf("%-12s %10.2f %10.3f %10.3f %10.3f %10.4f %10s\n",
-              mgsr::FileStem(FLAGS_mesh).c_str(), 100 * m.normal_consistency, 1000 * m.chamfer,
-              1000 * m.accuracy, 1000 * m.completeness, m.fscore, m.ok ? "ok" : m.failure.c_str());
-  auto finite_or_null = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); };
-  (*report)["mesh"] = {{"predicted", FLAGS_mesh}, {"ground_truth", FLAGS_gt}, {"ok", m.ok},
-                       {"failure", m.failure}, {"samples", FLAGS_samples},
-                       {"nc", m.normal_consistency}, {"cd", finite_or_null(m.chamfer)},
-                       {"accuracy", finite_or_null(m.accuracy)}, {"completeness", finite_or_null(m.completeness)},
-                       {"precision", m.precision}, {"recall", m.recall}, {"fscore", m.fscore},
+  std::printf("%-12s %10.2f %10.3f %10.3f %10.3f %10.4f %10s\n", mgsr::FileStem(FLAGS_mesh).c_str(),
+              100 * m.normal_consistency, 1000 * m.chamfer, 1000 * m.accuracy,
+              1000 * m.completeness, m.fscore, m.ok ? "ok" : m.failure.c_str());
+  auto finite_or_null = [](double v) {
+    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
+  };
+  (*report)["mesh"] = {{"predicted", FLAGS_mesh},
+                       {"ground_truth", FLAGS_gt},
+                       {"ok", m.ok},
+                       {"failure", m.failure},
+                       {"samples", FLAGS_samples},
+                       {"nc", m.normal_consistency},
+                       {"cd", finite_or_null(m.chamfer)},
+                       {"accuracy", finite_or_null(m.accuracy)},
+                       {"completeness", finite_or_null(m.completeness)},
+                       {"precision", m.precision},
+                       {"recall", m.recall},
+                       {"fscore", m.fscore},
                        {"fscore_threshold", FLAGS_fscore_threshold}};
   return 0;
 }
 
 int EvaluateImages(nlohmann::json* report) {
-  if (!mgsr::DirectoryExists(FLAGS_renders)) return Fail(FLAGS_renders + ": renders folder does not exist");
-  if (!mgsr::DirectoryExists(FLAGS_gt_images)) return Fail(FLAGS_gt_images + ": ground-truth folder does not exist");
-  if (FLAGS_background != "black" && FLAGS_background != "white") return Fail("--background must be black or white");
+  if (!mgsr::DirectoryExists(FLAGS_renders))
+    return Fail(FLAGS_renders + ": renders folder does not exist");
+  if (!mgsr::DirectoryExists(FLAGS_gt_images))
+    return Fail(FLAGS_gt_images + ": ground-truth folder does not exist");
+  if (FLAGS_background != "black" && FLAGS_background != "white")
+    return Fail("--background must be black or white");
   const float bg = FLAGS_background == "white" ? 1.0f : 0.0f;
   std::vector<std::string> names;
   for (const auto& e : std::filesystem::directory_iterator(FLAGS_renders)) {
     const std::string ext = e.path().extension().string();
-    if (e.is_regular_file() && (ext == ".png" || ext == ".jpg")) names.push_back(e.path().filename().string());
+    if (e.is_regular_file() && (ext == ".png" || ext == ".jpg"))
+      names.push_back(e.path().filename().string());
   }
   std::sort(names.begin(), names.end());
   if (names.empty()) return Fail(FLAGS_renders + ": no .png or .jpg images");
@@ -95,14 +111,16 @@ int EvaluateImages(nlohmann::json* report) {
   std::printf("%-24s %8s %8s %10s %10s\n", "image", "PSNR", "SSIM", "PSNR (al.)", "SSIM (al.)");
   for (const std::string& name : names) {
     mgsr::Image render, gt;
-    const std::string rp = mgsr::JoinPath(FLAGS_renders, name), gp = mgsr::JoinPath(FLAGS_gt_images, name);
+    const std::string rp = mgsr::JoinPath(FLAGS_renders, name),
+                      gp = mgsr::JoinPath(FLAGS_gt_images, name);
     mgsr::Status s = mgsr::ReadImage(rp, &render);
     if (!s.ok()) return Fail(s.message());
     s = mgsr::ReadImage(gp, &gt);
     if (!s.ok()) return Fail(s.message());
     if (render.width() != gt.width() || render.height() != gt.height()) {
-      return Fail(rp + ": render is " + std::to_string(render.width()) + "x" + std::to_string(render.height()) +
-                  " but " + gp + " is " + std::to_string(gt.width()) + "x" + std::to_string(gt.height()));
+      return Fail(rp + ": render is " + std::to_string(render.width()) + "x" +
+                  std::to_string(render.height()) + " but " + gp + " is " +
+                  std::to_string(gt.width()) + "x" + std::to_string(gt.height()));
     }
     const mgsr::Image a = ToRgb(render, bg), b = ToRgb(gt, bg);
     const double psnr = mgsr::Psnr(a, b), ssim = mgsr::Ssim(a, b);
@@ -115,16 +133,22 @@ int EvaluateImages(nlohmann::json* report) {
     ssim_sum += ssim;
     apsnr_sum += apsnr;
     assim_sum += al.ssim;
-    std::printf("%-24s %8.3f %8.4f %10.3f %10.4f\n", name.c_str(), psnr_capped, ssim, apsnr, al.ssim);
-    per_image.push_back({{"name", name}, {"psnr", psnr_capped}, {"ssim", ssim}, {"psnr_aligned", apsnr},
+    std::printf("%-24s %8.3f %8.4f %10.3f %10.4f\n", name.c_str(), psnr_capped, ssim, apsnr,
+                al.ssim);
+    per_image.push_back({{"name", name},
+                         {"psnr", psnr_capped},
+                         {"ssim", ssim},
+                         {"psnr_aligned", apsnr},
                          {"ssim_aligned", al.ssim}});
   }
   const double n = static_cast<double>(names.size());
-  std::printf("%-24s %8.3f %8.4f %10.3f %10.4f\n", "mean", psnr_sum / n, ssim_sum / n, apsnr_sum / n, assim_sum / n);
-  (*report)["images"] = {{"renders", FLAGS_renders}, {"ground_truth", FLAGS_gt_images},
+  std::printf("%-24s %8.3f %8.4f %10.3f %10.4f\n", "mean", psnr_sum / n, ssim_sum / n,
+              apsnr_sum / n, assim_sum / n);
+  (*report)["images"] = {{"renders", FLAGS_renders},       {"ground_truth", FLAGS_gt_images},
                          {"background", FLAGS_background}, {"count", names.size()},
-                         {"psnr", psnr_sum / n}, {"ssim", ssim_sum / n}, {"psnr_aligned", apsnr_sum / n},
-                         {"ssim_aligned", assim_sum / n}, {"per_image", per_image}};
+                         {"psnr", psnr_sum / n},           {"ssim", ssim_sum / n},
+                         {"psnr_aligned", apsnr_sum / n},  {"ssim_aligned", assim_sum / n},
+                         {"per_image", per_image}};
   return 0;
 }
 
@@ -156,13 +180,21 @@ int EvaluateRun(nlohmann::json* report) {
   const double psnr = run["test"].value("psnr", 0.0), ssim = run["test"].value("ssim", 0.0);
   const double psnr_al = run["test"].value("psnr_aligned", 0.0);
   const double seconds = run["seconds"].value("total", 0.0);
-  std::printf("%-24s %8s %9s %8s %8s %11s %9s\n", "run", "NC x100", "CD x1000", "PSNR", "SSIM", "PSNR (al.)", "time (s)");
+  std::printf("%-24s %8s %9s %8s %8s %11s %9s\n", "run", "NC x100", "CD x1000", "PSNR", "SSIM",
+              "PSNR (al.)", "time (s)");
   std::printf("%-24s %8.2f %9.3f %8.2f %8.4f %11.2f %9.1f%s\n", mgsr::FileStem(FLAGS_run).c_str(),
               100 * m.normal_consistency, 1000 * m.chamfer, psnr, ssim, psnr_al, seconds,
               m.ok ? "" : ("  (" + m.failure + ")").c_str());
-  (*report)["run"] = {{"folder", FLAGS_run}, {"ground_truth", gt_path}, {"nc", m.normal_consistency},
-                      {"cd", std::isfinite(m.chamfer) ? nlohmann::json(m.chamfer) : nlohmann::json()},
-                      {"fscore", m.fscore}, {"psnr", psnr}, {"ssim", ssim}, {"psnr_aligned", psnr_al}, {"seconds", seconds}};
+  (*report)["run"] = {
+      {"folder", FLAGS_run},
+      {"ground_truth", gt_path},
+      {"nc", m.normal_consistency},
+      {"cd", std::isfinite(m.chamfer) ? nlohmann::json(m.chamfer) : nlohmann::json()},
+      {"fscore", m.fscore},
+      {"psnr", psnr},
+      {"ssim", ssim},
+      {"psnr_aligned", psnr_al},
+      {"seconds", seconds}};
   return 0;
 }
 
@@ -170,7 +202,8 @@ int EvaluateRun(nlohmann::json* report) {
 
 int main(int argc, char** argv) {
   gflags::SetUsageMessage(
-      "mgsr_eval --mesh pred.ply --gt gt.ply | --renders DIR --gt_images DIR | --run DIR [--gt gt.ply]  [--json out.json]");
+      "mgsr_eval --mesh pred.ply --gt gt.ply | --renders DIR --gt_images DIR | --run DIR [--gt "
+      "gt.ply]  [--json out.json]");
   gflags::ParseCommandLineFlags(&argc, &argv, true);
   const bool run_mode = !FLAGS_run.empty();
   const bool mesh_mode = !run_mode && (!FLAGS_mesh.empty() || !FLAGS_gt.empty());

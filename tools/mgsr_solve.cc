@@ -1,6 +1,6 @@
 // mgsr_solve: the main job. Reads a COLMAP workspace or a Blender folder, reconstructs it with both
-// branches (warm-up with auto-stop, then the mutual stage), and writes the models, test-view renders,
-// the TSDF mesh, a training log and metrics.json into --output.
+// branches (warm-up with auto-stop, then the mutual stage), and writes the models, test-view
+// renders, the TSDF mesh, a training log and metrics.json into --output.
 #include <gflags/gflags.h>
 
 #include <cmath>
@@ -21,19 +21,22 @@
 #include "mgsr/mesh/tsdf_fusion.h"
 #include "solvers/mutual_boosted_solver.h"
 
-DEFINE_string(workspace, "", "COLMAP workspace (images/, sparse/0/) or Blender folder (transforms_*.json).");
+DEFINE_string(workspace, "",
+              "COLMAP workspace (images/, sparse/0/) or Blender folder (transforms_*.json).");
 DEFINE_string(output, "", "Output folder (created).");
 DEFINE_string(preset, "fast", "fast | paper: iteration counts and schedules.");
 DEFINE_int32(downscale, 1, "Divide the input resolution by this factor.");
 DEFINE_int32(max_width, 1600, "Cap the image width after downscaling (0: no cap).");
-DEFINE_int32(test_every, 8, "Without a split file, every Nth image (by name) is held out (0: none).");
+DEFINE_int32(test_every, 8,
+             "Without a split file, every Nth image (by name) is held out (0: none).");
 DEFINE_uint64(seed, 0, "Seed for every random choice.");
 DEFINE_string(mutual_mode, "alternate", "alternate (the paper) | joint (the authors' code).");
 DEFINE_int32(warmup_max_iterations, -1, "Cap of warm-up iterations per branch (-1: preset).");
 DEFINE_int32(warmup_min_iterations, -1, "Auto-stop only after this iteration (-1: preset).");
 DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");
 DEFINE_bool(auto_stop, true, "Stop each warm-up when its loss window flattens.");
-DEFINE_bool(bidirectional, false, "Ablation K: the supervising branch also learns from the supervision.");
+DEFINE_bool(bidirectional, false,
+            "Ablation K: the supervising branch also learns from the supervision.");
 DEFINE_uint64(max_gaussians, 0, "Budget of 3DGS primitives (0: none).");
 DEFINE_uint64(max_surfels, 0, "Budget of 2DGS primitives (0: none).");
 DEFINE_double(w_2d, 0.5, "Weight of the 2DGS loss in the mutual stage.");
@@ -41,16 +44,23 @@ DEFINE_double(w_3d, 0.5, "Weight of the 3DGS loss in the mutual stage.");
 DEFINE_double(w_depth, 0.01, "Weight of the mutual depth loss.");
 DEFINE_double(lambda_l1, 0.8, "Render loss: lambda L1 + (1 - lambda) D-SSIM.");
 DEFINE_double(lambda_normal, 0.05, "Weight of the normal consistency and normal TV terms.");
-DEFINE_double(mutual_transmitted_weight, 0.2, "2DGS mutual loss: weight of the render loss against the 3DGS transmitted image (lambda_6).");
+DEFINE_double(
+    mutual_transmitted_weight, 0.2,
+    "2DGS mutual loss: weight of the render loss against the 3DGS transmitted image (lambda_6).");
 DEFINE_int32(auto_stop_window, -1, "Auto-stop window in iterations (-1: preset).");
-DEFINE_double(auto_stop_range, 0.01, "Auto-stop when max - min of the window's losses falls below this.");
+DEFINE_double(auto_stop_range, 0.01,
+              "Auto-stop when max - min of the window's losses falls below this.");
 DEFINE_int32(log_every, 100, "Print progress every N iterations.");
 DEFINE_int32(eval_every, 500, "Print the test-view PSNR every N iterations (0: only at the end).");
-DEFINE_string(mesh_depth, "expected", "Depth fused into the mesh: expected (MGSR) | median (2DGS).");
-DEFINE_string(mesh_color, "transmitted", "Mesh colours: transmitted (3DGS, reflection-free) | surfel (2DGS render).");
+DEFINE_string(mesh_depth, "expected",
+              "Depth fused into the mesh: expected (MGSR) | median (2DGS).");
+DEFINE_string(mesh_color, "transmitted",
+              "Mesh colours: transmitted (3DGS, reflection-free) | surfel (2DGS render).");
 DEFINE_double(voxel_size, 0, "TSDF voxel (0: the pixel footprint at the object).");
-DEFINE_int32(checkpoint_every, 500, "Write OUTPUT/checkpoints/latest.ckpt every N iterations (0: only on Ctrl-C).");
-DEFINE_bool(resume, false, "Continue from OUTPUT/checkpoints/latest.ckpt (same options and scene).");
+DEFINE_int32(checkpoint_every, 500,
+             "Write OUTPUT/checkpoints/latest.ckpt every N iterations (0: only on Ctrl-C).");
+DEFINE_bool(resume, false,
+            "Continue from OUTPUT/checkpoints/latest.ckpt (same options and scene).");
 
 namespace {
 
@@ -96,13 +106,15 @@ class TestEvaluation : public mgsr::IterationCallback {
       mgsr::Image gt = scene_.views[v].image;
       if (!scene_.views[v].alpha.empty()) {
         for (int c = 0; c < 3; ++c) {
-          for (size_t k = 0; k < gt.plane_size(); ++k) gt.plane(c)[k] *= scene_.views[v].alpha.plane(0)[k];
+          for (size_t k = 0; k < gt.plane_size(); ++k)
+            gt.plane(c)[k] *= scene_.views[v].alpha.plane(0)[k];
         }
       }
       psnr += std::min(100.0, mgsr::Psnr(r.color, gt));
     }
-    std::printf("[%s %5d] test PSNR %.2f dB (%zu views)\n", i.stage == mgsr::Stage::kWarmup ? "warmup" : "mutual",
-                i.iteration, psnr / test.size(), test.size());
+    std::printf("[%s %5d] test PSNR %.2f dB (%zu views)\n",
+                i.stage == mgsr::Stage::kWarmup ? "warmup" : "mutual", i.iteration,
+                psnr / test.size(), test.size());
     std::fflush(stdout);
   }
 
@@ -121,20 +133,23 @@ int Fail(const std::string& message) {
 class ProgressLog : public mgsr::IterationCallback {
  public:
   ProgressLog(const std::string& csv_path, int every, int expected_total, bool append)
-      : csv_(csv_path, append ? std::ios::app : std::ios::trunc), every_(every), expected_(expected_total) {
+      : csv_(csv_path, append ? std::ios::app : std::ios::trunc),
+        every_(every),
+        expected_(expected_total) {
     if (!append) csv_ << "stage,iteration,branch,loss,gaussians,surfels,seconds\n";
   }
   void operator()(const mgsr::IterationInfo& i) override {
     const bool is2d = i.branch == mgsr::Branch::kSurfels2D;
     const char* stage = i.stage == mgsr::Stage::kWarmup ? "warmup" : "mutual";
-    csv_ << stage << "," << i.iteration << "," << (is2d ? "2dgs" : "3dgs") << "," << i.loss << "," << i.num_gaussians
-         << "," << i.num_surfels << "," << i.seconds << "\n";
+    csv_ << stage << "," << i.iteration << "," << (is2d ? "2dgs" : "3dgs") << "," << i.loss << ","
+         << i.num_gaussians << "," << i.num_surfels << "," << i.seconds << "\n";
     (is2d ? loss_2d_ : loss_3d_) = i.loss;
     ++steps_;
     if (i.iteration % every_ == 0 && !is2d) {
       const double eta = steps_ > 0 ? i.seconds / steps_ * std::max(0, expected_ - steps_) : 0;
-      std::printf("[%s %5d] loss 2DGS %.4f 3DGS %.4f | surfels %zu Gaussians %zu | %.0f s, ~%.0f s left\n", stage,
-                  i.iteration, loss_2d_, loss_3d_, i.num_surfels, i.num_gaussians, i.seconds, eta);
+      std::printf(
+          "[%s %5d] loss 2DGS %.4f 3DGS %.4f | surfels %zu Gaussians %zu | %.0f s, ~%.0f s left\n",
+          stage, i.iteration, loss_2d_, loss_3d_, i.num_surfels, i.num_gaussians, i.seconds, eta);
       std::fflush(stdout);
     }
   }
@@ -147,14 +162,16 @@ class ProgressLog : public mgsr::IterationCallback {
 
 mgsr::Image Colorize(const mgsr::Image& one, float lo, float hi) {
   mgsr::Image out(one.width(), one.height(), 1);
-  for (size_t i = 0; i < one.size(); ++i) out.data()[i] = hi > lo ? (one.data()[i] - lo) / (hi - lo) : 0.0f;
+  for (size_t i = 0; i < one.size(); ++i)
+    out.data()[i] = hi > lo ? (one.data()[i] - lo) / (hi - lo) : 0.0f;
   return out;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  gflags::SetUsageMessage("mgsr_solve --workspace DIR --output DIR [--preset fast|paper] [options]");
+  gflags::SetUsageMessage(
+      "mgsr_solve --workspace DIR --output DIR [--preset fast|paper] [options]");
   gflags::ParseCommandLineFlags(&argc, &argv, true);
   if (FLAGS_workspace.empty()) {
     std::fprintf(stderr, "error: --workspace is required\n");
@@ -165,7 +182,8 @@ int main(int argc, char** argv) {
     return 2;
   }
   mgsr::SolverOptions options;
-  if (!mgsr::SolverOptions::FromPreset(FLAGS_preset, &options)) return Fail("unknown --preset '" + FLAGS_preset + "' (fast or paper)");
+  if (!mgsr::SolverOptions::FromPreset(FLAGS_preset, &options))
+    return Fail("unknown --preset '" + FLAGS_preset + "' (fast or paper)");
   options.mutual_mode = FLAGS_mutual_mode;
   if (FLAGS_warmup_max_iterations >= 0) options.warmup_max_iterations = FLAGS_warmup_max_iterations;
   if (FLAGS_warmup_min_iterations >= 0) options.warmup_min_iterations = FLAGS_warmup_min_iterations;
@@ -185,8 +203,10 @@ int main(int argc, char** argv) {
   options.auto_stop_range = FLAGS_auto_stop_range;
   options.seed = FLAGS_seed;
   if (FLAGS_log_every < 1) return Fail("--log_every must be >= 1");
-  if (FLAGS_mesh_depth != "expected" && FLAGS_mesh_depth != "median") return Fail("--mesh_depth must be expected or median");
-  if (FLAGS_mesh_color != "transmitted" && FLAGS_mesh_color != "surfel") return Fail("--mesh_color must be transmitted or surfel");
+  if (FLAGS_mesh_depth != "expected" && FLAGS_mesh_depth != "median")
+    return Fail("--mesh_depth must be expected or median");
+  if (FLAGS_mesh_color != "transmitted" && FLAGS_mesh_color != "surfel")
+    return Fail("--mesh_color must be transmitted or surfel");
   if (!(FLAGS_voxel_size >= 0)) return Fail("--voxel_size must be >= 0");
   if (FLAGS_checkpoint_every < 0) return Fail("--checkpoint_every must be >= 0");
   if (FLAGS_eval_every < 0) return Fail("--eval_every must be >= 0");
@@ -207,9 +227,10 @@ int main(int argc, char** argv) {
   if (!s.ok()) return Fail(s.message());
   const double load_seconds = total.ElapsedSeconds();
   const mgsr::Camera& cam0 = scene.views.front().camera;
-  std::printf("scene: %s (%s), %zu train / %zu test views, %dx%d, %zu points, masks: %s\n", FLAGS_workspace.c_str(),
-              scene.source.c_str(), scene.TrainIndices().size(), scene.TestIndices().size(), cam0.width, cam0.height,
-              scene.points.size(), scene.has_masks() ? "yes" : "no (gamma = 1, mesh not masked)");
+  std::printf("scene: %s (%s), %zu train / %zu test views, %dx%d, %zu points, masks: %s\n",
+              FLAGS_workspace.c_str(), scene.source.c_str(), scene.TrainIndices().size(),
+              scene.TestIndices().size(), cam0.width, cam0.height, scene.points.size(),
+              scene.has_masks() ? "yes" : "no (gamma = 1, mesh not masked)");
 
   mgsr::MutualBoostedSolver solver(options, scene);
   const std::string ckpt_dir = mgsr::JoinPath(FLAGS_output, "checkpoints");
@@ -223,7 +244,8 @@ int main(int argc, char** argv) {
     std::printf("resuming from %s\n", ckpt.c_str());
   }
   ProgressLog log(mgsr::JoinPath(FLAGS_output, "log.csv"), FLAGS_log_every,
-                  2 * options.warmup_max_iterations + (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations,
+                  2 * options.warmup_max_iterations +
+                      (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations,
                   FLAGS_resume);
   solver.AddCallback(&log);
   TestEvaluation evaluation(&solver, scene, FLAGS_eval_every);
@@ -240,8 +262,8 @@ int main(int argc, char** argv) {
     const mgsr::Status saved = solver.SaveCheckpoint(ckpt);
     if (!saved.ok()) return Fail(saved.message());
     if (g_interrupted) {
-      std::fprintf(stderr, "%s: checkpoint written to %s; run again with --resume to continue\n", s.message().c_str(),
-                   ckpt.c_str());
+      std::fprintf(stderr, "%s: checkpoint written to %s; run again with --resume to continue\n",
+                   s.message().c_str(), ckpt.c_str());
       return 130;
     }
   }
@@ -250,7 +272,9 @@ int main(int argc, char** argv) {
 
   // Models.
   s = mgsr::WriteSurfelPly(mgsr::JoinPath(FLAGS_output, "point_cloud_2d.ply"), solver.surfels());
-  if (s.ok()) s = mgsr::WriteGaussianPly(mgsr::JoinPath(FLAGS_output, "point_cloud_3d.ply"), solver.gaussians());
+  if (s.ok())
+    s = mgsr::WriteGaussianPly(mgsr::JoinPath(FLAGS_output, "point_cloud_3d.ply"),
+                               solver.gaussians());
   if (!s.ok()) return Fail(s.message());
 
   // Test views: PSNR / SSIM of the 3DGS composite against the ground truth on its background, and
@@ -269,14 +293,17 @@ int main(int argc, char** argv) {
     mgsr::Image gt = v.image;
     if (!v.alpha.empty()) {
       for (int c = 0; c < 3; ++c) {
-        for (size_t k = 0; k < gt.plane_size(); ++k) gt.plane(c)[k] *= v.alpha.plane(0)[k];  // black background
+        for (size_t k = 0; k < gt.plane_size(); ++k)
+          gt.plane(c)[k] *= v.alpha.plane(0)[k];  // black background
       }
     }
     const double p = std::min(100.0, mgsr::Psnr(g.color, gt)), q = mgsr::Ssim(g.color, gt);
     psnr += p;
     ssim += q;
-    // Exposure-aligned: the test views' light and exposure are not predictable from the training views.
-    const mgsr::AlignedScores aligned = mgsr::ExposureAlignedScores(g.color, gt, v.mask.empty() ? nullptr : &v.mask);
+    // Exposure-aligned: the test views' light and exposure are not predictable from the training
+    // views.
+    const mgsr::AlignedScores aligned =
+        mgsr::ExposureAlignedScores(g.color, gt, v.mask.empty() ? nullptr : &v.mask);
     psnr_aligned += std::min(100.0, aligned.psnr);
     ssim_aligned += aligned.ssim;
     const std::string stem = mgsr::FileStem(v.name);
@@ -288,14 +315,19 @@ int main(int argc, char** argv) {
       dmax = std::max(dmax, sr.depth.data()[k]);
     }
     mgsr::Image normal(sr.normal_world.width(), sr.normal_world.height(), 3);
-    for (size_t k = 0; k < normal.size(); ++k) normal.data()[k] = 0.5f + 0.5f * sr.normal_world.data()[k];
-    for (const auto& [suffix, image] : std::vector<std::pair<std::string, const mgsr::Image*>>{
-             {"composite", &g.color}, {"transmitted", &g.tran}, {"reflected", &g.ref}, {"weight", &g.weight},
-             {"gt", &gt}}) {
+    for (size_t k = 0; k < normal.size(); ++k)
+      normal.data()[k] = 0.5f + 0.5f * sr.normal_world.data()[k];
+    for (const auto& [suffix, image] :
+         std::vector<std::pair<std::string, const mgsr::Image*>>{{"composite", &g.color},
+                                                                 {"transmitted", &g.tran},
+                                                                 {"reflected", &g.ref},
+                                                                 {"weight", &g.weight},
+                                                                 {"gt", &gt}}) {
       s = mgsr::WriteImage(mgsr::JoinPath(dir, stem + "_" + suffix + ".png"), *image);
       if (!s.ok()) return Fail(s.message());
     }
-    s = mgsr::WriteImage(mgsr::JoinPath(dir, stem + "_depth2d.png"), Colorize(sr.depth, dmin, dmax));
+    s = mgsr::WriteImage(mgsr::JoinPath(dir, stem + "_depth2d.png"),
+                         Colorize(sr.depth, dmin, dmax));
     if (s.ok()) s = mgsr::WriteImage(mgsr::JoinPath(dir, stem + "_normal2d.png"), normal);
     if (!s.ok()) return Fail(s.message());
     // Depth error against ground-truth depth maps when the scene has them (synthetic scenes).
@@ -314,7 +346,10 @@ int main(int argc, char** argv) {
         ++depth_views;
       }
     }
-    per_view.push_back({{"name", v.name}, {"psnr", p}, {"ssim", q}, {"psnr_aligned", std::min(100.0, aligned.psnr)},
+    per_view.push_back({{"name", v.name},
+                        {"psnr", p},
+                        {"ssim", q},
+                        {"psnr_aligned", std::min(100.0, aligned.psnr)},
                         {"ssim_aligned", aligned.ssim}});
   }
   if (!test.empty()) {
@@ -324,8 +359,8 @@ int main(int argc, char** argv) {
     ssim_aligned /= test.size();
   }
 
-  // Mesh: TSDF fusion of the 2DGS expected depth over the training views, foreground and alpha >= 0.5,
-  // coloured by the 3DGS transmitted (reflection-free) render.
+  // Mesh: TSDF fusion of the 2DGS expected depth over the training views, foreground and alpha >=
+  // 0.5, coloured by the 3DGS transmitted (reflection-free) render.
   mgsr::Timer mesh_timer;
   std::vector<mgsr::DepthFrame> frames;
   for (int i : scene.TrainIndices()) {
@@ -340,7 +375,8 @@ int main(int argc, char** argv) {
     f.color = FLAGS_mesh_color == "surfel" ? sr.color : g.tran;
     f.weight = sr.alpha;
     if (!v.mask.empty()) {
-      for (size_t k = 0; k < f.weight.size(); ++k) f.weight.data()[k] *= v.mask.data()[k] >= 0.5f ? 1.0f : 0.0f;
+      for (size_t k = 0; k < f.weight.size(); ++k)
+        f.weight.data()[k] *= v.mask.data()[k] >= 0.5f ? 1.0f : 0.0f;
     }
     frames.push_back(std::move(f));
   }
@@ -358,16 +394,31 @@ int main(int argc, char** argv) {
       {"scene", FLAGS_workspace},
       {"preset", FLAGS_preset},
       {"mutual_mode", options.mutual_mode},
-      {"seconds", {{"load", load_seconds}, {"warmup", summary.warmup_seconds}, {"mutual", summary.mutual_seconds},
-                   {"mesh", mesh_seconds}, {"total", total.ElapsedSeconds()}}},
+      {"seconds",
+       {{"load", load_seconds},
+        {"warmup", summary.warmup_seconds},
+        {"mutual", summary.mutual_seconds},
+        {"mesh", mesh_seconds},
+        {"total", total.ElapsedSeconds()}}},
       {"peak_memory_mb", mgsr::PeakMemoryBytes() / 1048576.0},
-      {"iterations", {{"warmup_2d", summary.warmup_iterations_2d}, {"warmup_3d", summary.warmup_iterations_3d},
-                      {"auto_stopped_2d", summary.auto_stopped_2d}, {"auto_stopped_3d", summary.auto_stopped_3d},
-                      {"mutual", summary.mutual_iterations}}},
+      {"iterations",
+       {{"warmup_2d", summary.warmup_iterations_2d},
+        {"warmup_3d", summary.warmup_iterations_3d},
+        {"auto_stopped_2d", summary.auto_stopped_2d},
+        {"auto_stopped_3d", summary.auto_stopped_3d},
+        {"mutual", summary.mutual_iterations}}},
       {"counts", {{"gaussians", summary.num_gaussians}, {"surfels", summary.num_surfels}}},
-      {"test", {{"views", test.size()}, {"psnr", psnr}, {"ssim", ssim}, {"psnr_aligned", psnr_aligned},
-                {"ssim_aligned", ssim_aligned}, {"per_view", per_view}}},
-      {"mesh", {{"path", s.ok() ? mesh_path : ""}, {"vertices", mesh.vertices.size()}, {"triangles", mesh.triangles.size()}}}};
+      {"test",
+       {{"views", test.size()},
+        {"psnr", psnr},
+        {"ssim", ssim},
+        {"psnr_aligned", psnr_aligned},
+        {"ssim_aligned", ssim_aligned},
+        {"per_view", per_view}}},
+      {"mesh",
+       {{"path", s.ok() ? mesh_path : ""},
+        {"vertices", mesh.vertices.size()},
+        {"triangles", mesh.triangles.size()}}}};
   if (depth_views > 0) {
     metrics["test"]["depth_abs_error"] = depth_err / depth_views;
     metrics["test"]["depth_abs_error_over_extent"] = depth_err / depth_views / scene.extent;
@@ -377,14 +428,19 @@ int main(int argc, char** argv) {
     const mgsr::MeshMetrics m = mgsr::EvaluateMesh(mesh, gt_mesh, mgsr::MeshMetricsOptions());
     metrics["mesh"]["nc"] = m.normal_consistency;
     metrics["mesh"]["cd"] = std::isfinite(m.chamfer) ? nlohmann::json(m.chamfer) : nlohmann::json();
-    std::printf("mesh vs ground truth: NC x100 %.2f, CD x1000 %.2f\n", 100 * m.normal_consistency, 1000 * m.chamfer);
+    std::printf("mesh vs ground truth: NC x100 %.2f, CD x1000 %.2f\n", 100 * m.normal_consistency,
+                1000 * m.chamfer);
   }
-  s = mgsr::WriteStringToFileAtomic(mgsr::JoinPath(FLAGS_output, "metrics.json"), metrics.dump(2) + "\n");
+  s = mgsr::WriteStringToFileAtomic(mgsr::JoinPath(FLAGS_output, "metrics.json"),
+                                    metrics.dump(2) + "\n");
   if (!s.ok()) return Fail(s.message());
-  std::printf("test views: PSNR %.2f dB, SSIM %.4f (exposure-aligned %.2f dB, %.4f)", psnr, ssim, psnr_aligned,
-              ssim_aligned);
-  if (depth_views > 0) std::printf(", 2DGS depth error %.4f (%.3f%% of the extent)", depth_err / depth_views, 100 * depth_err / depth_views / scene.extent);
-  std::printf("\nmesh: %s (%zu triangles); metrics: %s; total %.0f s\n", mesh_path.c_str(), mesh.triangles.size(),
-              mgsr::JoinPath(FLAGS_output, "metrics.json").c_str(), total.ElapsedSeconds());
+  std::printf("test views: PSNR %.2f dB, SSIM %.4f (exposure-aligned %.2f dB, %.4f)", psnr, ssim,
+              psnr_aligned, ssim_aligned);
+  if (depth_views > 0)
+    std::printf(", 2DGS depth error %.4f (%.3f%% of the extent)", depth_err / depth_views,
+                100 * depth_err / depth_views / scene.extent);
+  std::printf("\nmesh: %s (%zu triangles); metrics: %s; total %.0f s\n", mesh_path.c_str(),
+              mesh.triangles.size(), mgsr::JoinPath(FLAGS_output, "metrics.json").c_str(),
+              total.ElapsedSeconds());
   return 0;
 }

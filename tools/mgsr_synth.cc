@@ -8,7 +8,8 @@
 #include "mgsr/synth/synthetic_scene.h"
 
 DEFINE_string(output, "", "Folder to write the scene into (created).");
-DEFINE_string(shape, "sphere", "sphere | torus | rounded_box | dented (concavities and a thin rod)");
+DEFINE_string(shape, "sphere",
+              "sphere | torus | rounded_box | dented (concavities and a thin rod)");
 DEFINE_int32(detail, 1, "Mesh detail 0..2.");
 DEFINE_int32(num_views, 48, "Number of views (cameras on a sphere around the object).");
 DEFINE_int32(width, 128, "Image width in pixels.");
@@ -20,7 +21,8 @@ DEFINE_int32(supersampling, 2, "Samples per pixel per axis.");
 DEFINE_double(specular, 0.7, "Highlight strength.");
 DEFINE_double(shininess, 80, "Highlight sharpness (Blinn-Phong exponent).");
 DEFINE_double(mirror, 0.0, "0..1: mirror-like reflection of the environment.");
-DEFINE_bool(varying_light, true, "Change light direction, intensity, colour and exposure per view.");
+DEFINE_bool(varying_light, true,
+            "Change light direction, intensity, colour and exposure per view.");
 DEFINE_double(exposure_stops, 1.0, "Per-view exposure range +-stops (with --varying_light).");
 DEFINE_int32(num_points, 2000, "Surface points written to points3D.");
 DEFINE_bool(text, false, "Write sparse/0 in COLMAP's text format instead of binary.");

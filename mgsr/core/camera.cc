@@ -46,8 +46,8 @@ bool Camera::IsValid() const {
 
 Camera LookAtCamera(const Eigen::Vector3d& center, const Eigen::Vector3d& target,
                     const Eigen::Vector3d& up, int width, int height, double fx, double fy) {
-  const Eigen::Vector3d z = (target - center).normalized();  // forward
-  Eigen::Vector3d x = z.cross(up);                            // right, so that y = z x x is down
+  const Eigen::Vector3d z = (target - center).normalized();    // forward
+  Eigen::Vector3d x = z.cross(up);                             // right, so that y = z x x is down
   if (x.norm() < 1e-9) x = z.cross(Eigen::Vector3d::UnitX());  // looking along `up`
   x.normalize();
   const Eigen::Vector3d y = z.cross(x);

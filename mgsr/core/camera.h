@@ -22,7 +22,9 @@ struct Camera {
 
   Eigen::Vector3d Center() const { return -R.transpose() * t; }
   Eigen::Vector3d WorldToCamera(const Eigen::Vector3d& X) const { return R * X + t; }
-  Eigen::Vector3d CameraToWorld(const Eigen::Vector3d& Xc) const { return R.transpose() * (Xc - t); }
+  Eigen::Vector3d CameraToWorld(const Eigen::Vector3d& Xc) const {
+    return R.transpose() * (Xc - t);
+  }
   // Pixel coordinates of a camera-space point (z must be > 0).
   Eigen::Vector2d CameraToPixel(const Eigen::Vector3d& Xc) const {
     return {fx * Xc.x() / Xc.z() + cx, fy * Xc.y() / Xc.z() + cy};

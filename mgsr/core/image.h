@@ -13,7 +13,9 @@ class ImageT {
  public:
   ImageT() = default;
   ImageT(int width, int height, int channels, T fill = T(0))
-      : width_(width), height_(height), channels_(channels),
+      : width_(width),
+        height_(height),
+        channels_(channels),
         data_(static_cast<size_t>(width) * height * channels, fill) {}
   ImageT(const ImageT&) = default;
   ImageT& operator=(const ImageT&) = default;
@@ -46,8 +48,12 @@ class ImageT {
   const T* data() const { return data_.data(); }
   T* plane(int c) { return data_.data() + c * plane_size(); }
   const T* plane(int c) const { return data_.data() + c * plane_size(); }
-  T& at(int c, int y, int x) { return data_[c * plane_size() + static_cast<size_t>(y) * width_ + x]; }
-  T at(int c, int y, int x) const { return data_[c * plane_size() + static_cast<size_t>(y) * width_ + x]; }
+  T& at(int c, int y, int x) {
+    return data_[c * plane_size() + static_cast<size_t>(y) * width_ + x];
+  }
+  T at(int c, int y, int x) const {
+    return data_[c * plane_size() + static_cast<size_t>(y) * width_ + x];
+  }
 
   void Fill(T v) { data_.assign(data_.size(), v); }
   template <typename U>

@@ -3,8 +3,8 @@
 #pragma once
 
 #include <algorithm>
-#include <cstdint>
 #include <cmath>
+#include <cstdint>
 #include <vector>
 
 namespace mgsr {
@@ -16,9 +16,11 @@ std::vector<T> SsimWindowT() {
   constexpr double kSigma = 1.5;
   std::vector<T> w(kSize);
   double sum = 0;
-  for (int i = 0; i < kSize; ++i) sum += std::exp(-(i - kSize / 2) * (i - kSize / 2) / (2 * kSigma * kSigma));
+  for (int i = 0; i < kSize; ++i)
+    sum += std::exp(-(i - kSize / 2) * (i - kSize / 2) / (2 * kSigma * kSigma));
   for (int i = 0; i < kSize; ++i) {
-    w[i] = static_cast<T>(std::exp(-(i - kSize / 2) * (i - kSize / 2) / (2 * kSigma * kSigma)) / sum);
+    w[i] =
+        static_cast<T>(std::exp(-(i - kSize / 2) * (i - kSize / 2) / (2 * kSigma * kSigma)) / sum);
   }
   return w;
 }
@@ -32,7 +34,7 @@ void BlurZeroPaddedT(const T* in, int width, int height, const std::vector<T>& k
   const int taps = static_cast<int>(kernel.size());
   // Both passes loop over taps outside and pixels inside, so the inner loops run over contiguous
   // memory and vectorise; rows are independent and split across threads for large images.
-#pragma omp parallel for schedule(static) if (static_cast<int64_t>(width) * height >= 65536)
+#pragma omp parallel for schedule(static) if (static_cast <int64_t>(width) * height >= 65536)
   for (int y = 0; y < height; ++y) {
     const T* row = in + static_cast<size_t>(y) * width;
     T* dst = tmp + static_cast<size_t>(y) * width;
@@ -44,7 +46,7 @@ void BlurZeroPaddedT(const T* in, int width, int height, const std::vector<T>& k
       for (int x = x0; x < x1; ++x) dst[x] += w * row[x + shift];
     }
   }
-#pragma omp parallel for schedule(static) if (static_cast<int64_t>(width) * height >= 65536)
+#pragma omp parallel for schedule(static) if (static_cast <int64_t>(width) * height >= 65536)
   for (int y = 0; y < height; ++y) {
     T* dst = out + static_cast<size_t>(y) * width;
     std::fill(dst, dst + width, T(0));

@@ -1,5 +1,6 @@
 // Status: the error type at the library's boundaries (readers, writers, option validation).
-// A failed Status carries one line that names the file and the problem, so a CLI can print it as is.
+// A failed Status carries one line that names the file and the problem, so a CLI can print it as
+// is.
 #pragma once
 
 #include <string>
@@ -29,8 +30,8 @@ class [[nodiscard]] Status {
 
 }  // namespace mgsr
 
-#define MGSR_RETURN_IF_ERROR(expr)              \
-  do {                                          \
-    ::mgsr::Status _mgsr_status = (expr);       \
+#define MGSR_RETURN_IF_ERROR(expr)               \
+  do {                                           \
+    ::mgsr::Status _mgsr_status = (expr);        \
     if (!_mgsr_status.ok()) return _mgsr_status; \
   } while (0)

@@ -30,7 +30,8 @@ void TriangleMesh::Append(const TriangleMesh& other) {
     vertex_normals.clear();
   }
   if (had_colors && other.vertex_colors.size() == other.vertices.size()) {
-    vertex_colors.insert(vertex_colors.end(), other.vertex_colors.begin(), other.vertex_colors.end());
+    vertex_colors.insert(vertex_colors.end(), other.vertex_colors.begin(),
+                         other.vertex_colors.end());
   } else {
     vertex_colors.clear();
   }

@@ -6,7 +6,8 @@
 
 namespace mgsr {
 
-Eigen::Matrix<double, 3, 4> FitAffineColor(const Image& render, const Image& target, const Image* mask) {
+Eigen::Matrix<double, 3, 4> FitAffineColor(const Image& render, const Image& target,
+                                           const Image* mask) {
   Eigen::Matrix<double, 3, 4> M = Eigen::Matrix<double, 3, 4>::Zero();
   M.leftCols<3>().setIdentity();
   // Normal equations over the pixels: [r 1]^T [r 1] x = [r 1]^T t, one 4x4 system for all channels.
@@ -29,7 +30,8 @@ Eigen::Matrix<double, 3, 4> FitAffineColor(const Image& render, const Image& tar
   return X.transpose();
 }
 
-Image ApplyAffineColor(const Image& render, const Eigen::Matrix<double, 3, 4>& M, const Image* mask) {
+Image ApplyAffineColor(const Image& render, const Eigen::Matrix<double, 3, 4>& M,
+                       const Image* mask) {
   Image out = render;
   for (size_t i = 0; i < render.plane_size(); ++i) {
     if (mask != nullptr && mask->plane(0)[i] < 0.5f) continue;

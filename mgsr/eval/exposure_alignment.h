@@ -12,15 +12,18 @@
 namespace mgsr {
 
 // M = [A | b] (3 x 4). Falls back to the identity when there are too few pixels to fit.
-Eigen::Matrix<double, 3, 4> FitAffineColor(const Image& render, const Image& target, const Image* mask = nullptr);
+Eigen::Matrix<double, 3, 4> FitAffineColor(const Image& render, const Image& target,
+                                           const Image* mask = nullptr);
 // Applies M to every pixel, or only inside the mask when one is given (the background keeps the
 // render's values, which already match a uniform background).
-Image ApplyAffineColor(const Image& render, const Eigen::Matrix<double, 3, 4>& M, const Image* mask = nullptr);
+Image ApplyAffineColor(const Image& render, const Eigen::Matrix<double, 3, 4>& M,
+                       const Image* mask = nullptr);
 
 struct AlignedScores {
   double psnr = 0, ssim = 0;
   Eigen::Matrix<double, 3, 4> transform;
 };
-AlignedScores ExposureAlignedScores(const Image& render, const Image& target, const Image* mask = nullptr);
+AlignedScores ExposureAlignedScores(const Image& render, const Image& target,
+                                    const Image* mask = nullptr);
 
 }  // namespace mgsr

@@ -1,9 +1,9 @@
 #include "mgsr/eval/image_metrics.h"
 
+#include <glog/logging.h>
+
 #include <cmath>
 #include <limits>
-
-#include <glog/logging.h>
 
 #include "mgsr/core/separable_blur.h"
 
@@ -11,8 +11,8 @@ namespace mgsr {
 
 std::vector<float> SsimWindow() { return SsimWindowT<float>(); }
 
-void BlurZeroPadded(const float* in, int width, int height, const std::vector<float>& kernel, float* out,
-                    std::vector<float>* scratch) {
+void BlurZeroPadded(const float* in, int width, int height, const std::vector<float>& kernel,
+                    float* out, std::vector<float>* scratch) {
   BlurZeroPaddedT(in, width, height, kernel, out, scratch);
 }
 
@@ -50,7 +50,8 @@ double Ssim(const Image& a, const Image& b) {
     for (size_t i = 0; i < n; ++i) {
       const double ma = mu_a[i], mb = mu_b[i];
       const double va = saa[i] - ma * ma, vb = sbb[i] - mb * mb, cov = sab[i] - ma * mb;
-      total += ((2 * ma * mb + kC1) * (2 * cov + kC2)) / ((ma * ma + mb * mb + kC1) * (va + vb + kC2));
+      total +=
+          ((2 * ma * mb + kC1) * (2 * cov + kC2)) / ((ma * ma + mb * mb + kC1) * (va + vb + kC2));
     }
   }
   return total / std::max<size_t>(1, a.size());

@@ -17,11 +17,14 @@ struct PointCloudAdaptor {
   size_t kdtree_get_point_count() const { return pts.size(); }
   double kdtree_get_pt(size_t i, size_t dim) const { return pts[i][dim]; }
   template <class BBox>
-  bool kdtree_get_bbox(BBox&) const { return false; }
+  bool kdtree_get_bbox(BBox&) const {
+    return false;
+  }
 };
 
-using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloudAdaptor>,
-                                                   PointCloudAdaptor, 3, size_t>;
+using KdTree =
+    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloudAdaptor>,
+                                        PointCloudAdaptor, 3, size_t>;
 
 struct OneWay {
   double mean_distance = 0;
@@ -64,7 +67,8 @@ SurfaceSamples SampleSurface(const TriangleMesh& mesh, int count, uint64_t seed)
     std::iota(order.begin(), order.end(), 0);
     // Partial Fisher-Yates: a seeded subset of the vertices.
     const size_t take = std::min(order.size(), static_cast<size_t>(std::max(count, 0)));
-    for (size_t i = 0; i < take; ++i) std::swap(order[i], order[i + rng.UniformInt(order.size() - i)]);
+    for (size_t i = 0; i < take; ++i)
+      std::swap(order[i], order[i + rng.UniformInt(order.size() - i)]);
     const bool normals = mesh.vertex_normals.size() == mesh.vertices.size();
     for (size_t i = 0; i < take; ++i) {
       s.points.push_back(mesh.vertices[order[i]]);
@@ -76,7 +80,9 @@ SurfaceSamples SampleSurface(const TriangleMesh& mesh, int count, uint64_t seed)
   double total = 0;
   for (size_t i = 0; i < mesh.triangles.size(); ++i) {
     const auto& f = mesh.triangles[i];
-    const double area = 0.5 * (mesh.vertices[f[1]] - mesh.vertices[f[0]]).cross(mesh.vertices[f[2]] - mesh.vertices[f[0]]).norm();
+    const double area = 0.5 * (mesh.vertices[f[1]] - mesh.vertices[f[0]])
+                                  .cross(mesh.vertices[f[2]] - mesh.vertices[f[0]])
+                                  .norm();
     total += std::isfinite(area) ? area : 0.0;
     cumulative[i] = total;
   }
@@ -88,7 +94,8 @@ SurfaceSamples SampleSurface(const TriangleMesh& mesh, int count, uint64_t seed)
     size_t i = std::upper_bound(cumulative.begin(), cumulative.end(), target) - cumulative.begin();
     i = std::min(i, cumulative.size() - 1);
     const auto& f = mesh.triangles[i];
-    const Eigen::Vector3d &a = mesh.vertices[f[0]], &b = mesh.vertices[f[1]], &c = mesh.vertices[f[2]];
+    const Eigen::Vector3d &a = mesh.vertices[f[0]], &b = mesh.vertices[f[1]],
+                          &c = mesh.vertices[f[2]];
     double u = rng.Uniform(), v = rng.Uniform();
     if (u + v > 1) {
       u = 1 - u;
@@ -106,7 +113,8 @@ MeshMetrics EvaluateMesh(const TriangleMesh& predicted, const TriangleMesh& grou
   const SurfaceSamples pred = SampleSurface(predicted, options.num_samples, options.seed);
   const SurfaceSamples gt = SampleSurface(ground_truth, options.num_samples, options.seed + 1);
   if (pred.points.empty()) {
-    m.failure = predicted.vertices.empty() ? "predicted mesh is empty" : "predicted mesh has no area";
+    m.failure =
+        predicted.vertices.empty() ? "predicted mesh is empty" : "predicted mesh has no area";
     return m;
   }
   if (gt.points.empty()) {
@@ -122,7 +130,8 @@ MeshMetrics EvaluateMesh(const TriangleMesh& predicted, const TriangleMesh& grou
   m.normal_consistency = 0.5 * (to_gt.normal_dot + to_pred.normal_dot);
   m.precision = to_gt.within;
   m.recall = to_pred.within;
-  m.fscore = m.precision + m.recall > 0 ? 2 * m.precision * m.recall / (m.precision + m.recall) : 0.0;
+  m.fscore =
+      m.precision + m.recall > 0 ? 2 * m.precision * m.recall / (m.precision + m.recall) : 0.0;
   return m;
 }
 

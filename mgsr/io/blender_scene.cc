@@ -22,8 +22,8 @@ struct Frame {
 bool HasExtension(const std::string& p) {
   const size_t slash = p.find_last_of('/');
   const size_t dot = p.find_last_of('.');
-  return dot != std::string::npos && (slash == std::string::npos || dot > slash) && dot + 1 < p.size() &&
-         p.substr(dot) != "./";
+  return dot != std::string::npos && (slash == std::string::npos || dot > slash) &&
+         dot + 1 < p.size() && p.substr(dot) != "./";
 }
 
 Status ReadTransforms(const std::string& root, const std::string& file, bool is_test,
@@ -44,16 +44,20 @@ Status ReadTransforms(const std::string& root, const std::string& file, bool is_
       fr.name = fp;
       if (f.contains("mask_path")) fr.mask_path = JoinPath(root, f["mask_path"].get<std::string>());
       const json& m = f.at("transform_matrix");
-      if (!m.is_array() || m.size() != 4) return Status::Error(path + ": transform_matrix of " + fp + " is not 4x4");
+      if (!m.is_array() || m.size() != 4)
+        return Status::Error(path + ": transform_matrix of " + fp + " is not 4x4");
       for (int r = 0; r < 4; ++r) {
-        if (!m[r].is_array() || m[r].size() != 4) return Status::Error(path + ": transform_matrix of " + fp + " is not 4x4");
+        if (!m[r].is_array() || m[r].size() != 4)
+          return Status::Error(path + ": transform_matrix of " + fp + " is not 4x4");
         for (int c = 0; c < 4; ++c) {
           // NaN is not valid JSON, but some writers emit it as null or a string.
-          if (!m[r][c].is_number()) return Status::Error(path + ": transform_matrix of " + fp + " has a non-number (NaN?)");
+          if (!m[r][c].is_number())
+            return Status::Error(path + ": transform_matrix of " + fp + " has a non-number (NaN?)");
           fr.c2w_gl(r, c) = m[r][c].get<double>();
         }
       }
-      if (!fr.c2w_gl.allFinite()) return Status::Error(path + ": transform_matrix of " + fp + " has NaN/inf");
+      if (!fr.c2w_gl.allFinite())
+        return Status::Error(path + ": transform_matrix of " + fp + " has NaN/inf");
       frames->push_back(fr);
     }
   } catch (const json::exception& e) {
@@ -80,7 +84,8 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
   }
   if (frames.empty()) return Status::Error(JoinPath(root, "transforms_train.json") + ": no frames");
   if (!train_meta.contains("camera_angle_x") && !train_meta.contains("fl_x")) {
-    return Status::Error(JoinPath(root, "transforms_train.json") + ": needs camera_angle_x or fl_x");
+    return Status::Error(JoinPath(root, "transforms_train.json") +
+                         ": needs camera_angle_x or fl_x");
   }
 
   scene->views.resize(frames.size());
@@ -93,7 +98,8 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
     v.name = f.name;
     v.is_test = f.is_test;
     // Size: from the json (nerfstudio-style w/h) or from the image itself.
-    int w = static_cast<int>(JsonNumber(meta, "w", 0)), h = static_cast<int>(JsonNumber(meta, "h", 0));
+    int w = static_cast<int>(JsonNumber(meta, "w", 0)),
+        h = static_cast<int>(JsonNumber(meta, "h", 0));
     Image probe;
     if (w <= 0 || h <= 0) {
       statuses[i] = ReadImage(f.image_path, &probe);
@@ -126,7 +132,8 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
     }
     std::string mask = f.mask_path;
     if (mask.empty()) {
-      const std::string candidate = JoinPath(JoinPath(root, "masks"), FileStem(f.image_path) + ".png");
+      const std::string candidate =
+          JoinPath(JoinPath(root, "masks"), FileStem(f.image_path) + ".png");
       if (FileExists(candidate)) mask = candidate;
     }
     if (!options.load_images) continue;
@@ -148,8 +155,9 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
     MGSR_RETURN_IF_ERROR(ReadTriangleMesh(points_file, &cloud));
     for (size_t i = 0; i < cloud.vertices.size(); ++i) {
       scene->points.push_back(cloud.vertices[i].cast<float>());
-      scene->point_colors.push_back(i < cloud.vertex_colors.size() ? cloud.vertex_colors[i]
-                                                                  : Eigen::Vector3f(0.5f, 0.5f, 0.5f));
+      scene->point_colors.push_back(i < cloud.vertex_colors.size()
+                                        ? cloud.vertex_colors[i]
+                                        : Eigen::Vector3f(0.5f, 0.5f, 0.5f));
     }
   }
   if (scene->points.empty()) {

@@ -48,8 +48,8 @@ const CameraModelInfo* FindCameraModel(const std::string& name) {
 
 Status ReadColmapModel(const std::string& dir, ColmapModel* model) {
   if (!DirectoryExists(dir)) return Status::Error(dir + ": COLMAP model folder does not exist");
-  const bool binary = FileExists(JoinPath(dir, "cameras.bin")) ||
-                      FileExists(JoinPath(dir, "images.bin"));
+  const bool binary =
+      FileExists(JoinPath(dir, "cameras.bin")) || FileExists(JoinPath(dir, "images.bin"));
   if (binary) {
     MGSR_RETURN_IF_ERROR(ReadCamerasBinary(JoinPath(dir, "cameras.bin"), &model->cameras));
     MGSR_RETURN_IF_ERROR(ReadImagesBinary(JoinPath(dir, "images.bin"), &model->images));
@@ -84,7 +84,8 @@ Status ValidateColmapModel(const ColmapModel& model, const std::string& dir) {
       return Status::Error(dir + ": camera id " + std::to_string(c.camera_id) + " appears twice");
     }
     if (!AllFinite(c.params)) {
-      return Status::Error(dir + ": camera " + std::to_string(c.camera_id) + " has NaN/inf parameters");
+      return Status::Error(dir + ": camera " + std::to_string(c.camera_id) +
+                           " has NaN/inf parameters");
     }
   }
   for (const ColmapImage& im : model.images) {
@@ -104,7 +105,8 @@ Status ValidateColmapModel(const ColmapModel& model, const std::string& dir) {
   }
   for (const ColmapPoint3D& p : model.points) {
     if (!p.xyz.allFinite()) {
-      return Status::Error(dir + ": point " + std::to_string(p.point3D_id) + " has NaN/inf coordinates");
+      return Status::Error(dir + ": point " + std::to_string(p.point3D_id) +
+                           " has NaN/inf coordinates");
     }
   }
   return Status::Ok();
@@ -137,7 +139,8 @@ Status MakePinholeCamera(const ColmapCamera& camera, const ColmapImage& image, C
   c.SetRotationFromQuaternion(image.qvec[0], image.qvec[1], image.qvec[2], image.qvec[3]);
   c.t = image.tvec;
   if (!c.IsValid()) {
-    return Status::Error("image " + image.name + ": invalid camera (non-positive focal length, "
+    return Status::Error("image " + image.name +
+                         ": invalid camera (non-positive focal length, "
                          "zero size or NaN/inf values)");
   }
   *out = c;

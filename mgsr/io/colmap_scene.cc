@@ -78,7 +78,8 @@ Status LoadColmapScene(const std::string& root, const SceneOptions& options, Sce
     std::set<std::string> known;
     for (const ColmapImage* im : images) known.insert(im->name);
     for (const std::string& n : test_names) {
-      if (!known.count(n)) return Status::Error(split_file + ": lists '" + n + "', which is not in the model");
+      if (!known.count(n))
+        return Status::Error(split_file + ": lists '" + n + "', which is not in the model");
     }
   }
 
@@ -129,7 +130,8 @@ Status LoadColmapScene(const std::string& root, const SceneOptions& options, Sce
     }
   }
 
-  if (scene->TrainIndices().empty()) return Status::Error(root + ": every image is a test image; nothing to train on");
+  if (scene->TrainIndices().empty())
+    return Status::Error(root + ": every image is a test image; nothing to train on");
   ComputeSceneExtent(scene);
 
   for (const ColmapPoint3D& p : model.points) {

@@ -88,10 +88,12 @@ Status ReadCamerasText(const std::string& path, std::vector<ColmapCamera>* camer
   size_t no = 0;
   while (text.NextDataLine(&line, &no)) {
     const std::vector<std::string> tok = SplitWhitespace(line);
-    if (tok.size() < 4) return LineError(path, no, "expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]");
+    if (tok.size() < 4)
+      return LineError(path, no, "expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS[]");
     ColmapCamera c;
     uint64_t id = 0;
-    if (!ParseUInt(tok[0], 0xFFFFFFFFull, &id)) return LineError(path, no, "bad camera id '" + tok[0] + "'");
+    if (!ParseUInt(tok[0], 0xFFFFFFFFull, &id))
+      return LineError(path, no, "bad camera id '" + tok[0] + "'");
     c.camera_id = static_cast<uint32_t>(id);
     const CameraModelInfo* info = FindCameraModel(tok[1]);
     if (info == nullptr) return LineError(path, no, "unknown camera model '" + tok[1] + "'");
@@ -106,7 +108,8 @@ Status ReadCamerasText(const std::string& path, std::vector<ColmapCamera>* camer
     }
     c.params.resize(info->num_params);
     for (int k = 0; k < info->num_params; ++k) {
-      if (!ParseDouble(tok[4 + k], &c.params[k])) return LineError(path, no, "bad parameter '" + tok[4 + k] + "'");
+      if (!ParseDouble(tok[4 + k], &c.params[k]))
+        return LineError(path, no, "bad parameter '" + tok[4 + k] + "'");
     }
     cameras->push_back(std::move(c));
   }
@@ -126,7 +129,8 @@ Status ReadImagesText(const std::string& path, std::vector<ColmapImage>* images)
     }
     ColmapImage im;
     uint64_t id = 0;
-    if (!ParseUInt(tok[0], 0xFFFFFFFFull, &id)) return LineError(path, no, "bad image id '" + tok[0] + "'");
+    if (!ParseUInt(tok[0], 0xFFFFFFFFull, &id))
+      return LineError(path, no, "bad image id '" + tok[0] + "'");
     im.image_id = static_cast<uint32_t>(id);
     for (int k = 0; k < 4; ++k) {
       if (!ParseDouble(tok[1 + k], &im.qvec[k])) return LineError(path, no, "bad quaternion");
@@ -134,7 +138,8 @@ Status ReadImagesText(const std::string& path, std::vector<ColmapImage>* images)
     for (int k = 0; k < 3; ++k) {
       if (!ParseDouble(tok[5 + k], &im.tvec[k])) return LineError(path, no, "bad translation");
     }
-    if (!ParseUInt(tok[8], 0xFFFFFFFFull, &id)) return LineError(path, no, "bad camera id '" + tok[8] + "'");
+    if (!ParseUInt(tok[8], 0xFFFFFFFFull, &id))
+      return LineError(path, no, "bad camera id '" + tok[8] + "'");
     im.camera_id = static_cast<uint32_t>(id);
     im.name = tok[9];
     // The POINTS2D line follows directly and may be empty.
@@ -204,7 +209,8 @@ Status WriteCamerasText(const std::string& path, const std::vector<ColmapCamera>
       << "# Number of cameras: " << cameras.size() << "\n";
   for (const ColmapCamera& c : cameras) {
     const CameraModelInfo* info = FindCameraModel(c.model_id);
-    if (info == nullptr) return Status::Error(path + ": unknown camera model id " + std::to_string(c.model_id));
+    if (info == nullptr)
+      return Status::Error(path + ": unknown camera model id " + std::to_string(c.model_id));
     out << c.camera_id << " " << info->name << " " << c.width << " " << c.height;
     for (double p : c.params) out << " " << FormatDouble(p);
     out << "\n";

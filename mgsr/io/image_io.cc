@@ -2,10 +2,10 @@
 
 #include <algorithm>
 #include <cstring>
-#include <sstream>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
 #include <vector>
 
 #include "mgsr/io/file_util.h"
@@ -16,7 +16,9 @@ namespace {
 // cv::Mat (interleaved, BGR order) <-> planar RGB float.
 Image FromMat(const cv::Mat& mat_in) {
   cv::Mat mat;
-  const double scale = mat_in.depth() == CV_16U ? 1.0 / 65535.0 : mat_in.depth() == CV_8U ? 1.0 / 255.0 : 1.0;
+  const double scale = mat_in.depth() == CV_16U  ? 1.0 / 65535.0
+                       : mat_in.depth() == CV_8U ? 1.0 / 255.0
+                                                 : 1.0;
   mat_in.convertTo(mat, CV_32F, scale);
   const int c = mat.channels();
   Image image(mat.cols, mat.rows, c);
@@ -54,7 +56,8 @@ Status ReadImage(const std::string& path, Image* image) {
   } catch (const cv::Exception&) {
     mat.release();
   }
-  if (mat.empty()) return Status::Error(path + ": cannot decode image (corrupt or unsupported format)");
+  if (mat.empty())
+    return Status::Error(path + ": cannot decode image (corrupt or unsupported format)");
   if (mat.channels() != 1 && mat.channels() != 3 && mat.channels() != 4) {
     return Status::Error(path + ": unsupported channel count " + std::to_string(mat.channels()));
   }
@@ -105,10 +108,11 @@ namespace mgsr {
 
 Status WritePfm(const std::string& path, const Image& image) {
   if (image.channels() != 1 && image.channels() != 3) {
-    return Status::Error(path + ": PFM holds 1 or 3 channels, not " + std::to_string(image.channels()));
+    return Status::Error(path + ": PFM holds 1 or 3 channels, not " +
+                         std::to_string(image.channels()));
   }
-  std::string out = (image.channels() == 1 ? "Pf\n" : "PF\n") + std::to_string(image.width()) + " " +
-                    std::to_string(image.height()) + "\n-1.0\n";
+  std::string out = (image.channels() == 1 ? "Pf\n" : "PF\n") + std::to_string(image.width()) +
+                    " " + std::to_string(image.height()) + "\n-1.0\n";
   const int w = image.width(), h = image.height(), c = image.channels();
   std::vector<float> row(static_cast<size_t>(w) * c);
   for (int y = h - 1; y >= 0; --y) {
@@ -127,7 +131,8 @@ Status ReadPfm(const std::string& path, Image* image) {
   std::string magic;
   int w = 0, h = 0;
   double scale = 0;
-  if (!(header >> magic >> w >> h >> scale) || (magic != "Pf" && magic != "PF") || w <= 0 || h <= 0) {
+  if (!(header >> magic >> w >> h >> scale) || (magic != "Pf" && magic != "PF") || w <= 0 ||
+      h <= 0) {
     return Status::Error(path + ": not a PFM file (bad header)");
   }
   if (scale > 0) return Status::Error(path + ": big-endian PFM is not supported");

@@ -30,7 +30,8 @@ Status GetStrided(const PlyElement& e, const std::string& path, const std::strin
   if (p < 0) return Status::Error(path + ": missing vertex property '" + name + "'");
   for (size_t i = 0; i < e.count; ++i) {
     const double x = e.columns[p][i];
-    if (!std::isfinite(x)) return Status::Error(path + ": NaN/inf in '" + name + "' at vertex " + std::to_string(i));
+    if (!std::isfinite(x))
+      return Status::Error(path + ": NaN/inf in '" + name + "' at vertex " + std::to_string(i));
     (*v)[i * stride + offset] = static_cast<float>(x);
   }
   return Status::Ok();
@@ -54,8 +55,8 @@ Status GetSh(const PlyElement& e, const std::string& path, const std::string& pr
   }
   for (int c = 0; c < 3; ++c) {
     for (int k = 1; k < K; ++k) {
-      MGSR_RETURN_IF_ERROR(GetStrided(e, path, prefix + "f_rest_" + std::to_string(c * (K - 1) + k - 1),
-                                      sh, K * 3, k * 3 + c));
+      MGSR_RETURN_IF_ERROR(GetStrided(
+          e, path, prefix + "f_rest_" + std::to_string(c * (K - 1) + k - 1), sh, K * 3, k * 3 + c));
     }
   }
   return Status::Ok();
@@ -68,7 +69,8 @@ PlyElement MakeVertexElement(size_t n, const std::vector<float>& means) {
   AddStrided(&e, "x", means, 3, 0);
   AddStrided(&e, "y", means, 3, 1);
   AddStrided(&e, "z", means, 3, 2);
-  for (const char* name : {"nx", "ny", "nz"}) e.AddColumn(name, "float", std::vector<double>(n, 0.0));
+  for (const char* name : {"nx", "ny", "nz"})
+    e.AddColumn(name, "float", std::vector<double>(n, 0.0));
   return e;
 }
 
@@ -106,18 +108,23 @@ Status ReadGaussianPly(const std::string& path, GaussianModel* m) {
   const PlyElement* e = nullptr;
   MGSR_RETURN_IF_ERROR(ReadVertexElement(path, &ply, &e));
   const int degree = DetectShDegree(*e, "");
-  if (degree < 0) return Status::Error(path + ": f_rest_* attributes do not match any SH degree 0-3");
+  if (degree < 0)
+    return Status::Error(path + ": f_rest_* attributes do not match any SH degree 0-3");
   GaussianModel out;
   out.max_sh_degree = degree;
   out.Resize(e->count);
   const int K = out.sh_coeffs();
-  for (int d = 0; d < 3; ++d) MGSR_RETURN_IF_ERROR(GetStrided(*e, path, std::string(1, "xyz"[d]), &out.means, 3, d));
+  for (int d = 0; d < 3; ++d)
+    MGSR_RETURN_IF_ERROR(GetStrided(*e, path, std::string(1, "xyz"[d]), &out.means, 3, d));
   MGSR_RETURN_IF_ERROR(GetSh(*e, path, "", K, &out.sh));
   MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "opacity", &out.opacity_logits, 1, 0));
-  for (int d = 0; d < 3; ++d) MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "scale_" + std::to_string(d), &out.log_scales, 3, d));
-  for (int d = 0; d < 4; ++d) MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "rot_" + std::to_string(d), &out.quats, 4, d));
+  for (int d = 0; d < 3; ++d)
+    MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "scale_" + std::to_string(d), &out.log_scales, 3, d));
+  for (int d = 0; d < 4; ++d)
+    MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "rot_" + std::to_string(d), &out.quats, 4, d));
   if (e->FindProperty("ref_f_dc_0") >= 0) {
-    if (DetectShDegree(*e, "ref_") != degree) return Status::Error(path + ": reflected SH degree differs from transmitted");
+    if (DetectShDegree(*e, "ref_") != degree)
+      return Status::Error(path + ": reflected SH degree differs from transmitted");
     MGSR_RETURN_IF_ERROR(GetSh(*e, path, "ref_", K, &out.ref_sh));
     MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "ref_opacity", &out.ref_opacity_logits, 1, 0));
     MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "beta", &out.beta_logits, 1, 0));
@@ -135,7 +142,8 @@ Status ReadGaussianPly(const std::string& path, GaussianModel* m) {
 Status WriteSurfelPly(const std::string& path, const SurfelModel& m) {
   const size_t n = m.size();
   PlyData ply;
-  ply.comments.push_back("MGSR-CPU 2DGS branch (surfels), sh_degree " + std::to_string(m.max_sh_degree));
+  ply.comments.push_back("MGSR-CPU 2DGS branch (surfels), sh_degree " +
+                         std::to_string(m.max_sh_degree));
   PlyElement e = MakeVertexElement(n, m.means);
   AddSh(&e, "", m.sh, m.sh_coeffs());
   AddStrided(&e, "opacity", m.opacity_logits, 1, 0);
@@ -150,16 +158,21 @@ Status ReadSurfelPly(const std::string& path, SurfelModel* m) {
   const PlyElement* e = nullptr;
   MGSR_RETURN_IF_ERROR(ReadVertexElement(path, &ply, &e));
   const int degree = DetectShDegree(*e, "");
-  if (degree < 0) return Status::Error(path + ": f_rest_* attributes do not match any SH degree 0-3");
-  if (e->FindProperty("scale_2") >= 0) return Status::Error(path + ": has three scales; this is a 3DGS file, not a surfel file");
+  if (degree < 0)
+    return Status::Error(path + ": f_rest_* attributes do not match any SH degree 0-3");
+  if (e->FindProperty("scale_2") >= 0)
+    return Status::Error(path + ": has three scales; this is a 3DGS file, not a surfel file");
   SurfelModel out;
   out.max_sh_degree = degree;
   out.Resize(e->count);
-  for (int d = 0; d < 3; ++d) MGSR_RETURN_IF_ERROR(GetStrided(*e, path, std::string(1, "xyz"[d]), &out.means, 3, d));
+  for (int d = 0; d < 3; ++d)
+    MGSR_RETURN_IF_ERROR(GetStrided(*e, path, std::string(1, "xyz"[d]), &out.means, 3, d));
   MGSR_RETURN_IF_ERROR(GetSh(*e, path, "", out.sh_coeffs(), &out.sh));
   MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "opacity", &out.opacity_logits, 1, 0));
-  for (int d = 0; d < 2; ++d) MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "scale_" + std::to_string(d), &out.log_scales, 2, d));
-  for (int d = 0; d < 4; ++d) MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "rot_" + std::to_string(d), &out.quats, 4, d));
+  for (int d = 0; d < 2; ++d)
+    MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "scale_" + std::to_string(d), &out.log_scales, 2, d));
+  for (int d = 0; d < 4; ++d)
+    MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "rot_" + std::to_string(d), &out.quats, 4, d));
   *m = std::move(out);
   return Status::Ok();
 }

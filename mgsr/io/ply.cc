@@ -14,34 +14,68 @@ namespace {
 int TypeSize(const std::string& t) {
   if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
   if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
-  if (t == "int" || t == "uint" || t == "int32" || t == "uint32" || t == "float" || t == "float32") return 4;
+  if (t == "int" || t == "uint" || t == "int32" || t == "uint32" || t == "float" || t == "float32")
+    return 4;
   if (t == "double" || t == "float64") return 8;
   return 0;
 }
 
 Status ReadScalar(BinaryReader* in, const std::string& t, double* v) {
   const int size = TypeSize(t);
-  if (t == "char" || t == "int8") { int8_t x = 0; MGSR_RETURN_IF_ERROR(in->Read(&x)); *v = x; }
-  else if (t == "uchar" || t == "uint8") { uint8_t x = 0; MGSR_RETURN_IF_ERROR(in->Read(&x)); *v = x; }
-  else if (t == "short" || t == "int16") { int16_t x = 0; MGSR_RETURN_IF_ERROR(in->Read(&x)); *v = x; }
-  else if (t == "ushort" || t == "uint16") { uint16_t x = 0; MGSR_RETURN_IF_ERROR(in->Read(&x)); *v = x; }
-  else if (t == "int" || t == "int32") { int32_t x = 0; MGSR_RETURN_IF_ERROR(in->Read(&x)); *v = x; }
-  else if (t == "uint" || t == "uint32") { uint32_t x = 0; MGSR_RETURN_IF_ERROR(in->Read(&x)); *v = x; }
-  else if (t == "float" || t == "float32") { float x = 0; MGSR_RETURN_IF_ERROR(in->Read(&x)); *v = x; }
-  else if (size == 8) { double x = 0; MGSR_RETURN_IF_ERROR(in->Read(&x)); *v = x; }
-  else return Status::Error(in->path() + ": unknown PLY type " + t);
+  if (t == "char" || t == "int8") {
+    int8_t x = 0;
+    MGSR_RETURN_IF_ERROR(in->Read(&x));
+    *v = x;
+  } else if (t == "uchar" || t == "uint8") {
+    uint8_t x = 0;
+    MGSR_RETURN_IF_ERROR(in->Read(&x));
+    *v = x;
+  } else if (t == "short" || t == "int16") {
+    int16_t x = 0;
+    MGSR_RETURN_IF_ERROR(in->Read(&x));
+    *v = x;
+  } else if (t == "ushort" || t == "uint16") {
+    uint16_t x = 0;
+    MGSR_RETURN_IF_ERROR(in->Read(&x));
+    *v = x;
+  } else if (t == "int" || t == "int32") {
+    int32_t x = 0;
+    MGSR_RETURN_IF_ERROR(in->Read(&x));
+    *v = x;
+  } else if (t == "uint" || t == "uint32") {
+    uint32_t x = 0;
+    MGSR_RETURN_IF_ERROR(in->Read(&x));
+    *v = x;
+  } else if (t == "float" || t == "float32") {
+    float x = 0;
+    MGSR_RETURN_IF_ERROR(in->Read(&x));
+    *v = x;
+  } else if (size == 8) {
+    double x = 0;
+    MGSR_RETURN_IF_ERROR(in->Read(&x));
+    *v = x;
+  } else
+    return Status::Error(in->path() + ": unknown PLY type " + t);
   return Status::Ok();
 }
 
 void WriteScalar(BinaryWriter* out, const std::string& t, double v) {
-  if (t == "char" || t == "int8") out->Write<int8_t>(static_cast<int8_t>(v));
-  else if (t == "uchar" || t == "uint8") out->Write<uint8_t>(static_cast<uint8_t>(v));
-  else if (t == "short" || t == "int16") out->Write<int16_t>(static_cast<int16_t>(v));
-  else if (t == "ushort" || t == "uint16") out->Write<uint16_t>(static_cast<uint16_t>(v));
-  else if (t == "int" || t == "int32") out->Write<int32_t>(static_cast<int32_t>(v));
-  else if (t == "uint" || t == "uint32") out->Write<uint32_t>(static_cast<uint32_t>(v));
-  else if (t == "float" || t == "float32") out->Write<float>(static_cast<float>(v));
-  else out->Write<double>(v);
+  if (t == "char" || t == "int8")
+    out->Write<int8_t>(static_cast<int8_t>(v));
+  else if (t == "uchar" || t == "uint8")
+    out->Write<uint8_t>(static_cast<uint8_t>(v));
+  else if (t == "short" || t == "int16")
+    out->Write<int16_t>(static_cast<int16_t>(v));
+  else if (t == "ushort" || t == "uint16")
+    out->Write<uint16_t>(static_cast<uint16_t>(v));
+  else if (t == "int" || t == "int32")
+    out->Write<int32_t>(static_cast<int32_t>(v));
+  else if (t == "uint" || t == "uint32")
+    out->Write<uint32_t>(static_cast<uint32_t>(v));
+  else if (t == "float" || t == "float32")
+    out->Write<float>(static_cast<float>(v));
+  else
+    out->Write<double>(v);
 }
 
 bool IsIntegerType(const std::string& t) {
@@ -57,7 +91,8 @@ int PlyElement::FindProperty(const std::string& n) const {
   return -1;
 }
 
-void PlyElement::AddColumn(const std::string& n, const std::string& type, std::vector<double> values) {
+void PlyElement::AddColumn(const std::string& n, const std::string& type,
+                           std::vector<double> values) {
   PlyProperty p;
   p.name = n;
   p.type = type;
@@ -83,9 +118,11 @@ Status ReadPly(const std::string& path, PlyData* ply) {
   std::string data;
   MGSR_RETURN_IF_ERROR(ReadFileToString(path, &data));
   *ply = PlyData();
-  if (data.compare(0, 3, "ply") != 0) return Status::Error(path + ": not a PLY file (no 'ply' magic)");
+  if (data.compare(0, 3, "ply") != 0)
+    return Status::Error(path + ": not a PLY file (no 'ply' magic)");
   const size_t header_end = data.find("end_header");
-  if (header_end == std::string::npos) return Status::Error(path + ": truncated PLY header (no end_header)");
+  if (header_end == std::string::npos)
+    return Status::Error(path + ": truncated PLY header (no end_header)");
   size_t body = data.find('\n', header_end);
   if (body == std::string::npos) return Status::Error(path + ": truncated PLY header");
   ++body;
@@ -101,9 +138,13 @@ Status ReadPly(const std::string& path, PlyData* ply) {
     if (key == "format") {
       std::string fmt;
       ls >> fmt;
-      if (fmt == "ascii") ply->format = PlyFormat::kAscii;
-      else if (fmt == "binary_little_endian") ply->format = PlyFormat::kBinaryLittleEndian;
-      else return Status::Error(path + ": unsupported PLY format '" + fmt + "' (ascii and binary_little_endian only)");
+      if (fmt == "ascii")
+        ply->format = PlyFormat::kAscii;
+      else if (fmt == "binary_little_endian")
+        ply->format = PlyFormat::kBinaryLittleEndian;
+      else
+        return Status::Error(path + ": unsupported PLY format '" + fmt +
+                             "' (ascii and binary_little_endian only)");
       have_format = true;
     } else if (key == "comment" || key == "obj_info") {
       const size_t pos = line.find(' ');
@@ -112,7 +153,8 @@ Status ReadPly(const std::string& path, PlyData* ply) {
       PlyElement e;
       long long count = -1;
       ls >> e.name >> count;
-      if (e.name.empty() || count < 0) return Status::Error(path + ": bad element line '" + line + "'");
+      if (e.name.empty() || count < 0)
+        return Status::Error(path + ": bad element line '" + line + "'");
       e.count = static_cast<size_t>(count);
       ply->elements.push_back(e);
     } else if (key == "property") {
@@ -123,7 +165,8 @@ Status ReadPly(const std::string& path, PlyData* ply) {
       if (t == "list") {
         p.is_list = true;
         ls >> p.count_type >> p.type >> p.name;
-        if (TypeSize(p.count_type) == 0) return Status::Error(path + ": unknown PLY type " + p.count_type);
+        if (TypeSize(p.count_type) == 0)
+          return Status::Error(path + ": unknown PLY type " + p.count_type);
       } else {
         p.type = t;
         ls >> p.name;
@@ -143,8 +186,10 @@ Status ReadPly(const std::string& path, PlyData* ply) {
     e.columns.assign(e.properties.size(), {});
     e.lists.assign(e.properties.size(), {});
     for (size_t p = 0; p < e.properties.size(); ++p) {
-      if (e.properties[p].is_list) e.lists[p].resize(e.count);
-      else e.columns[p].resize(e.count);
+      if (e.properties[p].is_list)
+        e.lists[p].resize(e.count);
+      else
+        e.columns[p].resize(e.count);
     }
   }
 
@@ -162,7 +207,8 @@ Status ReadPly(const std::string& path, PlyData* ply) {
           double n = 0;
           MGSR_RETURN_IF_ERROR(ReadScalar(&in, prop.count_type, &n));
           if (n < 0) return Status::Error(path + ": negative list length");
-          MGSR_RETURN_IF_ERROR(in.CheckRemaining(static_cast<uint64_t>(n), TypeSize(prop.type), "list items"));
+          MGSR_RETURN_IF_ERROR(
+              in.CheckRemaining(static_cast<uint64_t>(n), TypeSize(prop.type), "list items"));
           auto& list = e.lists[p][i];
           list.resize(static_cast<size_t>(n));
           for (auto& v : list) {
@@ -181,19 +227,21 @@ Status ReadPly(const std::string& path, PlyData* ply) {
           const PlyProperty& prop = e.properties[p];
           if (!prop.is_list) {
             if (!(in >> e.columns[p][i])) {
-              return Status::Error(path + ": truncated or malformed ASCII data in element '" + e.name +
-                                   "' item " + std::to_string(i));
+              return Status::Error(path + ": truncated or malformed ASCII data in element '" +
+                                   e.name + "' item " + std::to_string(i));
             }
             continue;
           }
           long long n = 0;
           if (!(in >> n) || n < 0 || n > 1 << 20) {
-            return Status::Error(path + ": truncated or malformed list in element '" + e.name + "'");
+            return Status::Error(path + ": truncated or malformed list in element '" + e.name +
+                                 "'");
           }
           auto& list = e.lists[p][i];
           list.resize(static_cast<size_t>(n));
           for (auto& v : list) {
-            if (!(in >> v)) return Status::Error(path + ": truncated list in element '" + e.name + "'");
+            if (!(in >> v))
+              return Status::Error(path + ": truncated list in element '" + e.name + "'");
           }
         }
       }
@@ -204,22 +252,24 @@ Status ReadPly(const std::string& path, PlyData* ply) {
 
 Status WritePly(const std::string& path, const PlyData& ply) {
   std::ostringstream header;
-  header << "ply\nformat "
-         << (ply.format == PlyFormat::kAscii ? "ascii" : "binary_little_endian") << " 1.0\n";
+  header << "ply\nformat " << (ply.format == PlyFormat::kAscii ? "ascii" : "binary_little_endian")
+         << " 1.0\n";
   for (const auto& c : ply.comments) header << "comment " << c << "\n";
   for (const PlyElement& e : ply.elements) {
     header << "element " << e.name << " " << e.count << "\n";
     for (size_t p = 0; p < e.properties.size(); ++p) {
       const PlyProperty& prop = e.properties[p];
       if (prop.is_list) {
-        header << "property list " << prop.count_type << " " << prop.type << " " << prop.name << "\n";
+        header << "property list " << prop.count_type << " " << prop.type << " " << prop.name
+               << "\n";
       } else {
         header << "property " << prop.type << " " << prop.name << "\n";
       }
       const size_t have = prop.is_list ? e.lists[p].size() : e.columns[p].size();
       if (have != e.count) {
         return Status::Error(path + ": internal error: property '" + prop.name + "' has " +
-                             std::to_string(have) + " values for " + std::to_string(e.count) + " items");
+                             std::to_string(have) + " values for " + std::to_string(e.count) +
+                             " items");
       }
     }
   }
@@ -251,8 +301,10 @@ Status WritePly(const std::string& path, const PlyData& ply) {
           const PlyProperty& prop = e.properties[p];
           if (p > 0) body << " ";
           if (!prop.is_list) {
-            if (IsIntegerType(prop.type)) body << static_cast<long long>(e.columns[p][i]);
-            else body << e.columns[p][i];
+            if (IsIntegerType(prop.type))
+              body << static_cast<long long>(e.columns[p][i]);
+            else
+              body << e.columns[p][i];
             continue;
           }
           body << e.lists[p][i].size();
@@ -288,20 +340,23 @@ Status ReadTriangleMesh(const std::string& path, TriangleMesh* mesh) {
       mesh->vertex_normals[i] = {v->columns[inx][i], v->columns[iny][i], v->columns[inz][i]};
     }
   }
-  const int ir = v->FindProperty("red"), ig = v->FindProperty("green"), ib = v->FindProperty("blue");
+  const int ir = v->FindProperty("red"), ig = v->FindProperty("green"),
+            ib = v->FindProperty("blue");
   if (ir >= 0 && ig >= 0 && ib >= 0) {
     const double scale = IsIntegerType(v->properties[ir].type) ? 1.0 / 255.0 : 1.0;
     mesh->vertex_colors.resize(v->count);
     for (size_t i = 0; i < v->count; ++i) {
-      mesh->vertex_colors[i] = Eigen::Vector3d(v->columns[ir][i], v->columns[ig][i], v->columns[ib][i])
-                                   .cast<float>() * static_cast<float>(scale);
+      mesh->vertex_colors[i] =
+          Eigen::Vector3d(v->columns[ir][i], v->columns[ig][i], v->columns[ib][i]).cast<float>() *
+          static_cast<float>(scale);
     }
   }
   const PlyElement* f = ply.FindElement("face");
   if (f != nullptr) {
     int il = f->FindProperty("vertex_indices");
     if (il < 0) il = f->FindProperty("vertex_index");
-    if (il < 0 || !f->properties[il].is_list) return Status::Error(path + ": faces lack vertex_indices");
+    if (il < 0 || !f->properties[il].is_list)
+      return Status::Error(path + ": faces lack vertex_indices");
     for (size_t i = 0; i < f->count; ++i) {
       const auto& idx = f->lists[il][i];
       for (int64_t k : idx) {

@@ -13,7 +13,8 @@ namespace mgsr {
 
 struct PlyProperty {
   std::string name;
-  std::string type = "float";       // char uchar short ushort int uint float double (or int8 ... float64)
+  std::string type =
+      "float";  // char uchar short ushort int uint float double (or int8 ... float64)
   bool is_list = false;
   std::string count_type = "uchar";  // for lists
 };

@@ -40,7 +40,8 @@ Status LoadScene(const std::string& path, const SceneOptions& options, Scene* sc
   const bool blender = FileExists(JoinPath(path, "transforms_train.json"));
   if (colmap) return LoadColmapScene(path, options, scene);
   if (blender) return LoadBlenderScene(path, options, scene);
-  return Status::Error(path + ": not a scene (expected sparse/ for COLMAP or transforms_train.json "
+  return Status::Error(path +
+                       ": not a scene (expected sparse/ for COLMAP or transforms_train.json "
                        "for Blender)");
 }
 
@@ -56,7 +57,8 @@ Status LoadViewImages(const std::string& image_path, const std::string& mask_pat
   }
   if (raw.channels() == 1) {  // grey: replicate
     Image rgb(raw.width(), raw.height(), 3);
-    for (int c = 0; c < 3; ++c) std::copy(raw.plane(0), raw.plane(0) + raw.plane_size(), rgb.plane(c));
+    for (int c = 0; c < 3; ++c)
+      std::copy(raw.plane(0), raw.plane(0) + raw.plane_size(), rgb.plane(c));
     raw = std::move(rgb);
   }
   Image rgb = raw.channels() == 4 ? ExtractChannels(raw, 0, 3) : raw;
@@ -75,11 +77,14 @@ Status LoadViewImages(const std::string& image_path, const std::string& mask_pat
   }
   int width = raw.width(), height = raw.height();
   if (options.downscale > 1) {
-    width = std::max(1, static_cast<int>(std::lround(static_cast<double>(width) / options.downscale)));
-    height = std::max(1, static_cast<int>(std::lround(static_cast<double>(height) / options.downscale)));
+    width =
+        std::max(1, static_cast<int>(std::lround(static_cast<double>(width) / options.downscale)));
+    height =
+        std::max(1, static_cast<int>(std::lround(static_cast<double>(height) / options.downscale)));
   }
   if (options.max_width > 0 && width > options.max_width) {
-    height = std::max(1, static_cast<int>(std::lround(static_cast<double>(height) * options.max_width / width)));
+    height = std::max(
+        1, static_cast<int>(std::lround(static_cast<double>(height) * options.max_width / width)));
     width = options.max_width;
   }
   if (width != raw.width() || height != raw.height()) {
@@ -102,7 +107,8 @@ void ComputeSceneExtent(Scene* scene) {
   for (int i : train) center += scene->views[i].camera.Center();
   center /= static_cast<double>(train.size());
   double max_dist = 0;
-  for (int i : train) max_dist = std::max(max_dist, (scene->views[i].camera.Center() - center).norm());
+  for (int i : train)
+    max_dist = std::max(max_dist, (scene->views[i].camera.Center() - center).norm());
   scene->center = center;
   scene->extent = max_dist > 0 ? 1.1 * max_dist : 1.0;
 }

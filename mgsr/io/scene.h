@@ -1,4 +1,5 @@
-// Scene: what the solver trains on, read from a COLMAP workspace or a Blender/NeRF-synthetic folder.
+// Scene: what the solver trains on, read from a COLMAP workspace or a Blender/NeRF-synthetic
+// folder.
 //
 // COLMAP workspace:  images/, optional masks/<stem>.png|jpg (or <name>.png), sparse/0/ or sparse/
 //                    (binary or text), optional split.txt / test.txt listing test image names.
@@ -27,10 +28,10 @@ struct View {
 };
 
 struct SceneOptions {
-  int downscale = 1;        // divide the resolution by this factor
-  int max_width = 1600;     // then cap the width (0 = no cap), as the reference loader does
-  int test_every = 8;       // without a split file, every Nth image (by name) is a test view; 0 = none
-  bool load_images = true;  // false: cameras and points only
+  int downscale = 1;     // divide the resolution by this factor
+  int max_width = 1600;  // then cap the width (0 = no cap), as the reference loader does
+  int test_every = 8;    // without a split file, every Nth image (by name) is a test view; 0 = none
+  bool load_images = true;     // false: cameras and points only
   int random_points = 100000;  // points drawn when the model has none
   uint64_t seed = 0;
 };

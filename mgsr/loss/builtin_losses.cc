@@ -14,9 +14,12 @@ Status ParseTarget(const nlohmann::json& c, const char* key, TargetKind* out) {
   *out = TargetKind::kImage;
   if (!c.contains(key)) return Status::Ok();
   const std::string v = c[key].is_string() ? c[key].get<std::string>() : "";
-  if (v == "image") *out = TargetKind::kImage;
-  else if (v == "transmitted") *out = TargetKind::kTransmitted;
-  else return Status::Error(std::string("'") + key + "' must be \"image\" or \"transmitted\"");
+  if (v == "image")
+    *out = TargetKind::kImage;
+  else if (v == "transmitted")
+    *out = TargetKind::kTransmitted;
+  else
+    return Status::Error(std::string("'") + key + "' must be \"image\" or \"transmitted\"");
   return Status::Ok();
 }
 
@@ -51,7 +54,8 @@ void RegisterBuiltinLosses(LossRegistry* r) {
     return std::make_unique<RenderLoss>(b, t, Number(c, "lambda", 0.8));
   });
   r->Register("mutual_render", [](const nlohmann::json& c, Status*) -> std::unique_ptr<LossTerm> {
-    return std::make_unique<MutualRenderLoss>(Number(c, "transmitted_weight", 0.2), Number(c, "image_weight", 0.8),
+    return std::make_unique<MutualRenderLoss>(Number(c, "transmitted_weight", 0.2),
+                                              Number(c, "image_weight", 0.8),
                                               Number(c, "lambda", 0.8));
   });
   r->Register("tv", [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
@@ -62,11 +66,13 @@ void RegisterBuiltinLosses(LossRegistry* r) {
     if (!s->ok()) return nullptr;
     return std::make_unique<EdgeAwareTvLoss>(b, g);
   });
-  r->Register("normal_consistency", [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {
-    return std::make_unique<NormalConsistencyLoss>();
-  });
+  r->Register("normal_consistency",
+              [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {
+                return std::make_unique<NormalConsistencyLoss>();
+              });
   r->Register("mutual_depth", [](const nlohmann::json& c, Status*) -> std::unique_ptr<LossTerm> {
-    return std::make_unique<MutualDepthLoss>(c.contains("masked") && c["masked"].is_boolean() && c["masked"].get<bool>());
+    return std::make_unique<MutualDepthLoss>(c.contains("masked") && c["masked"].is_boolean() &&
+                                             c["masked"].get<bool>());
   });
   r->Register("distortion", [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {
     return std::make_unique<DistortionLoss>();

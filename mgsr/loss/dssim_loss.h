@@ -1,7 +1,7 @@
 // D-SSIM: 1 - SSIM, with SSIM as the reference computes it (reference 1.14): an 11x11 Gaussian
-// window (sigma 1.5) per channel, zero padding, C1 = 0.01^2, C2 = 0.03^2, mean of the map. Means and
-// second moments come from separable blurs; the backward uses that the zero-padded symmetric blur
-// is its own adjoint: d/dx = G*(dS/dmu_x) + 2x G*(dS/dE[x^2]) + y G*(dS/dE[xy]).
+// window (sigma 1.5) per channel, zero padding, C1 = 0.01^2, C2 = 0.03^2, mean of the map. Means
+// and second moments come from separable blurs; the backward uses that the zero-padded symmetric
+// blur is its own adjoint: d/dx = G*(dS/dmu_x) + 2x G*(dS/dE[x^2]) + y G*(dS/dE[xy]).
 #pragma once
 
 #include <vector>
@@ -22,18 +22,21 @@ class DssimLoss : public LossTermImpl<DssimLoss> {
   std::vector<Buffer> Inputs() const override { return {buffer_}; }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
     MGSR_RETURN_IF_ERROR(RequireImage(Name(), BufferName(buffer_), in.Get(buffer_)));
-    return RequireImage(Name(), TargetName(target_), SelectTarget(t, target_), in.Get(buffer_), in.Get(buffer_)->channels());
+    return RequireImage(Name(), TargetName(target_), SelectTarget(t, target_), in.Get(buffer_),
+                        in.Get(buffer_)->channels());
   }
 
   template <typename T>
-  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale, RenderGradientsT<T>* grad) const {
+  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+                 RenderGradientsT<T>* grad) const {
     const ImageT<T>& x = *in.Get(buffer_);
     const ImageT<T>& y = *SelectTarget(t, target_);
     const int w = x.width(), h = x.height();
     const size_t n = x.plane_size();
     const T C1 = T(0.01 * 0.01), C2 = T(0.03 * 0.03);
     const std::vector<T> window = SsimWindowT<T>();
-    std::vector<T> scratch, prod(n), mx(n), my(n), exx(n), eyy(n), exy(n), a1(n), a2(n), a3(n), b(n);
+    std::vector<T> scratch, prod(n), mx(n), my(n), exx(n), eyy(n), exy(n), a1(n), a2(n), a3(n),
+        b(n);
     double total = 0;
     const T dscale = static_cast<T>(-scale / static_cast<double>(x.size()));  // d(1 - mean S) / dS
     for (int c = 0; c < x.channels(); ++c) {
@@ -50,7 +53,8 @@ class DssimLoss : public LossTermImpl<DssimLoss> {
       for (size_t i = 0; i < n; ++i) {
         const T ux = mx[i], uy = my[i];
         const T vx = exx[i] - ux * ux, vy = eyy[i] - uy * uy, cxy = exy[i] - ux * uy;
-        const T A = 2 * ux * uy + C1, B = 2 * cxy + C2, C = ux * ux + uy * uy + C1, D = vx + vy + C2;
+        const T A = 2 * ux * uy + C1, B = 2 * cxy + C2, C = ux * ux + uy * uy + C1,
+                D = vx + vy + C2;
         const T S = (A * B) / (C * D);
         total += S;
         if (grad) {

@@ -16,7 +16,9 @@ class EdgeAwareTvLoss : public LossTermImpl<EdgeAwareTvLoss> {
  public:
   explicit EdgeAwareTvLoss(Buffer buffer = Buffer::kDepth, TargetKind guide = TargetKind::kImage)
       : buffer_(buffer), guide_(guide) {}
-  std::string Name() const override { return std::string("tv(") + BufferName(buffer_) + ", " + TargetName(guide_) + ")"; }
+  std::string Name() const override {
+    return std::string("tv(") + BufferName(buffer_) + ", " + TargetName(guide_) + ")";
+  }
   std::vector<Buffer> Inputs() const override { return {buffer_}; }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
     MGSR_RETURN_IF_ERROR(RequireImage(Name(), BufferName(buffer_), in.Get(buffer_)));
@@ -24,7 +26,8 @@ class EdgeAwareTvLoss : public LossTermImpl<EdgeAwareTvLoss> {
   }
 
   template <typename T>
-  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale, RenderGradientsT<T>* grad) const {
+  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+                 RenderGradientsT<T>* grad) const {
     const ImageT<T>& P = *in.Get(buffer_);
     const ImageT<T>& I = *SelectTarget(t, guide_);
     const int w = P.width(), h = P.height();

@@ -12,15 +12,19 @@ class L1Loss : public LossTermImpl<L1Loss> {
  public:
   explicit L1Loss(Buffer buffer = Buffer::kColor, TargetKind target = TargetKind::kImage)
       : buffer_(buffer), target_(target) {}
-  std::string Name() const override { return std::string("l1(") + BufferName(buffer_) + ", " + TargetName(target_) + ")"; }
+  std::string Name() const override {
+    return std::string("l1(") + BufferName(buffer_) + ", " + TargetName(target_) + ")";
+  }
   std::vector<Buffer> Inputs() const override { return {buffer_}; }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
     MGSR_RETURN_IF_ERROR(RequireImage(Name(), BufferName(buffer_), in.Get(buffer_)));
-    return RequireImage(Name(), TargetName(target_), SelectTarget(t, target_), in.Get(buffer_), in.Get(buffer_)->channels());
+    return RequireImage(Name(), TargetName(target_), SelectTarget(t, target_), in.Get(buffer_),
+                        in.Get(buffer_)->channels());
   }
 
   template <typename T>
-  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale, RenderGradientsT<T>* grad) const {
+  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+                 RenderGradientsT<T>* grad) const {
     const ImageT<T>& x = *in.Get(buffer_);
     const ImageT<T>& y = *SelectTarget(t, target_);
     const double inv_n = 1.0 / static_cast<double>(x.size());

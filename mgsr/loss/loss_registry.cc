@@ -11,10 +11,12 @@ LossRegistry& LossRegistry::Get() {
   return *registry;
 }
 
-void LossRegistry::Register(const std::string& name, Factory factory) { factories_[name] = std::move(factory); }
+void LossRegistry::Register(const std::string& name, Factory factory) {
+  factories_[name] = std::move(factory);
+}
 
-std::unique_ptr<LossTerm> LossRegistry::Create(const std::string& name, const nlohmann::json& config,
-                                               Status* status) const {
+std::unique_ptr<LossTerm> LossRegistry::Create(const std::string& name,
+                                               const nlohmann::json& config, Status* status) const {
   const auto it = factories_.find(name);
   if (it == factories_.end()) {
     std::string known;

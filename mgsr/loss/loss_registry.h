@@ -2,7 +2,8 @@
 // writing one class and one registration line (in builtin_losses.cc or in their own code):
 //   LossRegistry::Get().Register("my_term", [](const nlohmann::json& c, Status* s) { ... });
 // Config keys understood by the built-in terms: "buffer" (color, transmitted, depth, normal, ...),
-// "target" / "guide" (image, transmitted), "lambda", "masked", "transmitted_weight", "image_weight".
+// "target" / "guide" (image, transmitted), "lambda", "masked", "transmitted_weight",
+// "image_weight".
 #pragma once
 
 #include <functional>
@@ -19,14 +20,16 @@ namespace mgsr {
 
 class LossRegistry {
  public:
-  using Factory = std::function<std::unique_ptr<LossTerm>(const nlohmann::json& config, Status* status)>;
+  using Factory =
+      std::function<std::unique_ptr<LossTerm>(const nlohmann::json& config, Status* status)>;
 
   // The process-wide registry, with the built-in terms registered.
   static LossRegistry& Get();
 
   void Register(const std::string& name, Factory factory);
   // nullptr and a message naming the term and the problem when the name or the config is bad.
-  std::unique_ptr<LossTerm> Create(const std::string& name, const nlohmann::json& config, Status* status) const;
+  std::unique_ptr<LossTerm> Create(const std::string& name, const nlohmann::json& config,
+                                   Status* status) const;
   std::vector<std::string> Names() const;
 
  private:

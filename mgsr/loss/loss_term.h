@@ -33,10 +33,12 @@ class LossTerm {
 template <typename Derived>
 class LossTermImpl : public LossTerm {
  public:
-  double Evaluate(const RenderBuffers& in, const Targets& t, double scale, RenderGradients* grad) const final {
+  double Evaluate(const RenderBuffers& in, const Targets& t, double scale,
+                  RenderGradients* grad) const final {
     return static_cast<const Derived*>(this)->template Compute<float>(in, t, scale, grad);
   }
-  double Evaluate(const RenderBuffersD& in, const TargetsD& t, double scale, RenderGradientsD* grad) const final {
+  double Evaluate(const RenderBuffersD& in, const TargetsD& t, double scale,
+                  RenderGradientsD* grad) const final {
     return static_cast<const Derived*>(this)->template Compute<double>(in, t, scale, grad);
   }
 };

@@ -19,14 +19,17 @@ class MutualDepthLoss : public LossTermImpl<MutualDepthLoss> {
   std::string Name() const override { return masked_ ? "mutual_depth(masked)" : "mutual_depth"; }
   std::vector<Buffer> Inputs() const override { return {Buffer::kDepth}; }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
-    MGSR_RETURN_IF_ERROR(RequireImage(Name(), "depth", in.Get(Buffer::kDepth), static_cast<const Image*>(nullptr), 1));
-    MGSR_RETURN_IF_ERROR(RequireImage(Name(), "the other branch's depth", t.other_depth, in.Get(Buffer::kDepth), 1));
+    MGSR_RETURN_IF_ERROR(RequireImage(Name(), "depth", in.Get(Buffer::kDepth),
+                                      static_cast<const Image*>(nullptr), 1));
+    MGSR_RETURN_IF_ERROR(
+        RequireImage(Name(), "the other branch's depth", t.other_depth, in.Get(Buffer::kDepth), 1));
     if (masked_) return RequireImage(Name(), "mask", t.mask, in.Get(Buffer::kDepth), 1);
     return Status::Ok();
   }
 
   template <typename T>
-  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale, RenderGradientsT<T>* grad) const {
+  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+                 RenderGradientsT<T>* grad) const {
     const ImageT<T>& D = *in.Get(Buffer::kDepth);
     const ImageT<T>& Z = *t.other_depth;
     T max_d = 0, max_z = 0;
@@ -60,7 +63,8 @@ class DistortionLoss : public LossTermImpl<DistortionLoss> {
     return RequireImage(Name(), "distortion", in.Get(Buffer::kDistortion));
   }
   template <typename T>
-  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>&, double scale, RenderGradientsT<T>* grad) const {
+  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>&, double scale,
+                 RenderGradientsT<T>* grad) const {
     const ImageT<T>& d = *in.Get(Buffer::kDistortion);
     const double inv_n = 1.0 / static_cast<double>(d.size());
     double total = 0;

@@ -25,16 +25,21 @@ class NormalConsistencyLoss : public LossTermImpl<NormalConsistencyLoss> {
   std::vector<Buffer> Inputs() const override { return {Buffer::kNormal, Buffer::kDepth}; }
   std::vector<Buffer> ConstantInputs() const override { return {Buffer::kAlpha}; }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
-    MGSR_RETURN_IF_ERROR(RequireImage(Name(), "depth", in.Get(Buffer::kDepth), static_cast<const Image*>(nullptr), 1));
-    MGSR_RETURN_IF_ERROR(RequireImage(Name(), "normal", in.Get(Buffer::kNormal), in.Get(Buffer::kDepth), 3));
-    MGSR_RETURN_IF_ERROR(RequireImage(Name(), "alpha", in.Get(Buffer::kAlpha), in.Get(Buffer::kDepth), 1));
-    if (t.mask != nullptr) MGSR_RETURN_IF_ERROR(RequireImage(Name(), "mask", t.mask, in.Get(Buffer::kDepth), 1));
+    MGSR_RETURN_IF_ERROR(RequireImage(Name(), "depth", in.Get(Buffer::kDepth),
+                                      static_cast<const Image*>(nullptr), 1));
+    MGSR_RETURN_IF_ERROR(
+        RequireImage(Name(), "normal", in.Get(Buffer::kNormal), in.Get(Buffer::kDepth), 3));
+    MGSR_RETURN_IF_ERROR(
+        RequireImage(Name(), "alpha", in.Get(Buffer::kAlpha), in.Get(Buffer::kDepth), 1));
+    if (t.mask != nullptr)
+      MGSR_RETURN_IF_ERROR(RequireImage(Name(), "mask", t.mask, in.Get(Buffer::kDepth), 1));
     if (in.camera == nullptr) return Status::Error(Name() + ": needs the camera");
     return Status::Ok();
   }
 
   template <typename T>
-  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale, RenderGradientsT<T>* grad) const;
+  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+                 RenderGradientsT<T>* grad) const;
 };
 
 // --- implementation ---------------------------------------------------------------------------
@@ -56,7 +61,9 @@ ImageT<T> DepthToNormal(const ImageT<T>& depth, const Camera& cam) {
   const int w = depth.width(), h = depth.height();
   ImageT<T> out(w, h, 3);
   const V C = cam.Center().template cast<T>();
-  auto P = [&](int x, int y) -> V { return C + depth.at(0, y, x) * internal::PixelRay<T>(cam, x, y); };
+  auto P = [&](int x, int y) -> V {
+    return C + depth.at(0, y, x) * internal::PixelRay<T>(cam, x, y);
+  };
   for (int y = 1; y + 1 < h; ++y) {
     for (int x = 1; x + 1 < w; ++x) {
       const V c = (P(x, y + 1) - P(x, y - 1)).cross(P(x + 1, y) - P(x - 1, y));
@@ -69,8 +76,8 @@ ImageT<T> DepthToNormal(const ImageT<T>& depth, const Camera& cam) {
 }
 
 template <typename T>
-double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
-                                      RenderGradientsT<T>* grad) const {
+double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t,
+                                      double scale, RenderGradientsT<T>* grad) const {
   using V = internal::Vec3<T>;
   const ImageT<T>& D = *in.Get(Buffer::kDepth);
   const ImageT<T>& N = *in.Get(Buffer::kNormal);
@@ -82,7 +89,8 @@ double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const Targets
   // World rays of every pixel, once per call.
   std::vector<V> rays(static_cast<size_t>(w) * h);
   for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) rays[static_cast<size_t>(y) * w + x] = internal::PixelRay<T>(cam, x, y);
+    for (int x = 0; x < w; ++x)
+      rays[static_cast<size_t>(y) * w + x] = internal::PixelRay<T>(cam, x, y);
   }
   auto ray = [&](int x, int y) -> const V& { return rays[static_cast<size_t>(y) * w + x]; };
   auto P = [&](int x, int y) -> V { return C + D.at(0, y, x) * ray(x, y); };

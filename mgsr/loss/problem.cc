@@ -24,8 +24,8 @@ Status Problem::Check(Branch branch, const RenderBuffers& in, const Targets& tar
   return Status::Ok();
 }
 
-double Problem::Evaluate(Branch branch, const RenderBuffers& in, const Targets& targets, RenderGradients* grad,
-                         std::vector<TermValue>* breakdown) const {
+double Problem::Evaluate(Branch branch, const RenderBuffers& in, const Targets& targets,
+                         RenderGradients* grad, std::vector<TermValue>* breakdown) const {
   if (grad != nullptr) grad->Clear();
   if (breakdown != nullptr) breakdown->clear();
   double total = 0;

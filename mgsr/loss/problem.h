@@ -29,15 +29,17 @@ class Problem {
   };
 
   void AddTerm(std::unique_ptr<LossTerm> term, double weight, Branch branch);
-  // Changes the weight of the first entry whose term name matches (schedules switch terms on and off).
+  // Changes the weight of the first entry whose term name matches (schedules switch terms on and
+  // off).
   bool SetWeight(const std::string& name, Branch branch, double weight);
   const std::vector<Entry>& entries() const { return entries_; }
 
   // Checks every active term of the branch against the buffers and targets.
   Status Check(Branch branch, const RenderBuffers& in, const Targets& targets) const;
-  // Weighted sum of the branch's terms; with grad, it is cleared and filled with d total / d buffer.
-  double Evaluate(Branch branch, const RenderBuffers& in, const Targets& targets, RenderGradients* grad,
-                  std::vector<TermValue>* breakdown = nullptr) const;
+  // Weighted sum of the branch's terms; with grad, it is cleared and filled with d total / d
+  // buffer.
+  double Evaluate(Branch branch, const RenderBuffers& in, const Targets& targets,
+                  RenderGradients* grad, std::vector<TermValue>* breakdown = nullptr) const;
 
  private:
   std::vector<Entry> entries_;

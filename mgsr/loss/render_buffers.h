@@ -40,10 +40,12 @@ struct RenderBuffersT {
 // Constant inputs: nothing here receives a gradient (that is one-way supervision).
 template <typename T>
 struct TargetsT {
-  const ImageT<T>* image = nullptr;        // ground truth, RGB
-  const ImageT<T>* mask = nullptr;         // foreground weight gamma in [0, 1], 1 channel
-  const ImageT<T>* transmitted = nullptr;  // the 3DGS branch's C_tran, as a target for the 2DGS branch
-  const ImageT<T>* other_depth = nullptr;  // the 2DGS branch's depth, as a target for the 3DGS branch
+  const ImageT<T>* image = nullptr;  // ground truth, RGB
+  const ImageT<T>* mask = nullptr;   // foreground weight gamma in [0, 1], 1 channel
+  const ImageT<T>* transmitted =
+      nullptr;  // the 3DGS branch's C_tran, as a target for the 2DGS branch
+  const ImageT<T>* other_depth =
+      nullptr;  // the 2DGS branch's depth, as a target for the 3DGS branch
 };
 
 template <typename T>

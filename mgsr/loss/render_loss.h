@@ -1,4 +1,5 @@
-// The render loss of the paper: lambda L1 + (1 - lambda) D-SSIM, lambda = 0.8 (reference 1.7, lambda_1).
+// The render loss of the paper: lambda L1 + (1 - lambda) D-SSIM, lambda = 0.8 (reference 1.7,
+// lambda_1).
 #pragma once
 
 #include "mgsr/loss/dssim_loss.h"
@@ -8,16 +9,24 @@ namespace mgsr {
 
 class RenderLoss : public LossTermImpl<RenderLoss> {
  public:
-  explicit RenderLoss(Buffer buffer = Buffer::kColor, TargetKind target = TargetKind::kImage, double lambda = 0.8)
-      : l1_(buffer, target), dssim_(buffer, target), buffer_(buffer), target_(target), lambda_(lambda) {}
+  explicit RenderLoss(Buffer buffer = Buffer::kColor, TargetKind target = TargetKind::kImage,
+                      double lambda = 0.8)
+      : l1_(buffer, target),
+        dssim_(buffer, target),
+        buffer_(buffer),
+        target_(target),
+        lambda_(lambda) {}
   std::string Name() const override {
     return std::string("render(") + BufferName(buffer_) + ", " + TargetName(target_) + ")";
   }
   std::vector<Buffer> Inputs() const override { return {buffer_}; }
-  Status Check(const RenderBuffers& in, const Targets& t) const override { return l1_.Check(in, t); }
+  Status Check(const RenderBuffers& in, const Targets& t) const override {
+    return l1_.Check(in, t);
+  }
 
   template <typename T>
-  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale, RenderGradientsT<T>* grad) const {
+  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+                 RenderGradientsT<T>* grad) const {
     return lambda_ * l1_.Compute(in, t, scale * lambda_, grad) +
            (1 - lambda_) * dssim_.Compute(in, t, scale * (1 - lambda_), grad);
   }
@@ -34,10 +43,12 @@ class RenderLoss : public LossTermImpl<RenderLoss> {
 // the 3DGS branch's transmitted image (weight 0.2) plus one against the ground truth (weight 0.8).
 class MutualRenderLoss : public LossTermImpl<MutualRenderLoss> {
  public:
-  explicit MutualRenderLoss(double transmitted_weight = 0.2, double image_weight = 0.8, double lambda = 0.8)
+  explicit MutualRenderLoss(double transmitted_weight = 0.2, double image_weight = 0.8,
+                            double lambda = 0.8)
       : vs_transmitted_(Buffer::kColor, TargetKind::kTransmitted, lambda),
         vs_image_(Buffer::kColor, TargetKind::kImage, lambda),
-        wt_(transmitted_weight), wi_(image_weight) {}
+        wt_(transmitted_weight),
+        wi_(image_weight) {}
   std::string Name() const override { return "mutual_render"; }
   std::vector<Buffer> Inputs() const override { return {Buffer::kColor}; }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
@@ -46,8 +57,10 @@ class MutualRenderLoss : public LossTermImpl<MutualRenderLoss> {
   }
 
   template <typename T>
-  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale, RenderGradientsT<T>* grad) const {
-    return wt_ * vs_transmitted_.Compute(in, t, scale * wt_, grad) + wi_ * vs_image_.Compute(in, t, scale * wi_, grad);
+  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+                 RenderGradientsT<T>* grad) const {
+    return wt_ * vs_transmitted_.Compute(in, t, scale * wt_, grad) +
+           wi_ * vs_image_.Compute(in, t, scale * wi_, grad);
   }
 
  private:

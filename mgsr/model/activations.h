@@ -14,7 +14,8 @@ inline float InverseSigmoid(float y) { return std::log(y / (1.0f - y)); }
 // Rotation matrix (row-major 3x3) of the normalised quaternion (w, x, y, z). Returns false (and the
 // identity) for a zero quaternion.
 inline bool QuaternionToRotation(const float q_raw[4], float R[9], float q_unit[4]) {
-  const float n = std::sqrt(q_raw[0] * q_raw[0] + q_raw[1] * q_raw[1] + q_raw[2] * q_raw[2] + q_raw[3] * q_raw[3]);
+  const float n = std::sqrt(q_raw[0] * q_raw[0] + q_raw[1] * q_raw[1] + q_raw[2] * q_raw[2] +
+                            q_raw[3] * q_raw[3]);
   if (!(n > 0)) {
     q_unit[0] = 1;
     q_unit[1] = q_unit[2] = q_unit[3] = 0;
@@ -37,7 +38,8 @@ inline bool QuaternionToRotation(const float q_raw[4], float R[9], float q_unit[
 // Backward of QuaternionToRotation: dL/dR (row-major) -> dL/d q_raw, including the normalisation
 // Jacobian (I - u u^T) / |q|.
 inline void QuaternionToRotationBackward(const float q_raw[4], const float dR[9], float dq_raw[4]) {
-  const float n = std::sqrt(q_raw[0] * q_raw[0] + q_raw[1] * q_raw[1] + q_raw[2] * q_raw[2] + q_raw[3] * q_raw[3]);
+  const float n = std::sqrt(q_raw[0] * q_raw[0] + q_raw[1] * q_raw[1] + q_raw[2] * q_raw[2] +
+                            q_raw[3] * q_raw[3]);
   if (!(n > 0)) {
     dq_raw[0] = dq_raw[1] = dq_raw[2] = dq_raw[3] = 0;
     return;
@@ -46,9 +48,12 @@ inline void QuaternionToRotationBackward(const float q_raw[4], const float dR[9]
   // d R_ij / d (w, x, y, z) contracted with dR.
   float du[4];
   du[0] = 2 * (-z * dR[1] + y * dR[2] + z * dR[3] - x * dR[5] - y * dR[6] + x * dR[7]);
-  du[1] = 2 * (y * dR[1] + z * dR[2] + y * dR[3] - 2 * x * dR[4] - w * dR[5] + z * dR[6] + w * dR[7] - 2 * x * dR[8]);
-  du[2] = 2 * (-2 * y * dR[0] + x * dR[1] + w * dR[2] + x * dR[3] + z * dR[5] - w * dR[6] + z * dR[7] - 2 * y * dR[8]);
-  du[3] = 2 * (-2 * z * dR[0] - w * dR[1] + x * dR[2] + w * dR[3] - 2 * z * dR[4] + y * dR[5] + x * dR[6] + y * dR[7]);
+  du[1] = 2 * (y * dR[1] + z * dR[2] + y * dR[3] - 2 * x * dR[4] - w * dR[5] + z * dR[6] +
+               w * dR[7] - 2 * x * dR[8]);
+  du[2] = 2 * (-2 * y * dR[0] + x * dR[1] + w * dR[2] + x * dR[3] + z * dR[5] - w * dR[6] +
+               z * dR[7] - 2 * y * dR[8]);
+  du[3] = 2 * (-2 * z * dR[0] - w * dR[1] + x * dR[2] + w * dR[3] - 2 * z * dR[4] + y * dR[5] +
+               x * dR[6] + y * dR[7]);
   const float u[4] = {w, x, y, z};
   const float dot = u[0] * du[0] + u[1] * du[1] + u[2] * du[2] + u[3] * du[3];
   for (int k = 0; k < 4; ++k) dq_raw[k] = (du[k] - u[k] * dot) / n;

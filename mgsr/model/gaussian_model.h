@@ -1,7 +1,7 @@
 // GaussianModel: the 3DGS branch's parameter blocks, structure-of-arrays, raw (pre-activation)
-// values as the optimiser sees them. Activations: scale = exp(log_scale), rotation = normalise(quat),
-// opacity = sigmoid(logit); reflection parameters of MGSR: reflected SH, reflected opacity and the
-// reflected confidence beta (all sigmoid logits), see reference section 2.
+// values as the optimiser sees them. Activations: scale = exp(log_scale), rotation =
+// normalise(quat), opacity = sigmoid(logit); reflection parameters of MGSR: reflected SH, reflected
+// opacity and the reflected confidence beta (all sigmoid logits), see reference section 2.
 #pragma once
 
 #include <cstddef>
@@ -16,12 +16,12 @@ constexpr int NumShCoeffs(int degree) { return (degree + 1) * (degree + 1); }
 
 struct GaussianModel {
   int max_sh_degree = 3;
-  std::vector<float> means;           // N x 3
-  std::vector<float> log_scales;      // N x 3
-  std::vector<float> quats;           // N x 4 (w, x, y, z), not necessarily normalised
-  std::vector<float> opacity_logits;  // N
-  std::vector<float> sh;              // N x K x 3, K = NumShCoeffs(max_sh_degree); [n][k][rgb]
-  std::vector<float> ref_sh;          // N x K x 3 (reflected colour)
+  std::vector<float> means;               // N x 3
+  std::vector<float> log_scales;          // N x 3
+  std::vector<float> quats;               // N x 4 (w, x, y, z), not necessarily normalised
+  std::vector<float> opacity_logits;      // N
+  std::vector<float> sh;                  // N x K x 3, K = NumShCoeffs(max_sh_degree); [n][k][rgb]
+  std::vector<float> ref_sh;              // N x K x 3 (reflected colour)
   std::vector<float> ref_opacity_logits;  // N
   std::vector<float> beta_logits;         // N (reflected confidence)
 
@@ -33,7 +33,9 @@ struct GaussianModel {
   std::vector<ParamBlock> Blocks();
   // Density-control row operations (all blocks together).
   void KeepRows(const std::vector<uint8_t>& keep) { mgsr::KeepRows(Blocks(), keep); }
-  void AppendCopies(const std::vector<int>& rows) { mgsr::AppendRowsFrom(Blocks(), Blocks(), rows); }
+  void AppendCopies(const std::vector<int>& rows) {
+    mgsr::AppendRowsFrom(Blocks(), Blocks(), rows);
+  }
 };
 
 }  // namespace mgsr

@@ -17,9 +17,12 @@ struct Cloud {
   size_t kdtree_get_point_count() const { return pts.size(); }
   float kdtree_get_pt(size_t i, size_t d) const { return pts[i][d]; }
   template <class B>
-  bool kdtree_get_bbox(B&) const { return false; }
+  bool kdtree_get_bbox(B&) const {
+    return false;
+  }
 };
-using Tree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, Cloud>, Cloud, 3, size_t>;
+using Tree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, Cloud>, Cloud,
+                                                 3, size_t>;
 
 constexpr float kInitOpacity = 0.1f;
 
@@ -31,7 +34,8 @@ std::vector<float> MeanSquaredNeighbourDistance(const std::vector<Eigen::Vector3
   Cloud cloud{points};
   Tree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   tree.buildIndex();
-  const int want = std::min<int>(k + 1, static_cast<int>(points.size()));  // the point itself comes first
+  const int want =
+      std::min<int>(k + 1, static_cast<int>(points.size()));  // the point itself comes first
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < static_cast<int64_t>(points.size()); ++i) {
     size_t idx[16];
@@ -50,8 +54,9 @@ std::vector<float> MeanSquaredNeighbourDistance(const std::vector<Eigen::Vector3
   return out;
 }
 
-void InitGaussiansFromPoints(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& colors,
-                             int max_sh_degree, GaussianModel* m) {
+void InitGaussiansFromPoints(const std::vector<Eigen::Vector3f>& points,
+                             const std::vector<Eigen::Vector3f>& colors, int max_sh_degree,
+                             GaussianModel* m) {
   CHECK_EQ(points.size(), colors.size());
   CHECK_LE(max_sh_degree, 3);
   *m = GaussianModel();
@@ -78,8 +83,9 @@ void InitGaussiansFromPoints(const std::vector<Eigen::Vector3f>& points, const s
   }
 }
 
-void InitSurfelsFromPoints(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& colors,
-                           int max_sh_degree, uint64_t seed, SurfelModel* m) {
+void InitSurfelsFromPoints(const std::vector<Eigen::Vector3f>& points,
+                           const std::vector<Eigen::Vector3f>& colors, int max_sh_degree,
+                           uint64_t seed, SurfelModel* m) {
   CHECK_EQ(points.size(), colors.size());
   CHECK_LE(max_sh_degree, 3);
   *m = SurfelModel();

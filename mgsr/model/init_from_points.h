@@ -19,11 +19,14 @@ constexpr float kShC0 = 0.28209479177387814f;
 inline float RgbToShDc(float rgb) { return (rgb - 0.5f) / kShC0; }
 
 // Mean squared distance from each point to its k nearest other points (kd-tree), at least 1e-7.
-std::vector<float> MeanSquaredNeighbourDistance(const std::vector<Eigen::Vector3f>& points, int k = 3);
+std::vector<float> MeanSquaredNeighbourDistance(const std::vector<Eigen::Vector3f>& points,
+                                                int k = 3);
 
-void InitGaussiansFromPoints(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& colors,
-                             int max_sh_degree, GaussianModel* model);
-void InitSurfelsFromPoints(const std::vector<Eigen::Vector3f>& points, const std::vector<Eigen::Vector3f>& colors,
-                           int max_sh_degree, uint64_t seed, SurfelModel* model);
+void InitGaussiansFromPoints(const std::vector<Eigen::Vector3f>& points,
+                             const std::vector<Eigen::Vector3f>& colors, int max_sh_degree,
+                             GaussianModel* model);
+void InitSurfelsFromPoints(const std::vector<Eigen::Vector3f>& points,
+                           const std::vector<Eigen::Vector3f>& colors, int max_sh_degree,
+                           uint64_t seed, SurfelModel* model);
 
 }  // namespace mgsr

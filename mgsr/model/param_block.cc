@@ -11,7 +11,9 @@ void KeepRows(const std::vector<ParamBlock>& blocks, const std::vector<uint8_t>&
     size_t out = 0;
     for (size_t i = 0; i < keep.size(); ++i) {
       if (!keep[i]) continue;
-      if (out != i) std::copy(v.begin() + i * b.width, v.begin() + (i + 1) * b.width, v.begin() + out * b.width);
+      if (out != i)
+        std::copy(v.begin() + i * b.width, v.begin() + (i + 1) * b.width,
+                  v.begin() + out * b.width);
       ++out;
     }
     v.resize(out * b.width);

@@ -23,7 +23,9 @@ struct SurfelModel {
 
   std::vector<ParamBlock> Blocks();
   void KeepRows(const std::vector<uint8_t>& keep) { mgsr::KeepRows(Blocks(), keep); }
-  void AppendCopies(const std::vector<int>& rows) { mgsr::AppendRowsFrom(Blocks(), Blocks(), rows); }
+  void AppendCopies(const std::vector<int>& rows) {
+    mgsr::AppendRowsFrom(Blocks(), Blocks(), rows);
+  }
 };
 
 }  // namespace mgsr

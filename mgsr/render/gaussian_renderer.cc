@@ -7,7 +7,8 @@ namespace mgsr {
 void GaussianRenderer::Forward(const GaussianModel& model, const GaussianRenderOptions& options,
                                GaussianRender* out) {
   ProjectGaussians(model, options.camera, options.sh_degree, options.reflection, &projected_);
-  BinPrimitives(projected_.rects, projected_.depth.data(), options.camera.width, options.camera.height, &bins_);
+  BinPrimitives(projected_.rects, projected_.depth.data(), options.camera.width,
+                options.camera.height, &bins_);
   RasterizeGaussians(projected_, bins_, options, out, &scratch_);
 }
 
@@ -18,8 +19,8 @@ void GaussianRenderer::Backward(const GaussianModel& model, const GaussianRender
   d_projected_.ResizeAndZero(model.size());
   RasterizeGaussiansBackward(projected_, bins_, options, render, grad, &d_projected_, &scratch_);
   grads->ResizeAndZero(model);
-  ProjectGaussiansBackward(model, options.camera, options.sh_degree, options.reflection, projected_, d_projected_,
-                           grads);
+  ProjectGaussiansBackward(model, options.camera, options.sh_degree, options.reflection, projected_,
+                           d_projected_, grads);
 }
 
 }  // namespace mgsr

@@ -14,10 +14,12 @@ namespace mgsr {
 
 class GaussianRenderer {
  public:
-  void Forward(const GaussianModel& model, const GaussianRenderOptions& options, GaussianRender* out);
+  void Forward(const GaussianModel& model, const GaussianRenderOptions& options,
+               GaussianRender* out);
   // Writes (overwrites) `grads` with d loss / d raw parameters for the upstream image gradients.
-  void Backward(const GaussianModel& model, const GaussianRenderOptions& options, const GaussianRender& render,
-                const GaussianRenderGrad& grad, GaussianGradients* grads);
+  void Backward(const GaussianModel& model, const GaussianRenderOptions& options,
+                const GaussianRender& render, const GaussianRenderGrad& grad,
+                GaussianGradients* grads);
 
   const ProjectedGaussians& projected() const { return projected_; }
   const TileBins& bins() const { return bins_; }

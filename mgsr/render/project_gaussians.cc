@@ -22,7 +22,7 @@ struct Geometry {
   Mat3 Sigma;         // M M^T
   float rx, ry;       // clamped t.x / t.z, t.y / t.z
   bool clamped_x, clamped_y;
-  Mat23 J, T;         // T = J * R_cam
+  Mat23 J, T;  // T = J * R_cam
   Eigen::Matrix2f cov;
 };
 
@@ -83,7 +83,8 @@ void GaussianGradients::ResizeAndZero(const GaussianModel& model) {
   mean2d.assign(2 * model.size(), 0.0f);
 }
 
-void ScreenGradientNorms(const std::vector<float>& mean2d, int width, int height, std::vector<float>* norms) {
+void ScreenGradientNorms(const std::vector<float>& mean2d, int width, int height,
+                         std::vector<float>* norms) {
   const size_t n = mean2d.size() / 2;
   norms->resize(n);
   for (size_t i = 0; i < n; ++i) {
@@ -132,19 +133,20 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
     const Eigen::Vector3f mean(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
     const Eigen::Vector3f dir = (mean - center).normalized();
     for (int k = 0; k < 3; ++k) out->view_dir[3 * i + k] = dir[k];
-    EvalShColor(degree, &m.sh[static_cast<size_t>(i) * K * 3], dir.data(), &out->color_t[3 * i], &out->clamp_t[3 * i]);
+    EvalShColor(degree, &m.sh[static_cast<size_t>(i) * K * 3], dir.data(), &out->color_t[3 * i],
+                &out->clamp_t[3 * i]);
     if (reflection) {
       out->ref_opacity[i] = Sigmoid(m.ref_opacity_logits[i]);
       out->beta[i] = Sigmoid(m.beta_logits[i]);
-      EvalShColor(degree, &m.ref_sh[static_cast<size_t>(i) * K * 3], dir.data(), &out->color_r[3 * i],
-                  &out->clamp_r[3 * i]);
+      EvalShColor(degree, &m.ref_sh[static_cast<size_t>(i) * K * 3], dir.data(),
+                  &out->color_r[3 * i], &out->clamp_r[3 * i]);
     }
   }
 }
 
-void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_degree, bool reflection,
-                              const ProjectedGaussians& p, const ProjectedGaussiansGrad& d,
-                              GaussianGradients* grads) {
+void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_degree,
+                              bool reflection, const ProjectedGaussians& p,
+                              const ProjectedGaussiansGrad& d, GaussianGradients* grads) {
   const int n = static_cast<int>(m.size());
   const Mat3 Rc = cam.R.cast<float>();
   const Eigen::Vector3f tc = cam.t.cast<float>();
@@ -168,8 +170,8 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
     Eigen::Vector3f d_mean = Eigen::Vector3f::Zero();
     float d_dir[3], d_dir_r[3] = {0, 0, 0}, d_v[3];
     const float* dir = &p.view_dir[3 * i];
-    EvalShColorBackward(degree, &m.sh[static_cast<size_t>(i) * K * 3], dir, &p.clamp_t[3 * i], &d.color_t[3 * i],
-                        &G.sh[static_cast<size_t>(i) * K * 3], d_dir);
+    EvalShColorBackward(degree, &m.sh[static_cast<size_t>(i) * K * 3], dir, &p.clamp_t[3 * i],
+                        &d.color_t[3 * i], &G.sh[static_cast<size_t>(i) * K * 3], d_dir);
     if (reflection) {
       EvalShColorBackward(degree, &m.ref_sh[static_cast<size_t>(i) * K * 3], dir, &p.clamp_r[3 * i],
                           &d.color_r[3 * i], &G.ref_sh[static_cast<size_t>(i) * K * 3], d_dir_r);

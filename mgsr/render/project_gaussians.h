@@ -40,8 +40,8 @@ struct ProjectedGaussiansGrad {
 };
 
 // `reflection` false: the reflected quantities are not computed (plain 3DGS).
-void ProjectGaussians(const GaussianModel& model, const Camera& camera, int sh_degree, bool reflection,
-                      ProjectedGaussians* out);
+void ProjectGaussians(const GaussianModel& model, const Camera& camera, int sh_degree,
+                      bool reflection, ProjectedGaussians* out);
 
 // Gradients of the model's raw parameters (same layout as the model) plus the per-Gaussian
 // screen-space mean gradient (pixels) that density control accumulates.
@@ -55,7 +55,8 @@ struct GaussianGradients {
 // |d loss / d screen mean| per Gaussian in NDC units (the pixel gradient times W/2 and H/2), the
 // statistic density control compares with its threshold (reference 1.10: 2e-4).
 // (For the 2DGS branch pass its reference-3.8(5) statistic, SurfelGradients::mean2d.)
-void ScreenGradientNorms(const std::vector<float>& mean2d_grads, int width, int height, std::vector<float>* norms);
+void ScreenGradientNorms(const std::vector<float>& mean2d_grads, int width, int height,
+                         std::vector<float>* norms);
 
 // Adds the chain from projected-quantity gradients to every raw parameter into `grads`.
 void ProjectGaussiansBackward(const GaussianModel& model, const Camera& camera, int sh_degree,

@@ -13,11 +13,11 @@ namespace {
 using Mat3 = Eigen::Matrix<float, 3, 3, Eigen::RowMajor>;
 
 struct SurfelGeometry {
-  Mat3 R;              // columns t_u, t_v, t_w
+  Mat3 R;  // columns t_u, t_v, t_w
   float su, sv;
-  Eigen::Vector3f p;   // centre (world)
-  Mat3 A;              // R_c [s_u t_u, s_v t_v, p] + t_c e3^T
-  Mat3 M;              // K A, rows T_u, T_v, T_w
+  Eigen::Vector3f p;  // centre (world)
+  Mat3 A;             // R_c [s_u t_u, s_v t_v, p] + t_c e3^T
+  Mat3 M;             // K A, rows T_u, T_v, T_w
 };
 
 Mat3 Intrinsics(const Camera& cam) {
@@ -27,8 +27,8 @@ Mat3 Intrinsics(const Camera& cam) {
   return K;
 }
 
-void ComputeGeometry(const SurfelModel& m, size_t i, const Mat3& Rc, const Eigen::Vector3f& tc, const Mat3& K,
-                     SurfelGeometry* g) {
+void ComputeGeometry(const SurfelModel& m, size_t i, const Mat3& Rc, const Eigen::Vector3f& tc,
+                     const Mat3& K, SurfelGeometry* g) {
   float q_unit[4];
   QuaternionToRotation(&m.quats[4 * i], g->R.data(), q_unit);
   g->su = std::exp(m.log_scales[2 * i]);
@@ -123,9 +123,10 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
     Ad.col(1) = cam.R * (static_cast<double>(g.sv) * g.R.col(1).cast<double>());
     Ad.col(2) = cam.R * g.p.cast<double>() + cam.t;
     const Eigen::Matrix3d Md = Kd * Ad;
-    const Eigen::Vector3d rows[3] = {Md.row(0).transpose() - static_cast<double>(mx) * Md.row(2).transpose(),
-                                     Md.row(1).transpose() - static_cast<double>(my) * Md.row(2).transpose(),
-                                     Md.row(2).transpose()};
+    const Eigen::Vector3d rows[3] = {
+        Md.row(0).transpose() - static_cast<double>(mx) * Md.row(2).transpose(),
+        Md.row(1).transpose() - static_cast<double>(my) * Md.row(2).transpose(),
+        Md.row(2).transpose()};
     for (int r = 0; r < 3; ++r) {
       for (int c = 0; c < 3; ++c) out->M[9 * i + 3 * r + c] = static_cast<float>(rows[r][c]);
       out->normal[3 * i + r] = n_view[r];
@@ -134,12 +135,14 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
     out->opacity[i] = Sigmoid(m.opacity_logits[i]);
     const Eigen::Vector3f dir = (g.p - center).normalized();
     for (int k = 0; k < 3; ++k) out->view_dir[3 * i + k] = dir[k];
-    EvalShColor(degree, &m.sh[static_cast<size_t>(i) * Kc * 3], dir.data(), &out->color[3 * i], &out->clamp[3 * i]);
+    EvalShColor(degree, &m.sh[static_cast<size_t>(i) * Kc * 3], dir.data(), &out->color[3 * i],
+                &out->clamp[3 * i]);
   }
 }
 
-void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degree, const ProjectedSurfels& p,
-                            const ProjectedSurfelsGrad& d, SurfelGradients* grads) {
+void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degree,
+                            const ProjectedSurfels& p, const ProjectedSurfelsGrad& d,
+                            SurfelGradients* grads) {
   const int n = static_cast<int>(m.size());
   const Mat3 Rc = cam.R.cast<float>();
   const Eigen::Vector3f tc = cam.t.cast<float>();
@@ -156,8 +159,9 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
     G.opacity_logits[i] += d.opacity[i] * SigmoidGradFromValue(p.opacity[i]);
     // Colour -> SH and the view direction.
     float d_dir[3], d_v[3];
-    EvalShColorBackward(degree, &m.sh[static_cast<size_t>(i) * Kc * 3], &p.view_dir[3 * i], &p.clamp[3 * i],
-                        &d.color[3 * i], &G.sh[static_cast<size_t>(i) * Kc * 3], d_dir);
+    EvalShColorBackward(degree, &m.sh[static_cast<size_t>(i) * Kc * 3], &p.view_dir[3 * i],
+                        &p.clamp[3 * i], &d.color[3 * i], &G.sh[static_cast<size_t>(i) * Kc * 3],
+                        d_dir);
     const Eigen::Vector3f v = g.p - center;
     NormalizeBackward(v.data(), d_dir, d_v);
     Eigen::Vector3f d_p(d_v[0], d_v[1], d_v[2]);
@@ -171,7 +175,8 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
     const Eigen::Vector3f dTu_c = dM.row(0), dTv_c = dM.row(1);
     const Eigen::Vector3f Tw_row = g.M.row(2);
     dM.row(2) -= (cx * dTu_c + cy * dTv_c).transpose();
-    const float dmx = d.center[2 * i] - Tw_row.dot(dTu_c), dmy = d.center[2 * i + 1] - Tw_row.dot(dTv_c);
+    const float dmx = d.center[2 * i] - Tw_row.dot(dTu_c),
+                dmy = d.center[2 * i + 1] - Tw_row.dot(dTv_c);
     if (dmx != 0.0f || dmy != 0.0f) {
       const Eigen::Vector3f Tu = g.M.row(0), Tv = g.M.row(1), Tw = g.M.row(2);
       const Eigen::Vector3f t(kCutoff2, kCutoff2, -1.0f);

@@ -26,8 +26,8 @@ struct ProjectedSurfels {
   std::vector<float> center;  // N x 2: screen centre m (pixels)
   std::vector<float> radius;  // N, pixels; 0 = culled
   std::vector<TileRect> rects;
-  std::vector<float> depth;   // N: view depth of p (sort key)
-  std::vector<float> normal;  // N x 3: view-space unit normal facing the camera
+  std::vector<float> depth;        // N: view depth of p (sort key)
+  std::vector<float> normal;       // N x 3: view-space unit normal facing the camera
   std::vector<float> normal_sign;  // N: +1 or -1 (flipped to face the camera)
   std::vector<float> opacity;      // N
   std::vector<float> color;        // N x 3
@@ -49,10 +49,11 @@ struct SurfelGradients {
   void ResizeAndZero(const SurfelModel& model);
 };
 
-void ProjectSurfels(const SurfelModel& model, const Camera& camera, int sh_degree, ProjectedSurfels* out);
+void ProjectSurfels(const SurfelModel& model, const Camera& camera, int sh_degree,
+                    ProjectedSurfels* out);
 
 void ProjectSurfelsBackward(const SurfelModel& model, const Camera& camera, int sh_degree,
-                            const ProjectedSurfels& projected, const ProjectedSurfelsGrad& d_projected,
-                            SurfelGradients* grads);
+                            const ProjectedSurfels& projected,
+                            const ProjectedSurfelsGrad& d_projected, SurfelGradients* grads);
 
 }  // namespace mgsr

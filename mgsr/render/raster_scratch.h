@@ -17,10 +17,10 @@ namespace mgsr {
 struct RasterScratch {
   std::vector<float> packed;                    // per primitive: the fields the pixel loops read
   std::vector<std::vector<float>> pixel_state;  // per thread: pixel state of the current tile
-  std::vector<std::vector<float>> tile_data;    // per thread: gathered primitives of the current tile
-  std::vector<float> entry_grads;               // per tile entry: gradient fields (stride floats)
-  std::vector<uint32_t> tile_used;              // per tile: entries [0, used) hold gradients
-  std::vector<float> per_primitive;             // per primitive: reduced gradient fields
+  std::vector<std::vector<float>> tile_data;  // per thread: gathered primitives of the current tile
+  std::vector<float> entry_grads;             // per tile entry: gradient fields (stride floats)
+  std::vector<uint32_t> tile_used;            // per tile: entries [0, used) hold gradients
+  std::vector<float> per_primitive;           // per primitive: reduced gradient fields
 };
 
 // Helpers shared by the two tile rasterizers.
@@ -53,7 +53,8 @@ class PixelArrays {
   static constexpr int kMaxArrays = 32;
   PixelArrays(std::vector<float>* buffer, int count) {
     buffer->resize(static_cast<size_t>(count) * kTilePixels);
-    for (int i = 0; i < count && i < kMaxArrays; ++i) arrays_[i] = buffer->data() + static_cast<size_t>(i) * kTilePixels;
+    for (int i = 0; i < count && i < kMaxArrays; ++i)
+      arrays_[i] = buffer->data() + static_cast<size_t>(i) * kTilePixels;
   }
   float* operator[](int i) const { return arrays_[i]; }
 
@@ -74,7 +75,8 @@ inline void ReduceEntryGradients(const TileBins& bins, const std::vector<uint32_
 #pragma omp parallel num_threads(threads)
   {
     const int t = omp_get_thread_num();
-    const uint32_t lo = static_cast<uint32_t>(num * t / threads), hi = static_cast<uint32_t>(num * (t + 1) / threads);
+    const uint32_t lo = static_cast<uint32_t>(num * t / threads),
+                   hi = static_cast<uint32_t>(num * (t + 1) / threads);
     for (int tile = 0; tile < bins.num_tiles(); ++tile) {
       const uint32_t begin = bins.tile_start[tile];
       for (uint32_t j = 0; j < tile_used[tile]; ++j) {

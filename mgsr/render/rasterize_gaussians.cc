@@ -12,9 +12,44 @@ namespace mgsr {
 namespace {
 
 // Gathered per-tile fields (structure of arrays over the tile's Gaussians).
-enum Field { kMx, kMy, kRad, kCa, kCb, kCc, kOp, kRefOp, kBeta, kZ, kCt0, kCt1, kCt2, kCr0, kCr1, kCr2, kNumFields };
+enum Field {
+  kMx,
+  kMy,
+  kRad,
+  kCa,
+  kCb,
+  kCc,
+  kOp,
+  kRefOp,
+  kBeta,
+  kZ,
+  kCt0,
+  kCt1,
+  kCt2,
+  kCr0,
+  kCr1,
+  kCr2,
+  kNumFields
+};
 // Gradient fields, per Gaussian.
-enum GradField { gMx, gMy, gCa, gCb, gCc, gOp, gRefOp, gBeta, gZ, gCt0, gCt1, gCt2, gCr0, gCr1, gCr2, kGradStride };
+enum GradField {
+  gMx,
+  gMy,
+  gCa,
+  gCb,
+  gCc,
+  gOp,
+  gRefOp,
+  gBeta,
+  gZ,
+  gCt0,
+  gCt1,
+  gCt2,
+  gCr0,
+  gCr1,
+  gCr2,
+  kGradStride
+};
 
 // Everything the pixel loops read about one Gaussian, packed into one 64-byte row (AoS), so a
 // tile's loop touches one cache line per Gaussian instead of 16 scattered arrays.
@@ -49,19 +84,18 @@ void GatherTile(const float* packed, const uint32_t* ids, int n, std::vector<flo
   buffer->resize(static_cast<size_t>(n) * kNumFields);
   float* out = buffer->data();
   for (int j = 0; j < n; ++j) {
-    std::memcpy(out + static_cast<size_t>(j) * kNumFields, packed + static_cast<size_t>(ids[j]) * kNumFields,
-                kNumFields * sizeof(float));
+    std::memcpy(out + static_cast<size_t>(j) * kNumFields,
+                packed + static_cast<size_t>(ids[j]) * kNumFields, kNumFields * sizeof(float));
   }
 }
 
-
-using simd::F16;
-using simd::I16;
 using raster_internal::BoxRange;
 using raster_internal::EnsureImage;
 using raster_internal::EnsureScratch;
 using raster_internal::kTilePixels;
 using raster_internal::PixelArrays;
+using simd::F16;
+using simd::I16;
 
 static_assert(kTileSize == 16, "one tile row is one 16-lane vector");
 
@@ -82,8 +116,21 @@ inline bool RowHitsEllipse(float dy, float a, float b, float c, float min_power)
 struct Splat {
   float mx, my, rad, ca, cb, cc, op, rop, beta, z, ct0, ct1, ct2, cr0, cr1, cr2;
   explicit Splat(const float* f)
-      : mx(f[kMx]), my(f[kMy]), rad(f[kRad]), ca(f[kCa]), cb(f[kCb]), cc(f[kCc]), op(f[kOp]), rop(f[kRefOp]),
-        beta(f[kBeta]), z(f[kZ]), ct0(f[kCt0]), ct1(f[kCt1]), ct2(f[kCt2]), cr0(f[kCr0]), cr1(f[kCr1]),
+      : mx(f[kMx]),
+        my(f[kMy]),
+        rad(f[kRad]),
+        ca(f[kCa]),
+        cb(f[kCb]),
+        cc(f[kCc]),
+        op(f[kOp]),
+        rop(f[kRefOp]),
+        beta(f[kBeta]),
+        z(f[kZ]),
+        ct0(f[kCt0]),
+        ct1(f[kCt1]),
+        ct2(f[kCt2]),
+        cr0(f[kCr0]),
+        cr1(f[kCr1]),
         cr2(f[kCr2]) {}
 };
 
@@ -103,8 +150,9 @@ inline F16 RowPower(const Splat& s, F16 dx, float dy, float min_power, I16 lanes
 // the tile rows its 3-sigma square covers, 16 pixels at a time in vector registers, keeping every
 // pixel's blending state in tile-local arrays. Per pixel, the order and the decisions are those
 // of the per-pixel loop the header describes; masks replace its branches.
-void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins, const GaussianRenderOptions& o,
-                        GaussianRender* out, RasterScratch* scratch) {
+void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
+                        const GaussianRenderOptions& o, GaussianRender* out,
+                        RasterScratch* scratch) {
   const int W = o.camera.width, H = o.camera.height;
   const size_t npix = static_cast<size_t>(W) * H;
   for (Image* im : {&out->color, &out->tran, &out->ref}) EnsureImage(im, W, H, 3);
@@ -138,7 +186,23 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins, const
 
     // T, Tr, colours, W and D sums, "still blending" flags and 1 + index of the last blended
     // Gaussian (as float, exact below 2^24), per pixel.
-    enum { aT, aTr, aCt0, aCt1, aCt2, aCr0, aCr1, aCr2, aWs, aDs, aLiveT, aLiveR, aLastT, aLastR, kArrays };
+    enum {
+      aT,
+      aTr,
+      aCt0,
+      aCt1,
+      aCt2,
+      aCr0,
+      aCr1,
+      aCr2,
+      aWs,
+      aDs,
+      aLiveT,
+      aLiveR,
+      aLastT,
+      aLastR,
+      kArrays
+    };
     const PixelArrays st(&scratch->pixel_state[thread], kArrays);
     for (int k = 0; k < kTilePixels; ++k) {
       st[aT][k] = st[aTr][k] = 1.0f;
@@ -182,7 +246,8 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins, const
         simd::Store(st[aWs] + k, simd::Load(st[aWs] + k) + wt * s.beta);
         simd::Store(st[aDs] + k, simd::Load(st[aDs] + k) + wt * s.z);
         simd::Store(st[aT] + k, simd::Select(blend_t, test_t, T));
-        simd::Store(st[aLastT] + k, simd::Select(blend_t, simd::Splat(jp1), simd::Load(st[aLastT] + k)));
+        simd::Store(st[aLastT] + k,
+                    simd::Select(blend_t, simd::Splat(jp1), simd::Load(st[aLastT] + k)));
         simd::Store(st[aLiveT] + k, simd::Select(term_t, F16{}, live));
         if (!refl) continue;
         // Reflected chain.
@@ -197,7 +262,8 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins, const
         simd::Store(st[aCr1] + k, simd::Load(st[aCr1] + k) + wr * s.cr1);
         simd::Store(st[aCr2] + k, simd::Load(st[aCr2] + k) + wr * s.cr2);
         simd::Store(st[aTr] + k, simd::Select(blend_r, test_r, Tr));
-        simd::Store(st[aLastR] + k, simd::Select(blend_r, simd::Splat(jp1), simd::Load(st[aLastR] + k)));
+        simd::Store(st[aLastR] + k,
+                    simd::Select(blend_r, simd::Splat(jp1), simd::Load(st[aLastR] + k)));
         simd::Store(st[aLiveR] + k, simd::Select(term_r, F16{}, live_r));
       }
     }
@@ -207,7 +273,8 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins, const
         const size_t pix = static_cast<size_t>(y) * W + x;
         const float T = st[aT][k];
         const float A = 1.0f - T;
-        const float ct[3] = {st[aCt0][k], st[aCt1][k], st[aCt2][k]}, cr[3] = {st[aCr0][k], st[aCr1][k], st[aCr2][k]};
+        const float ct[3] = {st[aCt0][k], st[aCt1][k], st[aCt2][k]},
+                    cr[3] = {st[aCr0][k], st[aCr1][k], st[aCr2][k]};
         for (int c = 0; c < 3; ++c) {
           const float tran = ct[c] + T * bg[c];
           out->tran.plane(c)[pix] = tran;
@@ -227,9 +294,10 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins, const
   }
 }
 
-void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bins, const GaussianRenderOptions& o,
-                                const GaussianRender& r, const GaussianRenderGrad& g,
-                                ProjectedGaussiansGrad* d, RasterScratch* scratch) {
+void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bins,
+                                const GaussianRenderOptions& o, const GaussianRender& r,
+                                const GaussianRenderGrad& g, ProjectedGaussiansGrad* d,
+                                RasterScratch* scratch) {
   const int W = o.camera.width, H = o.camera.height;
   const size_t num = p.size();
   const int threads = omp_get_max_threads();
@@ -264,8 +332,31 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
       // Per-pixel state, walking back to front: transmittances, "behind" accumulators, the
       // upstream gradients folded onto the chains (C = C_tran + W C_ref, D = Dsum / A) and the
       // last-blended indices. Pixels outside the image keep last = 0 and take no part.
-      enum { aT, aTr, aSt0, aSt1, aSt2, aSr0, aSr1, aSr2, aSb, aSz, aGt0, aGt1, aGt2, aGr0, aGr1, aGr2, aGW, aGN,
-             aGA, aTfin, aLastT, aLastR, kArrays };
+      enum {
+        aT,
+        aTr,
+        aSt0,
+        aSt1,
+        aSt2,
+        aSr0,
+        aSr1,
+        aSr2,
+        aSb,
+        aSz,
+        aGt0,
+        aGt1,
+        aGt2,
+        aGr0,
+        aGr1,
+        aGr2,
+        aGW,
+        aGN,
+        aGA,
+        aTfin,
+        aLastT,
+        aLastR,
+        kArrays
+      };
       const PixelArrays st(&scratch->pixel_state[thread], kArrays);
       for (int a = 0; a < kArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
       int max_last = 0;
@@ -296,7 +387,8 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
           st[aGN][k] = n_grad;
           st[aT][k] = st[aTfin][k] = r.final_t[pix];
           st[aTr][k] = r.final_tr[pix];
-          const int lt = static_cast<int>(r.last_t[pix]), lr = refl ? static_cast<int>(r.last_r[pix]) : 0;
+          const int lt = static_cast<int>(r.last_t[pix]),
+                    lr = refl ? static_cast<int>(r.last_r[pix]) : 0;
           st[aLastT][k] = static_cast<float>(lt);
           st[aLastR][k] = static_cast<float>(lr);
           max_last = std::max(max_last, std::max(lt, lr));
@@ -305,8 +397,10 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
       for (int j = max_last - 1; j >= 0; --j) {
         const Splat s(f + static_cast<size_t>(j) * kNumFields);
         const float min_power = MinPower(s.op, s.rop, refl);
-        if (!(min_power < 0.0f)) {  // invisible everywhere: no gradient (the row must still be written)
-          std::fill(tg + static_cast<size_t>(j) * kGradStride, tg + static_cast<size_t>(j + 1) * kGradStride, 0.0f);
+        if (!(min_power <
+              0.0f)) {  // invisible everywhere: no gradient (the row must still be written)
+          std::fill(tg + static_cast<size_t>(j) * kGradStride,
+                    tg + static_cast<size_t>(j + 1) * kGradStride, 0.0f);
           continue;
         }
         int ya, yb;
@@ -333,17 +427,19 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
           const F16 T = simd::Select(vt, simd::Load(st[aT] + k) * inv_t, simd::Load(st[aT] + k));
           simd::Store(st[aT] + k, T);
           const F16 wt = simd::Masked(vt, at * T);
-          const F16 gt0 = simd::Load(st[aGt0] + k), gt1 = simd::Load(st[aGt1] + k), gt2 = simd::Load(st[aGt2] + k);
+          const F16 gt0 = simd::Load(st[aGt0] + k), gt1 = simd::Load(st[aGt1] + k),
+                    gt2 = simd::Load(st[aGt2] + k);
           const F16 gW = simd::Load(st[aGW] + k), gN = simd::Load(st[aGN] + k);
           g_ct0 += wt * gt0;
           g_ct1 += wt * gt1;
           g_ct2 += wt * gt2;
           g_beta += wt * gW;
           g_z += wt * gN;
-          const F16 St0 = simd::Load(st[aSt0] + k), St1 = simd::Load(st[aSt1] + k), St2 = simd::Load(st[aSt2] + k);
+          const F16 St0 = simd::Load(st[aSt0] + k), St1 = simd::Load(st[aSt1] + k),
+                    St2 = simd::Load(st[aSt2] + k);
           const F16 Sb = simd::Load(st[aSb] + k), Sz = simd::Load(st[aSz] + k);
-          F16 da_t = (s.ct0 - St0) * gt0 + (s.ct1 - St1) * gt1 + (s.ct2 - St2) * gt2 + (s.beta - Sb) * gW +
-                     (s.z - Sz) * gN;
+          F16 da_t = (s.ct0 - St0) * gt0 + (s.ct1 - St1) * gt1 + (s.ct2 - St2) * gt2 +
+                     (s.beta - Sb) * gW + (s.z - Sz) * gN;
           da_t = da_t * T + simd::Load(st[aTfin] + k) * inv_t * simd::Load(st[aGA] + k);
           const F16 keep_t = 1.0f - at;
           simd::Store(st[aSt0] + k, simd::Select(vt, at * s.ct0 + keep_t * St0, St0));
@@ -360,14 +456,17 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
             const F16 ar = simd::Min(raw_r, simd::Splat(kMaxAlpha));
             const I16 vr = in & (jf < simd::Load(st[aLastR] + k)) & (ar >= kMinAlpha);
             const F16 inv_r = 1.0f / (1.0f - ar);
-            const F16 Tr = simd::Select(vr, simd::Load(st[aTr] + k) * inv_r, simd::Load(st[aTr] + k));
+            const F16 Tr =
+                simd::Select(vr, simd::Load(st[aTr] + k) * inv_r, simd::Load(st[aTr] + k));
             simd::Store(st[aTr] + k, Tr);
             const F16 wr = simd::Masked(vr, ar * Tr);
-            const F16 gr0 = simd::Load(st[aGr0] + k), gr1 = simd::Load(st[aGr1] + k), gr2 = simd::Load(st[aGr2] + k);
+            const F16 gr0 = simd::Load(st[aGr0] + k), gr1 = simd::Load(st[aGr1] + k),
+                      gr2 = simd::Load(st[aGr2] + k);
             g_cr0 += wr * gr0;
             g_cr1 += wr * gr1;
             g_cr2 += wr * gr2;
-            const F16 Sr0 = simd::Load(st[aSr0] + k), Sr1 = simd::Load(st[aSr1] + k), Sr2 = simd::Load(st[aSr2] + k);
+            const F16 Sr0 = simd::Load(st[aSr0] + k), Sr1 = simd::Load(st[aSr1] + k),
+                      Sr2 = simd::Load(st[aSr2] + k);
             const F16 da_r = ((s.cr0 - Sr0) * gr0 + (s.cr1 - Sr1) * gr1 + (s.cr2 - Sr2) * gr2) * Tr;
             const F16 keep_r = 1.0f - ar;
             simd::Store(st[aSr0] + k, simd::Select(vr, ar * s.cr0 + keep_r * Sr0, Sr0));
@@ -406,7 +505,8 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
     }
   }
   // Deterministic reduction (tile and entry order) into the projected-quantity gradients.
-  ReduceEntryGradients(bins, scratch->tile_used, scratch->entry_grads, kGradStride, num, &scratch->per_primitive);
+  ReduceEntryGradients(bins, scratch->tile_used, scratch->entry_grads, kGradStride, num,
+                       &scratch->per_primitive);
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < static_cast<int64_t>(num); ++i) {
     const float* s = scratch->per_primitive.data() + static_cast<size_t>(i) * kGradStride;

@@ -1,11 +1,11 @@
 // Rasterization stage of the 3DGS branch with MGSR's reflection decomposition (reference 2.2):
 // per 16x16 tile, front-to-back alpha blending of the depth-sorted Gaussians, two transmittance
 // chains per pixel:
-//   C_tran = sum_i c_t,i a_i T_i + T_N bg        (a_i = min(0.99, o_i G_i), T_i = prod_{j<i} (1 - a_j))
-//   C_ref  = sum_i c_r,i ar_i Tr_i               (ar_i = min(0.99, or_i G_i), own chain, no background)
-//   W      = sum_i beta_i a_i T_i                (beta blended with the transmitted weights)
-//   D      = sum_i z_i a_i T_i / A, A = 1 - T_N  (0 where A < kMinDepthAlpha)
-//   C      = C_tran + W * C_ref
+//   C_tran = sum_i c_t,i a_i T_i + T_N bg        (a_i = min(0.99, o_i G_i), T_i = prod_{j<i} (1 -
+//   a_j)) C_ref  = sum_i c_r,i ar_i Tr_i               (ar_i = min(0.99, or_i G_i), own chain, no
+//   background) W      = sum_i beta_i a_i T_i                (beta blended with the transmitted
+//   weights) D      = sum_i z_i a_i T_i / A, A = 1 - T_N  (0 where A < kMinDepthAlpha) C      =
+//   C_tran + W * C_ref
 // A Gaussian affects a pixel only inside its 3-sigma square (|dx|, |dy| <= radius), where the
 // exponent is <= 0, and in a chain only if that chain's alpha >= 1/255 (each chain decides for
 // itself: a departure from the reference kernels, which skip both when either alpha is small,
@@ -37,11 +37,12 @@ struct GaussianRenderOptions {
 };
 
 struct GaussianRender {
-  Image color, tran, ref;       // 3 channels
-  Image weight, depth, alpha;   // 1 channel: W, D, A
+  Image color, tran, ref;      // 3 channels
+  Image weight, depth, alpha;  // 1 channel: W, D, A
   // Kept for the backward pass.
   std::vector<float> final_t, final_tr, depth_sum;
-  std::vector<uint32_t> last_t, last_r;  // per pixel: 1 + index (within its tile list) of the last blended
+  std::vector<uint32_t> last_t,
+      last_r;  // per pixel: 1 + index (within its tile list) of the last blended
 };
 
 // Upstream gradients; an empty image means zero.
@@ -49,9 +50,9 @@ struct GaussianRenderGrad {
   Image color, tran, ref, weight, depth, alpha;
 };
 
-
 void RasterizeGaussians(const ProjectedGaussians& projected, const TileBins& bins,
-                        const GaussianRenderOptions& options, GaussianRender* out, RasterScratch* scratch);
+                        const GaussianRenderOptions& options, GaussianRender* out,
+                        RasterScratch* scratch);
 
 // Adds d loss / d projected quantities into `d_projected` (sized by the caller).
 void RasterizeGaussiansBackward(const ProjectedGaussians& projected, const TileBins& bins,

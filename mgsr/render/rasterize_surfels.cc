@@ -10,22 +10,58 @@
 namespace mgsr {
 namespace {
 
-using simd::F16;
-using simd::I16;
 using raster_internal::BoxRange;
 using raster_internal::EnsureImage;
 using raster_internal::EnsureScratch;
 using raster_internal::kTilePixels;
 using raster_internal::PixelArrays;
-
+using simd::F16;
+using simd::I16;
 
 // Gathered per-tile fields (structure of arrays over the tile's surfels).
 enum Field {
-  kTu0, kTu1, kTu2, kTv0, kTv1, kTv2, kTw0, kTw1, kTw2, kMx, kMy, kRad, kOp, kN0, kN1, kN2, kC0, kC1, kC2, kNumFields
+  kTu0,
+  kTu1,
+  kTu2,
+  kTv0,
+  kTv1,
+  kTv2,
+  kTw0,
+  kTw1,
+  kTw2,
+  kMx,
+  kMy,
+  kRad,
+  kOp,
+  kN0,
+  kN1,
+  kN2,
+  kC0,
+  kC1,
+  kC2,
+  kNumFields
 };
 // Gradient fields per surfel.
 enum GradField {
-  gTu0, gTu1, gTu2, gTv0, gTv1, gTv2, gTw0, gTw1, gTw2, gMx, gMy, gOp, gN0, gN1, gN2, gC0, gC1, gC2, kGradStride
+  gTu0,
+  gTu1,
+  gTu2,
+  gTv0,
+  gTv1,
+  gTv2,
+  gTw0,
+  gTw1,
+  gTw2,
+  gMx,
+  gMy,
+  gOp,
+  gN0,
+  gN1,
+  gN2,
+  gC0,
+  gC1,
+  gC2,
+  kGradStride
 };
 
 void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, std::vector<float>* buffer) {
@@ -75,7 +111,8 @@ struct RowHit {
   I16 in, splat_branch;  // may contribute; rho3d <= rho2d
 };
 
-inline void IntersectRow(const Surfel& s, F16 px, float py, float min_power, I16 lanes_ok, RowHit* h) {
+inline void IntersectRow(const Surfel& s, F16 px, float py, float min_power, I16 lanes_ok,
+                         RowHit* h) {
   // Pixel offsets from the centre m; the stored rows are T_u - m_x T_w and T_v - m_y T_w (see
   // project_surfels.h), so k and l stay small and float keeps its precision.
   h->dxp = px - s.mx;
@@ -102,13 +139,14 @@ inline void IntersectRow(const Surfel& s, F16 px, float py, float min_power, I16
   h->z = s.tw[0] * h->u + s.tw[1] * h->v + s.tw[2];
   const F16 power = -0.5f * rho;
   // (The row itself is within the radius: callers skip rows with |m_y - y| > radius.)
-  h->in = lanes_ok & ok & (simd::Abs(h->dxm) <= s.rad) & (h->z >= kSurfelNear) & (power >= min_power);
+  h->in =
+      lanes_ok & ok & (simd::Abs(h->dxm) <= s.rad) & (h->z >= kSurfelNear) & (power >= min_power);
   h->G = simd::Exp(simd::Max(power, simd::Splat(-80.0f)));
 }
 
-inline F16 NdcDepth(F16 z) { return (kSurfelFar / (kSurfelFar - kSurfelNear)) * (1.0f - kSurfelNear / z); }
-
-
+inline F16 NdcDepth(F16 z) {
+  return (kSurfelFar / (kSurfelFar - kSurfelNear)) * (1.0f - kSurfelNear / z);
+}
 
 }  // namespace
 
@@ -119,7 +157,8 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   EnsureImage(&out->color, W, H, 3);
   EnsureImage(&out->normal, W, H, 3);
   EnsureImage(&out->normal_world, W, H, 3);
-  for (Image* im : {&out->depth, &out->alpha, &out->median_depth, &out->distortion}) EnsureImage(im, W, H, 1);
+  for (Image* im : {&out->depth, &out->alpha, &out->median_depth, &out->distortion})
+    EnsureImage(im, W, H, 1);
   out->final_t.resize(npix);
   out->depth_sum.resize(npix);
   out->m1.resize(npix);
@@ -147,7 +186,25 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
     const I16 lanes_ok = lanes < static_cast<float>(x_end - x0);
     const F16 px = lanes + (x0 + 0.5f);
 
-    enum { aT, aC0, aC1, aC2, aDs, aN0, aN1, aN2, aLive, aLast, aZmed, aMed, aM1, aM2, aDist, aMref, kArrays };
+    enum {
+      aT,
+      aC0,
+      aC1,
+      aC2,
+      aDs,
+      aN0,
+      aN1,
+      aN2,
+      aLive,
+      aLast,
+      aZmed,
+      aMed,
+      aM1,
+      aM2,
+      aDist,
+      aMref,
+      kArrays
+    };
     const PixelArrays st(&scratch->pixel_state[thread], kArrays);
     for (int a = 0; a < kArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
     std::fill(st[aT], st[aT] + kTilePixels, 1.0f);
@@ -191,19 +248,23 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
         const I16 med = blend & (T > 0.5f);
         simd::Store(st[aZmed] + k, simd::Select(med, h.z, simd::Load(st[aZmed] + k)));
         simd::Store(st[aMed] + k, simd::Select(med, simd::Splat(jp1), simd::Load(st[aMed] + k)));
-        // Distortion: w_i (m_i^2 A_i + M2_i - 2 m_i M1_i), A_i = 1 - T_i, M1/M2 over the surfels in front.
-        // It only depends on differences of m, so m is taken relative to the pixel's first blended
-        // surfel: in float, the absolute NDC depths (all close to 1) would cancel catastrophically.
+        // Distortion: w_i (m_i^2 A_i + M2_i - 2 m_i M1_i), A_i = 1 - T_i, M1/M2 over the surfels in
+        // front. It only depends on differences of m, so m is taken relative to the pixel's first
+        // blended surfel: in float, the absolute NDC depths (all close to 1) would cancel
+        // catastrophically.
         const F16 m_abs = NdcDepth(simd::Select(blend, h.z, simd::Splat(1.0f)));
-        const F16 mref = simd::Select(blend & (simd::Load(st[aLast] + k) == 0.0f), m_abs, simd::Load(st[aMref] + k));
+        const F16 mref = simd::Select(blend & (simd::Load(st[aLast] + k) == 0.0f), m_abs,
+                                      simd::Load(st[aMref] + k));
         simd::Store(st[aMref] + k, mref);
         const F16 m = m_abs - mref;
         const F16 M1 = simd::Load(st[aM1] + k), M2 = simd::Load(st[aM2] + k);
-        simd::Store(st[aDist] + k, simd::Load(st[aDist] + k) + w * (m * m * (1.0f - T) + M2 - 2.0f * m * M1));
+        simd::Store(st[aDist] + k,
+                    simd::Load(st[aDist] + k) + w * (m * m * (1.0f - T) + M2 - 2.0f * m * M1));
         simd::Store(st[aM1] + k, M1 + w * m);
         simd::Store(st[aM2] + k, M2 + w * m * m);
         simd::Store(st[aT] + k, simd::Select(blend, test, T));
-        simd::Store(st[aLast] + k, simd::Select(blend, simd::Splat(jp1), simd::Load(st[aLast] + k)));
+        simd::Store(st[aLast] + k,
+                    simd::Select(blend, simd::Splat(jp1), simd::Load(st[aLast] + k)));
         simd::Store(st[aLive] + k, simd::Select(term, F16{}, live));
       }
     }
@@ -236,8 +297,9 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   }
 }
 
-void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins, const SurfelRenderOptions& o,
-                              const SurfelRender& r, const SurfelRenderGrad& g, ProjectedSurfelsGrad* d,
+void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
+                              const SurfelRenderOptions& o, const SurfelRender& r,
+                              const SurfelRenderGrad& g, ProjectedSurfelsGrad* d,
                               RasterScratch* scratch) {
   const int W = o.camera.width, H = o.camera.height;
   const size_t num = p.size();
@@ -268,8 +330,35 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins, c
       const I16 lanes_ok = lanes < static_cast<float>(x_end - x0);
       const F16 px = lanes + (x0 + 0.5f);
 
-      enum { aT, aSc0, aSc1, aSc2, aSz, aSn0, aSn1, aSn2, aSw, aGc0, aGc1, aGc2, aGDs, aGn0, aGn1, aGn2, aGA,
-             aGZmed, aGDist, aTfin, aAN, aM1N, aM2N, aMref, aLast, aMed, kArrays };
+      enum {
+        aT,
+        aSc0,
+        aSc1,
+        aSc2,
+        aSz,
+        aSn0,
+        aSn1,
+        aSn2,
+        aSw,
+        aGc0,
+        aGc1,
+        aGc2,
+        aGDs,
+        aGn0,
+        aGn1,
+        aGn2,
+        aGA,
+        aGZmed,
+        aGDist,
+        aTfin,
+        aAN,
+        aM1N,
+        aM2N,
+        aMref,
+        aLast,
+        aMed,
+        kArrays
+      };
       const PixelArrays st(&scratch->pixel_state[thread], kArrays);
       for (int a = 0; a < kArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
       int max_last = 0;
@@ -280,7 +369,9 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins, c
           float gc[3];
           for (int c = 0; c < 3; ++c) gc[c] = g.color.empty() ? 0.0f : g.color.plane(c)[pix];
           Eigen::Vector3f gn = Eigen::Vector3f::Zero();
-          if (!g.normal.empty()) gn += Eigen::Vector3f(g.normal.plane(0)[pix], g.normal.plane(1)[pix], g.normal.plane(2)[pix]);
+          if (!g.normal.empty())
+            gn += Eigen::Vector3f(g.normal.plane(0)[pix], g.normal.plane(1)[pix],
+                                  g.normal.plane(2)[pix]);
           if (!g.normal_world.empty()) {
             gn += Rc * Eigen::Vector3f(g.normal_world.plane(0)[pix], g.normal_world.plane(1)[pix],
                                        g.normal_world.plane(2)[pix]);
@@ -314,15 +405,18 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins, c
       }
       for (int j = max_last - 1; j >= 0; --j) {
         const Surfel s(f, n, j);
-        if (!(s.op > kMinAlpha)) {  // invisible everywhere: no gradient (the row must still be written)
-          std::fill(tg + static_cast<size_t>(j) * kGradStride, tg + static_cast<size_t>(j + 1) * kGradStride, 0.0f);
+        if (!(s.op >
+              kMinAlpha)) {  // invisible everywhere: no gradient (the row must still be written)
+          std::fill(tg + static_cast<size_t>(j) * kGradStride,
+                    tg + static_cast<size_t>(j + 1) * kGradStride, 0.0f);
           continue;
         }
         const float min_power = std::log(kMinAlpha / s.op);
         int ya, yb;
         BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
         const float jf = static_cast<float>(j);
-        F16 gTu0{}, gTu1{}, gTu2{}, gTv0{}, gTv1{}, gTv2{}, gTw0{}, gTw1{}, gTw2{}, gmx{}, gmy{}, gop{};
+        F16 gTu0{}, gTu1{}, gTu2{}, gTv0{}, gTv1{}, gTv2{}, gTw0{}, gTw1{}, gTw2{}, gmx{}, gmy{},
+            gop{};
         F16 gn0{}, gn1{}, gn2{}, gc0{}, gc1{}, gc2{};
         for (int y = ya; y <= yb; ++y) {
           const float py = y + 0.5f;
@@ -340,8 +434,10 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins, c
           const F16 T = simd::Select(valid, simd::Load(st[aT] + k) * inv, simd::Load(st[aT] + k));
           simd::Store(st[aT] + k, T);
           const F16 w = simd::Masked(valid, a * T);
-          const F16 Gc0 = simd::Load(st[aGc0] + k), Gc1 = simd::Load(st[aGc1] + k), Gc2 = simd::Load(st[aGc2] + k);
-          const F16 Gn0 = simd::Load(st[aGn0] + k), Gn1 = simd::Load(st[aGn1] + k), Gn2 = simd::Load(st[aGn2] + k);
+          const F16 Gc0 = simd::Load(st[aGc0] + k), Gc1 = simd::Load(st[aGc1] + k),
+                    Gc2 = simd::Load(st[aGc2] + k);
+          const F16 Gn0 = simd::Load(st[aGn0] + k), Gn1 = simd::Load(st[aGn1] + k),
+                    Gn2 = simd::Load(st[aGn2] + k);
           const F16 GDs = simd::Load(st[aGDs] + k), GDist = simd::Load(st[aGDist] + k);
           gc0 += w * Gc0;
           gc1 += w * Gc1;
@@ -351,8 +447,10 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins, c
           gn2 += w * Gn2;
           // Distortion: d dist / d w_i and d dist / d m_i at this pixel's totals.
           const F16 zz = simd::Select(valid, h.z, simd::Splat(1.0f));
-          const F16 m = NdcDepth(zz) - simd::Load(st[aMref] + k);  // relative, as in the forward pass
-          const F16 AN = simd::Load(st[aAN] + k), M1N = simd::Load(st[aM1N] + k), M2N = simd::Load(st[aM2N] + k);
+          const F16 m =
+              NdcDepth(zz) - simd::Load(st[aMref] + k);  // relative, as in the forward pass
+          const F16 AN = simd::Load(st[aAN] + k), M1N = simd::Load(st[aM1N] + k),
+                    M2N = simd::Load(st[aM2N] + k);
           const F16 gw_dist = GDist * (m * m * AN - 2.0f * m * M1N + M2N);
           const F16 dm = 2.0f * w * GDist * (m * AN - M1N);
           // d loss / d z of the intersection.
@@ -360,11 +458,14 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins, c
           const F16 dz = w * GDs + simd::Masked(is_median, simd::Load(st[aGZmed] + k)) +
                          dm * (kDmDzScale / (zz * zz));
           // d loss / d a through every output (the "behind" accumulators S).
-          const F16 Sc0 = simd::Load(st[aSc0] + k), Sc1 = simd::Load(st[aSc1] + k), Sc2 = simd::Load(st[aSc2] + k);
-          const F16 Sn0 = simd::Load(st[aSn0] + k), Sn1 = simd::Load(st[aSn1] + k), Sn2 = simd::Load(st[aSn2] + k);
+          const F16 Sc0 = simd::Load(st[aSc0] + k), Sc1 = simd::Load(st[aSc1] + k),
+                    Sc2 = simd::Load(st[aSc2] + k);
+          const F16 Sn0 = simd::Load(st[aSn0] + k), Sn1 = simd::Load(st[aSn1] + k),
+                    Sn2 = simd::Load(st[aSn2] + k);
           const F16 Sz = simd::Load(st[aSz] + k), Sw = simd::Load(st[aSw] + k);
-          F16 da = (s.c[0] - Sc0) * Gc0 + (s.c[1] - Sc1) * Gc1 + (s.c[2] - Sc2) * Gc2 + (h.z - Sz) * GDs +
-                   (s.n[0] - Sn0) * Gn0 + (s.n[1] - Sn1) * Gn1 + (s.n[2] - Sn2) * Gn2 + (gw_dist - Sw);
+          F16 da = (s.c[0] - Sc0) * Gc0 + (s.c[1] - Sc1) * Gc1 + (s.c[2] - Sc2) * Gc2 +
+                   (h.z - Sz) * GDs + (s.n[0] - Sn0) * Gn0 + (s.n[1] - Sn1) * Gn1 +
+                   (s.n[2] - Sn2) * Gn2 + (gw_dist - Sw);
           da = da * T + simd::Load(st[aTfin] + k) * inv * simd::Load(st[aGA] + k);
           const F16 keep = 1.0f - a;
           simd::Store(st[aSc0] + k, simd::Select(valid, a * s.c[0] + keep * Sc0, Sc0));
@@ -415,15 +516,17 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins, c
           gmy -= s.tw[0] * dl0 + s.tw[1] * dl1 + s.tw[2] * dl2;
         }
         float* dst = tg + static_cast<size_t>(j) * kGradStride;
-        const F16* accs[kGradStride] = {&gTu0, &gTu1, &gTu2, &gTv0, &gTv1, &gTv2, &gTw0, &gTw1, &gTw2,
-                                        &gmx,  &gmy,  &gop,  &gn0,  &gn1,  &gn2,  &gc0,  &gc1,  &gc2};
+        const F16* accs[kGradStride] = {&gTu0, &gTu1, &gTu2, &gTv0, &gTv1, &gTv2,
+                                        &gTw0, &gTw1, &gTw2, &gmx,  &gmy,  &gop,
+                                        &gn0,  &gn1,  &gn2,  &gc0,  &gc1,  &gc2};
         for (int q = 0; q < kGradStride; ++q) dst[q] = simd::Sum(*accs[q]);
       }
       scratch->tile_used[tile] = static_cast<uint32_t>(max_last);
     }
   }
   // Deterministic reduction (tile and entry order) into the projected-quantity gradients.
-  ReduceEntryGradients(bins, scratch->tile_used, scratch->entry_grads, kGradStride, num, &scratch->per_primitive);
+  ReduceEntryGradients(bins, scratch->tile_used, scratch->entry_grads, kGradStride, num,
+                       &scratch->per_primitive);
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < static_cast<int64_t>(num); ++i) {
     const float* s = scratch->per_primitive.data() + static_cast<size_t>(i) * kGradStride;

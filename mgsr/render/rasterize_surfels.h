@@ -1,8 +1,8 @@
 // Rasterization stage of the 2DGS branch (reference 3.3-3.4): per tile, front-to-back blending of
 // depth-sorted surfels with the exact ray-splat intersection in each splat's (u, v) frame:
-//   k = x T_w - T_u, l = y T_w - T_v, p = k x l, (u, v) = (p_x, p_y) / p_z   at the pixel centre (x, y)
-//   rho = min(u^2 + v^2, 2 |m - (x, y)|^2)       (the screen low-pass floor), G = exp(-rho / 2)
-//   z = T_w . (u, v, 1)  (skipped below the near plane), a = min(0.99, o G)
+//   k = x T_w - T_u, l = y T_w - T_v, p = k x l, (u, v) = (p_x, p_y) / p_z   at the pixel centre
+//   (x, y) rho = min(u^2 + v^2, 2 |m - (x, y)|^2)       (the screen low-pass floor), G = exp(-rho /
+//   2) z = T_w . (u, v, 1)  (skipped below the near plane), a = min(0.99, o G)
 // Outputs per pixel: C = sum w c + T_N bg, expected depth D = sum w z / A (0 where A < 1e-4),
 // A = 1 - T_N, N = sum w n (view space; world = R_c^T N), the median depth (z of the last surfel
 // blended while T > 0.5) and the depth distortion sum_i sum_{j<i} w_i w_j (m_i - m_j)^2 of NDC
@@ -30,8 +30,8 @@ struct SurfelRenderOptions {
 };
 
 struct SurfelRender {
-  Image color;         // 3 channels
-  Image depth;         // expected depth
+  Image color;  // 3 channels
+  Image depth;  // expected depth
   Image alpha;
   Image normal;        // view space, alpha-weighted (not normalised)
   Image normal_world;  // R_c^T normal
@@ -39,7 +39,7 @@ struct SurfelRender {
   Image distortion;
   // Kept for the backward pass.
   std::vector<float> final_t, depth_sum, m1, m2, m_ref;  // m1, m2 relative to m_ref (see .cc)
-  std::vector<uint32_t> last, median_index;  // 1 + index within the tile list (0: none)
+  std::vector<uint32_t> last, median_index;              // 1 + index within the tile list (0: none)
 };
 
 // Upstream gradients; an empty image means zero.
@@ -47,8 +47,9 @@ struct SurfelRenderGrad {
   Image color, depth, alpha, normal, normal_world, median_depth, distortion;
 };
 
-void RasterizeSurfels(const ProjectedSurfels& projected, const TileBins& bins, const SurfelRenderOptions& options,
-                      SurfelRender* out, RasterScratch* scratch);
+void RasterizeSurfels(const ProjectedSurfels& projected, const TileBins& bins,
+                      const SurfelRenderOptions& options, SurfelRender* out,
+                      RasterScratch* scratch);
 
 void RasterizeSurfelsBackward(const ProjectedSurfels& projected, const TileBins& bins,
                               const SurfelRenderOptions& options, const SurfelRender& render,

@@ -9,7 +9,7 @@ constexpr float kC0 = 0.28209479177387814f;
 constexpr float kC1 = 0.4886025119029199f;
 constexpr float kC2[5] = {1.0925484305920792f, -1.0925484305920792f, 0.31539156525252005f,
                           -1.0925484305920792f, 0.5462742152960396f};
-constexpr float kC3[7] = {-0.5900435899266435f, 2.890611442640554f, -0.4570457994644658f,
+constexpr float kC3[7] = {-0.5900435899266435f, 2.890611442640554f,   -0.4570457994644658f,
                           0.3731763325901154f,  -0.4570457994644658f, 1.445305721320277f,
                           -0.5900435899266435f};
 
@@ -39,7 +39,8 @@ void ShBasis(int degree, const float d[3], float b[kMaxShCoeffs]) {
   b[15] = kC3[6] * x * (xx - 3 * yy);
 }
 
-void ShBasisWithGradient(int degree, const float d[3], float b[kMaxShCoeffs], float g[kMaxShCoeffs][3]) {
+void ShBasisWithGradient(int degree, const float d[3], float b[kMaxShCoeffs],
+                         float g[kMaxShCoeffs][3]) {
   ShBasis(degree, d, b);
   const float x = d[0], y = d[1], z = d[2];
   auto set = [&](int k, float gx, float gy, float gz) {
@@ -69,7 +70,8 @@ void ShBasisWithGradient(int degree, const float d[3], float b[kMaxShCoeffs], fl
   set(15, kC3[6] * (3 * xx - 3 * yy), -6 * kC3[6] * x * y, 0);
 }
 
-void EvalShColor(int degree, const float* coeffs, const float dir[3], float rgb[3], uint8_t clamped[3]) {
+void EvalShColor(int degree, const float* coeffs, const float dir[3], float rgb[3],
+                 uint8_t clamped[3]) {
   float b[kMaxShCoeffs];
   ShBasis(degree, dir, b);
   const int n = (degree + 1) * (degree + 1);
@@ -81,8 +83,9 @@ void EvalShColor(int degree, const float* coeffs, const float dir[3], float rgb[
   }
 }
 
-void EvalShColorBackward(int degree, const float* coeffs, const float dir[3], const uint8_t clamped[3],
-                         const float d_rgb[3], float* d_coeffs, float d_dir[3]) {
+void EvalShColorBackward(int degree, const float* coeffs, const float dir[3],
+                         const uint8_t clamped[3], const float d_rgb[3], float* d_coeffs,
+                         float d_dir[3]) {
   float b[kMaxShCoeffs], g[kMaxShCoeffs][3];
   ShBasisWithGradient(degree, dir, b, g);
   const int n = (degree + 1) * (degree + 1);

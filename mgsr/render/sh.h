@@ -18,12 +18,14 @@ void ShBasisWithGradient(int degree, const float dir[3], float basis[kMaxShCoeff
 
 // Colour from coefficients laid out [k][rgb] (stride 3, `coeffs` has at least (degree+1)^2 rows).
 // clamped[c] is set to 1 where the channel was clamped at 0.
-void EvalShColor(int degree, const float* coeffs, const float dir[3], float rgb[3], uint8_t clamped[3]);
+void EvalShColor(int degree, const float* coeffs, const float dir[3], float rgb[3],
+                 uint8_t clamped[3]);
 
 // Backward of EvalShColor: adds d/d coeffs into d_coeffs (same layout) and returns d/d dir
 // (of the unit direction; chain through the normalisation is the caller's, see NormalizeBackward).
-void EvalShColorBackward(int degree, const float* coeffs, const float dir[3], const uint8_t clamped[3],
-                         const float d_rgb[3], float* d_coeffs, float d_dir[3]);
+void EvalShColorBackward(int degree, const float* coeffs, const float dir[3],
+                         const uint8_t clamped[3], const float d_rgb[3], float* d_coeffs,
+                         float d_dir[3]);
 
 // dir = v / |v|: given d/d dir, returns d/d v.
 void NormalizeBackward(const float v[3], const float d_dir[3], float d_v[3]);

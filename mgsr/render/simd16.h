@@ -60,7 +60,7 @@ inline bool Any(I16 mask) {
 inline F16 Exp(F16 x) {
   const F16 f = x * 1.44269504088896341f + 0.5f;
   F16 t = __builtin_convertvector(__builtin_convertvector(f, I16), F16);  // truncates toward 0
-  t = t > f ? t - 1.0f : t;                                                // floor
+  t = t > f ? t - 1.0f : t;                                               // floor
   F16 r = x - t * 0.693359375f;
   r = r + t * 2.12194440e-4f;
   const F16 z = r * r;

@@ -4,14 +4,17 @@
 
 namespace mgsr {
 
-void SurfelRenderer::Forward(const SurfelModel& model, const SurfelRenderOptions& options, SurfelRender* out) {
+void SurfelRenderer::Forward(const SurfelModel& model, const SurfelRenderOptions& options,
+                             SurfelRender* out) {
   ProjectSurfels(model, options.camera, options.sh_degree, &projected_);
-  BinPrimitives(projected_.rects, projected_.depth.data(), options.camera.width, options.camera.height, &bins_);
+  BinPrimitives(projected_.rects, projected_.depth.data(), options.camera.width,
+                options.camera.height, &bins_);
   RasterizeSurfels(projected_, bins_, options, out, &scratch_);
 }
 
-void SurfelRenderer::Backward(const SurfelModel& model, const SurfelRenderOptions& options, const SurfelRender& render,
-                              const SurfelRenderGrad& grad, SurfelGradients* grads) {
+void SurfelRenderer::Backward(const SurfelModel& model, const SurfelRenderOptions& options,
+                              const SurfelRender& render, const SurfelRenderGrad& grad,
+                              SurfelGradients* grads) {
   CHECK_EQ(projected_.size(), model.size()) << "Backward without a matching Forward";
   d_projected_.ResizeAndZero(model.size());
   RasterizeSurfelsBackward(projected_, bins_, options, render, grad, &d_projected_, &scratch_);

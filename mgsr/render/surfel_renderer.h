@@ -14,8 +14,8 @@ namespace mgsr {
 class SurfelRenderer {
  public:
   void Forward(const SurfelModel& model, const SurfelRenderOptions& options, SurfelRender* out);
-  void Backward(const SurfelModel& model, const SurfelRenderOptions& options, const SurfelRender& render,
-                const SurfelRenderGrad& grad, SurfelGradients* grads);
+  void Backward(const SurfelModel& model, const SurfelRenderOptions& options,
+                const SurfelRender& render, const SurfelRenderGrad& grad, SurfelGradients* grads);
 
   const ProjectedSurfels& projected() const { return projected_; }
   const TileBins& bins() const { return bins_; }

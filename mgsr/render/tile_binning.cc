@@ -20,8 +20,8 @@ TileRect TileRectFromBox(float cx, float cy, float rx, float ry, int tiles_x, in
 namespace {
 
 // Stable LSD radix sort of (key, id) pairs by 32-bit key, 11 bits per pass.
-void RadixSortByKey(std::vector<uint32_t>* keys, std::vector<uint32_t>* ids, std::vector<uint32_t>* tmp_keys,
-                    std::vector<uint32_t>* tmp_ids) {
+void RadixSortByKey(std::vector<uint32_t>* keys, std::vector<uint32_t>* ids,
+                    std::vector<uint32_t>* tmp_keys, std::vector<uint32_t>* tmp_ids) {
   const size_t n = keys->size();
   tmp_keys->resize(n);
   tmp_ids->resize(n);

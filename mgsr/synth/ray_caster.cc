@@ -64,7 +64,8 @@ int RayCaster::Build(int first, int count, int depth) {
   int axis = 0;
   (chi - clo).maxCoeff(&axis);
   const int half = count / 2;
-  std::nth_element(order_.begin() + first, order_.begin() + first + half, order_.begin() + first + count,
+  std::nth_element(order_.begin() + first, order_.begin() + first + half,
+                   order_.begin() + first + count,
                    [&](int a, int b) { return centroids_[a][axis] < centroids_[b][axis]; });
   const int left = Build(first, half, depth + 1);
   const int right = Build(first + half, count - half, depth + 1);
@@ -74,8 +75,8 @@ int RayCaster::Build(int first, int count, int depth) {
 }
 
 template <bool kAnyHit>
-bool RayCaster::Traverse(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t_min, double t_max,
-                         RayHit* hit) const {
+bool RayCaster::Traverse(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t_min,
+                         double t_max, RayHit* hit) const {
   if (nodes_.empty()) return false;
   const Eigen::Vector3d inv_d(1.0 / d.x(), 1.0 / d.y(), 1.0 / d.z());
   int stack[128];
@@ -121,14 +122,14 @@ bool RayCaster::Traverse(const Eigen::Vector3d& o, const Eigen::Vector3d& d, dou
   return found;
 }
 
-bool RayCaster::Intersect(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double t_min,
-                          double t_max, RayHit* hit) const {
+bool RayCaster::Intersect(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
+                          double t_min, double t_max, RayHit* hit) const {
   *hit = RayHit();
   return Traverse<false>(origin, direction, t_min, t_max, hit);
 }
 
-bool RayCaster::Occluded(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double t_min,
-                         double t_max) const {
+bool RayCaster::Occluded(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
+                         double t_min, double t_max) const {
   RayHit unused;
   return Traverse<true>(origin, direction, t_min, t_max, &unused);
 }

@@ -11,9 +11,9 @@
 namespace mgsr {
 
 struct RayHit {
-  double t = 0;          // distance along the (unit or not) direction
-  int triangle = -1;     // -1: no hit
-  double u = 0, v = 0;   // barycentrics of vertices 1 and 2
+  double t = 0;         // distance along the (unit or not) direction
+  int triangle = -1;    // -1: no hit
+  double u = 0, v = 0;  // barycentrics of vertices 1 and 2
 };
 
 class RayCaster {

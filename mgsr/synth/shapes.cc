@@ -38,8 +38,9 @@ void Subdivide(TriangleMesh* mesh, Project project) {
 TriangleMesh UnitIcoSphere(int subdivisions) {
   const double t = (1.0 + std::sqrt(5.0)) / 2.0;
   TriangleMesh m;
-  const double v[12][3] = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
-                           {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  const double v[12][3] = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0},
+                           {0, -1, t}, {0, 1, t}, {0, -1, -t}, {0, 1, -t},
+                           {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
   for (const auto& p : v) m.vertices.push_back(Eigen::Vector3d(p[0], p[1], p[2]).normalized());
   const int f[20][3] = {{0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11},
                         {1, 5, 9},  {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
@@ -67,8 +68,8 @@ TriangleMesh MakeTorus(double R, double r, int nu, int nv) {
     const double u = 2 * kPi * i / nu;
     for (int j = 0; j < nv; ++j) {
       const double v = 2 * kPi * j / nv;
-      m.vertices.emplace_back((R + r * std::cos(v)) * std::cos(u), (R + r * std::cos(v)) * std::sin(u),
-                              r * std::sin(v));
+      m.vertices.emplace_back((R + r * std::cos(v)) * std::cos(u),
+                              (R + r * std::cos(v)) * std::sin(u), r * std::sin(v));
     }
   }
   auto id = [&](int i, int j) { return ((i + nu) % nu) * nv + (j + nv) % nv; };
@@ -83,7 +84,8 @@ TriangleMesh MakeTorus(double R, double r, int nu, int nv) {
 }
 
 TriangleMesh MakeRoundedBox(double b, double r, int n) {
-  // A subdivided cube, each surface point pushed to distance r from the inner box of half-size b - r.
+  // A subdivided cube, each surface point pushed to distance r from the inner box of half-size b -
+  // r.
   TriangleMesh m;
   const double inner = b - r;
   for (int axis = 0; axis < 3; ++axis) {
@@ -121,8 +123,9 @@ TriangleMesh MakeRoundedBox(double b, double r, int n) {
   std::vector<int> remap(m.vertices.size());
   std::vector<Eigen::Vector3d> unique;
   for (size_t i = 0; i < m.vertices.size(); ++i) {
-    const auto key = std::make_tuple(std::lround(m.vertices[i].x() * 1e6), std::lround(m.vertices[i].y() * 1e6),
-                                     std::lround(m.vertices[i].z() * 1e6));
+    const auto key =
+        std::make_tuple(std::lround(m.vertices[i].x() * 1e6), std::lround(m.vertices[i].y() * 1e6),
+                        std::lround(m.vertices[i].z() * 1e6));
     auto it = index.find(key);
     if (it == index.end()) {
       it = index.emplace(key, static_cast<int>(unique.size())).first;
@@ -172,7 +175,8 @@ TriangleMesh MakeDentedSphereWithRod(int subdivisions) {
   // Cap at the far end.
   const int tip = static_cast<int>(rod.vertices.size());
   rod.vertices.push_back(end * axis);
-  for (int j = 0; j < seg; ++j) rod.triangles.emplace_back(rings * seg + j, rings * seg + (j + 1) % seg, tip);
+  for (int j = 0; j < seg; ++j)
+    rod.triangles.emplace_back(rings * seg + j, rings * seg + (j + 1) % seg, tip);
   rod.ComputeVertexNormals();
   body.Append(rod);
   return body;
@@ -182,11 +186,16 @@ std::vector<std::string> ShapeNames() { return {"sphere", "torus", "rounded_box"
 
 bool MakeShape(const std::string& name, int detail, TriangleMesh* mesh) {
   detail = std::max(0, std::min(2, detail));
-  if (name == "sphere") *mesh = MakeIcoSphere(0.8, 3 + detail);
-  else if (name == "torus") *mesh = MakeTorus(0.65, 0.3, 48 << detail, 24 << detail);
-  else if (name == "rounded_box") *mesh = MakeRoundedBox(0.55, 0.15, 12 << detail);
-  else if (name == "dented") *mesh = MakeDentedSphereWithRod(3 + detail);
-  else return false;
+  if (name == "sphere")
+    *mesh = MakeIcoSphere(0.8, 3 + detail);
+  else if (name == "torus")
+    *mesh = MakeTorus(0.65, 0.3, 48 << detail, 24 << detail);
+  else if (name == "rounded_box")
+    *mesh = MakeRoundedBox(0.55, 0.15, 12 << detail);
+  else if (name == "dented")
+    *mesh = MakeDentedSphereWithRod(3 + detail);
+  else
+    return false;
   return true;
 }
 

@@ -36,8 +36,10 @@ double Hash3(long x, long y, long z) {
 double ValueNoise(const Eigen::Vector3d& p) {
   const Eigen::Vector3d f(std::floor(p.x()), std::floor(p.y()), std::floor(p.z()));
   const Eigen::Vector3d t = p - f;
-  const Eigen::Vector3d s(Smoothstep(0, 1, t.x()), Smoothstep(0, 1, t.y()), Smoothstep(0, 1, t.z()));
-  const long x = static_cast<long>(f.x()), y = static_cast<long>(f.y()), z = static_cast<long>(f.z());
+  const Eigen::Vector3d s(Smoothstep(0, 1, t.x()), Smoothstep(0, 1, t.y()),
+                          Smoothstep(0, 1, t.z()));
+  const long x = static_cast<long>(f.x()), y = static_cast<long>(f.y()),
+             z = static_cast<long>(f.z());
   double v = 0;
   for (int c = 0; c < 8; ++c) {
     const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
@@ -68,7 +70,9 @@ Eigen::Vector3d Environment(const Eigen::Vector3d& d, const ViewLight& light) {
     c = Eigen::Vector3d(0.95, 0.92, 0.85) * (1 - t) + Eigen::Vector3d(0.25, 0.45, 0.9) * t;
   } else {
     const double s = 1.0 / std::max(1e-3, -d.z());
-    const bool check = (static_cast<long>(std::floor(d.x() * s * 2)) + static_cast<long>(std::floor(d.y() * s * 2))) & 1;
+    const bool check = (static_cast<long>(std::floor(d.x() * s * 2)) +
+                        static_cast<long>(std::floor(d.y() * s * 2))) &
+                       1;
     c = check ? Eigen::Vector3d(0.12, 0.11, 0.10) : Eigen::Vector3d(0.30, 0.28, 0.26);
   }
   c *= light.environment;
@@ -81,18 +85,21 @@ double LinearToSrgb(double x) {
   return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1.0 / 2.4) - 0.055;
 }
 
-Eigen::Vector3d Shade(const RayCaster& caster, const Eigen::Vector3d& p, const Eigen::Vector3d& n_in,
-                      const Eigen::Vector3d& view_dir, const ViewLight& light, const SynthOptions& o) {
+Eigen::Vector3d Shade(const RayCaster& caster, const Eigen::Vector3d& p,
+                      const Eigen::Vector3d& n_in, const Eigen::Vector3d& view_dir,
+                      const ViewLight& light, const SynthOptions& o) {
   // view_dir points from the camera to the surface.
   Eigen::Vector3d n = n_in;
   if (n.dot(view_dir) > 0) n = -n;  // inside faces of open parts
   const Eigen::Vector3d albedo = Albedo(p);
   const Eigen::Vector3d sky(0.55, 0.65, 0.85), ground(0.25, 0.23, 0.2);
-  const Eigen::Vector3d ambient = 0.35 * light.environment * (ground + (sky - ground) * (0.5 + 0.5 * n.z()));
+  const Eigen::Vector3d ambient =
+      0.35 * light.environment * (ground + (sky - ground) * (0.5 + 0.5 * n.z()));
   const double ndotl = n.dot(light.direction);
   double visible = 0;
   if (ndotl > 0) visible = caster.Occluded(p + 1e-6 * n, light.direction, 1e-6, 1e3) ? 0.0 : 1.0;
-  Eigen::Vector3d c = albedo.cwiseProduct(ambient + light.intensity * std::max(0.0, ndotl) * visible * light.color);
+  Eigen::Vector3d c =
+      albedo.cwiseProduct(ambient + light.intensity * std::max(0.0, ndotl) * visible * light.color);
   if (visible > 0) {
     const Eigen::Vector3d h = (light.direction - view_dir).normalized();
     const double spec = std::pow(std::max(0.0, n.dot(h)), o.shininess);
@@ -126,13 +133,16 @@ Status SynthOptions::Validate() const {
     return Status::Error("unknown shape '" + shape + "' (choose one of: " + names + ")");
   }
   if (num_views < 3) return Status::Error("--num_views must be >= 3");
-  if (width < 8 || height < 8 || width > 8192 || height > 8192) return Status::Error("--width/--height must be in [8, 8192]");
+  if (width < 8 || height < 8 || width > 8192 || height > 8192)
+    return Status::Error("--width/--height must be in [8, 8192]");
   if (!(fov_x > 0.05 && fov_x < 3.0)) return Status::Error("--fov_x must be in (0.05, 3) radians");
   if (!(distance > 1.2)) return Status::Error("--distance must be > 1.2 (the object has radius 1)");
-  if (supersampling < 1 || supersampling > 8) return Status::Error("--supersampling must be in [1, 8]");
+  if (supersampling < 1 || supersampling > 8)
+    return Status::Error("--supersampling must be in [1, 8]");
   if (test_every < 0) return Status::Error("--test_every must be >= 0");
   if (!(mirror >= 0 && mirror <= 1)) return Status::Error("--mirror must be in [0, 1]");
-  if (!(exposure_stops >= 0 && exposure_stops <= 6)) return Status::Error("--exposure_stops must be in [0, 6]");
+  if (!(exposure_stops >= 0 && exposure_stops <= 6))
+    return Status::Error("--exposure_stops must be in [0, 6]");
   return Status::Ok();
 }
 
@@ -142,16 +152,21 @@ Status MakeSyntheticScene(const SynthOptions& o, SyntheticScene* s) {
   MakeShape(o.shape, o.detail, &s->mesh);
   Rng rng(o.seed);
   const double fx = 0.5 * o.width / std::tan(0.5 * o.fov_x);
-  const double lo = std::sin(o.min_elevation_deg * kPi / 180), hi = std::sin(o.max_elevation_deg * kPi / 180);
+  const double lo = std::sin(o.min_elevation_deg * kPi / 180),
+               hi = std::sin(o.max_elevation_deg * kPi / 180);
   for (int i = 0; i < o.num_views; ++i) {
-    // A Fibonacci spiral over the elevation band gives even coverage; a little jitter avoids symmetry.
+    // A Fibonacci spiral over the elevation band gives even coverage; a little jitter avoids
+    // symmetry.
     const double z = lo + (hi - lo) * (i + 0.5) / o.num_views;
     const double azimuth = i * kPi * (3 - std::sqrt(5.0)) + rng.Uniform(-0.05, 0.05);
     const double r = std::sqrt(std::max(0.0, 1 - z * z));
     const double dist = o.distance * (1 + rng.Uniform(-0.03, 0.03));
-    const Eigen::Vector3d center = dist * Eigen::Vector3d(r * std::cos(azimuth), r * std::sin(azimuth), z);
-    const Eigen::Vector3d target(rng.Uniform(-0.03, 0.03), rng.Uniform(-0.03, 0.03), rng.Uniform(-0.03, 0.03));
-    s->cameras.push_back(LookAtCamera(center, target, Eigen::Vector3d::UnitZ(), o.width, o.height, fx, fx));
+    const Eigen::Vector3d center =
+        dist * Eigen::Vector3d(r * std::cos(azimuth), r * std::sin(azimuth), z);
+    const Eigen::Vector3d target(rng.Uniform(-0.03, 0.03), rng.Uniform(-0.03, 0.03),
+                                 rng.Uniform(-0.03, 0.03));
+    s->cameras.push_back(
+        LookAtCamera(center, target, Eigen::Vector3d::UnitZ(), o.width, o.height, fx, fx));
     char name[32];
     std::snprintf(name, sizeof(name), "v%03d.png", i);
     s->names.push_back(name);
@@ -160,11 +175,13 @@ Status MakeSyntheticScene(const SynthOptions& o, SyntheticScene* s) {
     ViewLight l = FixedLight();
     if (o.varying_light) {
       const double elev = rng.Uniform(10, 80) * kPi / 180, az = rng.Uniform(0, 2 * kPi);
-      l.direction = Eigen::Vector3d(std::cos(elev) * std::cos(az), std::cos(elev) * std::sin(az), std::sin(elev));
+      l.direction = Eigen::Vector3d(std::cos(elev) * std::cos(az), std::cos(elev) * std::sin(az),
+                                    std::sin(elev));
       l.intensity = rng.Uniform(0.7, 1.6);
       const int tint = static_cast<int>(rng.UniformInt(3));
-      l.color = tint == 0 ? Eigen::Vector3d(1, 1, 1) : tint == 1 ? Eigen::Vector3d(1.0, 0.85, 0.65)
-                                                                  : Eigen::Vector3d(0.75, 0.85, 1.0);
+      l.color = tint == 0   ? Eigen::Vector3d(1, 1, 1)
+                : tint == 1 ? Eigen::Vector3d(1.0, 0.85, 0.65)
+                            : Eigen::Vector3d(0.75, 0.85, 1.0);
       l.environment = rng.Uniform(0.6, 1.3);
       l.exposure_stops = rng.Uniform(-o.exposure_stops, o.exposure_stops);
     }
@@ -222,14 +239,16 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
   for (const char* d : {"images", "masks", "sparse/0", "gt/depth", "gt/normal"}) {
     MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, d)));
   }
-  if (o.constant_light_copy) MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, "images_constant")));
+  if (o.constant_light_copy)
+    MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, "images_constant")));
   const RayCaster caster(s.mesh);
 
   for (size_t i = 0; i < s.cameras.size(); ++i) {
     Image rgba, depth, normal;
     RenderSyntheticView(caster, s.mesh, s.cameras[i], s.lights[i], o, &rgba, &depth, &normal);
     Image mask(rgba.width(), rgba.height(), 1);
-    for (size_t k = 0; k < mask.size(); ++k) mask.data()[k] = rgba.plane(3)[k] >= 0.5f ? 1.0f : 0.0f;
+    for (size_t k = 0; k < mask.size(); ++k)
+      mask.data()[k] = rgba.plane(3)[k] >= 0.5f ? 1.0f : 0.0f;
     const std::string stem = FileStem(s.names[i]);
     MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "images/" + s.names[i]), rgba));
     MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "masks/" + stem + ".png"), mask));
@@ -265,16 +284,26 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
   std::vector<double> cumulative;
   double total = 0;
   for (const auto& f : s.mesh.triangles) {
-    total += 0.5 * (s.mesh.vertices[f[1]] - s.mesh.vertices[f[0]]).cross(s.mesh.vertices[f[2]] - s.mesh.vertices[f[0]]).norm();
+    total += 0.5 * (s.mesh.vertices[f[1]] - s.mesh.vertices[f[0]])
+                       .cross(s.mesh.vertices[f[2]] - s.mesh.vertices[f[0]])
+                       .norm();
     cumulative.push_back(total);
   }
   TriangleMesh cloud;
-  for (int attempt = 0; attempt < o.num_points * 4 && static_cast<int>(model.points.size()) < o.num_points; ++attempt) {
-    const int tri = static_cast<int>(std::lower_bound(cumulative.begin(), cumulative.end(), rng.Uniform() * total) - cumulative.begin());
+  for (int attempt = 0;
+       attempt < o.num_points * 4 && static_cast<int>(model.points.size()) < o.num_points;
+       ++attempt) {
+    const int tri = static_cast<int>(
+        std::lower_bound(cumulative.begin(), cumulative.end(), rng.Uniform() * total) -
+        cumulative.begin());
     const auto& f = s.mesh.triangles[std::min<size_t>(tri, s.mesh.triangles.size() - 1)];
     double a = rng.Uniform(), b = rng.Uniform();
-    if (a + b > 1) { a = 1 - a; b = 1 - b; }
-    const Eigen::Vector3d X = s.mesh.vertices[f[0]] + a * (s.mesh.vertices[f[1]] - s.mesh.vertices[f[0]]) +
+    if (a + b > 1) {
+      a = 1 - a;
+      b = 1 - b;
+    }
+    const Eigen::Vector3d X = s.mesh.vertices[f[0]] +
+                              a * (s.mesh.vertices[f[1]] - s.mesh.vertices[f[0]]) +
                               b * (s.mesh.vertices[f[2]] - s.mesh.vertices[f[0]]);
     ColmapPoint3D p;
     p.point3D_id = model.points.size() + 1;
@@ -301,14 +330,16 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
       continue;
     }
     const Eigen::Vector3d albedo = Albedo(X);
-    for (int k = 0; k < 3; ++k) p.rgb[k] = static_cast<uint8_t>(std::lround(255 * LinearToSrgb(albedo[k])));
+    for (int k = 0; k < 3; ++k)
+      p.rgb[k] = static_cast<uint8_t>(std::lround(255 * LinearToSrgb(albedo[k])));
     p.error = 0;
     cloud.vertices.push_back(X);
     cloud.vertex_colors.push_back(Eigen::Vector3f(p.rgb[0], p.rgb[1], p.rgb[2]) / 255.0f);
     model.points.push_back(std::move(p));
   }
-  MGSR_RETURN_IF_ERROR(WriteColmapModel(JoinPath(out, "sparse/0"), model,
-                                        o.write_text_model ? ColmapFormat::kText : ColmapFormat::kBinary));
+  MGSR_RETURN_IF_ERROR(
+      WriteColmapModel(JoinPath(out, "sparse/0"), model,
+                       o.write_text_model ? ColmapFormat::kText : ColmapFormat::kBinary));
   MGSR_RETURN_IF_ERROR(WriteTriangleMesh(JoinPath(out, "points3d.ply"), cloud));
 
   // Split, Blender json pair and the light log.
@@ -333,7 +364,8 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
     c2w.col(2) *= -1;
     nlohmann::json m = nlohmann::json::array();
     for (int r = 0; r < 4; ++r) m.push_back({c2w(r, 0), c2w(r, 1), c2w(r, 2), c2w(r, 3)});
-    nlohmann::json frame = {{"file_path", "./images/" + stem}, {"mask_path", "./masks/" + stem + ".png"},
+    nlohmann::json frame = {{"file_path", "./images/" + stem},
+                            {"mask_path", "./masks/" + stem + ".png"},
                             {"transform_matrix", m}};
     (s.is_test[i] ? test : train)["frames"].push_back(frame);
     const ViewLight& l = s.lights[i];
@@ -346,12 +378,20 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
                       {"exposure_stops", l.exposure_stops}});
   }
   MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(JoinPath(out, "split.txt"), split));
-  MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(JoinPath(out, "transforms_train.json"), train.dump(2)));
-  MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(JoinPath(out, "transforms_test.json"), test.dump(2)));
-  nlohmann::json info = {{"shape", o.shape}, {"seed", o.seed}, {"num_views", o.num_views},
-                         {"width", o.width}, {"height", o.height}, {"specular", o.specular},
-                         {"mirror", o.mirror}, {"varying_light", o.varying_light},
-                         {"exposure_stops", o.exposure_stops}, {"views", lights}};
+  MGSR_RETURN_IF_ERROR(
+      WriteStringToFileAtomic(JoinPath(out, "transforms_train.json"), train.dump(2)));
+  MGSR_RETURN_IF_ERROR(
+      WriteStringToFileAtomic(JoinPath(out, "transforms_test.json"), test.dump(2)));
+  nlohmann::json info = {{"shape", o.shape},
+                         {"seed", o.seed},
+                         {"num_views", o.num_views},
+                         {"width", o.width},
+                         {"height", o.height},
+                         {"specular", o.specular},
+                         {"mirror", o.mirror},
+                         {"varying_light", o.varying_light},
+                         {"exposure_stops", o.exposure_stops},
+                         {"views", lights}};
   return WriteStringToFileAtomic(JoinPath(out, "lights.json"), info.dump(2));
 }
 

@@ -1,7 +1,8 @@
-// Synthetic scenes with exact ground truth: a built-in mesh ray-cast from cameras on a sphere, with a
-// textured diffuse surface, strong specular highlights and optional mirror-like reflection of a simple
-// environment, under light that changes per view (direction, intensity, colour, environment
-// strength, exposure). Written as a COLMAP workspace and a Blender folder at once (they share images/).
+// Synthetic scenes with exact ground truth: a built-in mesh ray-cast from cameras on a sphere, with
+// a textured diffuse surface, strong specular highlights and optional mirror-like reflection of a
+// simple environment, under light that changes per view (direction, intensity, colour, environment
+// strength, exposure). Written as a COLMAP workspace and a Blender folder at once (they share
+// images/).
 #pragma once
 
 #include <Eigen/Core>
@@ -26,16 +27,16 @@ struct SynthOptions {
   double fov_x = 0.6911112;  // radians (as the shared suzanne scene)
   double distance = 3.5;     // camera distance from the origin
   double min_elevation_deg = -20, max_elevation_deg = 70;
-  int test_every = 8;        // views i with i % test_every == 0 are test views (0: none)
+  int test_every = 8;  // views i with i % test_every == 0 are test views (0: none)
   uint64_t seed = 1;
-  int supersampling = 2;     // samples per pixel per axis (anti-aliased edges and alpha)
-  double specular = 0.7;     // highlight strength (Blinn-Phong)
+  int supersampling = 2;  // samples per pixel per axis (anti-aliased edges and alpha)
+  double specular = 0.7;  // highlight strength (Blinn-Phong)
   double shininess = 80;
-  double mirror = 0.0;       // 0..1: weight of the reflected environment (Fresnel-scaled)
+  double mirror = 0.0;  // 0..1: weight of the reflected environment (Fresnel-scaled)
   bool varying_light = true;
-  double exposure_stops = 1.0;  // per-view exposure drawn from [-s, +s] when the light varies
-  int num_points = 2000;        // surface points written to points3D (seen by >= 2 train views)
-  bool write_text_model = false;   // sparse/0 as text instead of binary
+  double exposure_stops = 1.0;    // per-view exposure drawn from [-s, +s] when the light varies
+  int num_points = 2000;          // surface points written to points3D (seen by >= 2 train views)
+  bool write_text_model = false;  // sparse/0 as text instead of binary
   bool constant_light_copy = false;  // also render images_constant/ under one fixed light
 
   Status Validate() const;

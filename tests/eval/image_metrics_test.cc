@@ -21,7 +21,8 @@ double SlowSsim(const Image& a, const Image& b) {
   const double C1 = 1e-4, C2 = 9e-4, sigma = 1.5;
   double g[11][11], sum = 0;
   for (int i = 0; i < 11; ++i) {
-    for (int j = 0; j < 11; ++j) sum += g[i][j] = std::exp(-((i - 5) * (i - 5) + (j - 5) * (j - 5)) / (2 * sigma * sigma));
+    for (int j = 0; j < 11; ++j)
+      sum += g[i][j] = std::exp(-((i - 5) * (i - 5) + (j - 5) * (j - 5)) / (2 * sigma * sigma));
   }
   double total = 0;
   for (int c = 0; c < a.channels(); ++c) {
@@ -63,7 +64,8 @@ TEST(ImageMetricsTest, SsimMatchesADirectImplementation) {
   const Image a = RandomImage(23, 17, 3, 2);
   Image b = a;
   Rng rng(5);
-  for (size_t i = 0; i < b.size(); ++i) b.data()[i] = 0.7f * b.data()[i] + 0.2f * static_cast<float>(rng.Uniform());
+  for (size_t i = 0; i < b.size(); ++i)
+    b.data()[i] = 0.7f * b.data()[i] + 0.2f * static_cast<float>(rng.Uniform());
   const double fast = Ssim(a, b), slow = SlowSsim(a, b);
   EXPECT_NEAR(fast, slow, 1e-5);
   EXPECT_LT(fast, 0.95);

@@ -16,8 +16,9 @@ bool HaveColmap() { return testing::RunCommand("command -v colmap").exit_code ==
 
 void ConvertWithColmap(const std::string& in, const std::string& out, const char* type) {
   std::filesystem::create_directories(out);
-  const auto r = testing::RunCommand("QT_QPA_PLATFORM=offscreen colmap model_converter --input_path " +
-                                     in + " --output_path " + out + " --output_type " + type);
+  const auto r =
+      testing::RunCommand("QT_QPA_PLATFORM=offscreen colmap model_converter --input_path " + in +
+                          " --output_path " + out + " --output_type " + type);
   ASSERT_EQ(r.exit_code, 0) << r.output;
 }
 
@@ -32,7 +33,8 @@ void ExpectSameById(const ColmapModel& a, const ColmapModel& b) {
     ASSERT_TRUE(cams.count(c.camera_id));
     EXPECT_EQ(cams[c.camera_id]->model_id, c.model_id);
     EXPECT_EQ(cams[c.camera_id]->width, c.width);
-    for (size_t k = 0; k < c.params.size(); ++k) EXPECT_DOUBLE_EQ(cams[c.camera_id]->params[k], c.params[k]);
+    for (size_t k = 0; k < c.params.size(); ++k)
+      EXPECT_DOUBLE_EQ(cams[c.camera_id]->params[k], c.params[k]);
   }
   std::map<uint32_t, const ColmapImage*> ims;
   for (const auto& im : b.images) ims[im.image_id] = &im;

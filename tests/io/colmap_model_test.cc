@@ -26,7 +26,8 @@ ColmapModel RandomModel(uint64_t seed) {
     c.model_id = models[i];
     c.width = 640 + i;
     c.height = 480 - i;
-    for (int k = 0; k < FindCameraModel(c.model_id)->num_params; ++k) c.params.push_back(rng.Uniform(-1, 1000));
+    for (int k = 0; k < FindCameraModel(c.model_id)->num_params; ++k)
+      c.params.push_back(rng.Uniform(-1, 1000));
     m.cameras.push_back(c);
   }
   for (int i = 0; i < 5; ++i) {
@@ -47,7 +48,8 @@ ColmapModel RandomModel(uint64_t seed) {
     ColmapPoint3D p;
     p.point3D_id = 1000 + 3 * i;
     p.xyz = {rng.Normal(), rng.Normal(), rng.Normal()};
-    p.rgb = {static_cast<uint8_t>(rng.UniformInt(256)), static_cast<uint8_t>(rng.UniformInt(256)), 7};
+    p.rgb = {static_cast<uint8_t>(rng.UniformInt(256)), static_cast<uint8_t>(rng.UniformInt(256)),
+             7};
     p.error = rng.Uniform();
     for (int k = 0; k < i; ++k) {
       p.track_image_ids.push_back(100 - 7 * (k % 5));

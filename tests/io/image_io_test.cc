@@ -14,7 +14,8 @@ TEST(ImageIoTest, Png8BitRoundTripIsExact) {
   const std::string dir = testing::ScratchDir();
   for (int channels : {1, 3, 4}) {
     Image im(7, 5, channels);
-    for (size_t i = 0; i < im.size(); ++i) im.data()[i] = static_cast<float>((i * 37) % 256) / 255.0f;
+    for (size_t i = 0; i < im.size(); ++i)
+      im.data()[i] = static_cast<float>((i * 37) % 256) / 255.0f;
     const std::string path = dir + "/im" + std::to_string(channels) + ".png";
     ASSERT_TRUE(WriteImage(path, im).ok());
     Image back;

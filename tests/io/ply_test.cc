@@ -14,7 +14,8 @@ namespace {
 TEST(PlyTest, MeshRoundTripBinaryAndAscii) {
   const std::string dir = testing::ScratchDir();
   TriangleMesh mesh = MakeTorus(0.6, 0.2, 12, 8);
-  for (size_t i = 0; i < mesh.vertices.size(); ++i) mesh.vertex_colors.emplace_back((i % 256) / 255.0f, 128 / 255.0f, 1.0f);
+  for (size_t i = 0; i < mesh.vertices.size(); ++i)
+    mesh.vertex_colors.emplace_back((i % 256) / 255.0f, 128 / 255.0f, 1.0f);
   for (PlyFormat f : {PlyFormat::kBinaryLittleEndian, PlyFormat::kAscii}) {
     const std::string path = dir + (f == PlyFormat::kAscii ? "/a.ply" : "/b.ply");
     ASSERT_TRUE(WriteTriangleMesh(path, mesh, f).ok());
@@ -47,7 +48,8 @@ TEST(PlyTest, GenericRewriteIsByteIdentical) {
 TEST(PlyTest, PolygonsAreTriangulatedAndPointCloudsRead) {
   const std::string dir = testing::ScratchDir();
   const std::string quad =
-      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float "
+      "z\n"
       "element face 1\nproperty list uchar int vertex_index\nend_header\n"
       "0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n";
   ASSERT_TRUE(WriteStringToFileAtomic(dir + "/quad.ply", quad).ok());
@@ -56,7 +58,8 @@ TEST(PlyTest, PolygonsAreTriangulatedAndPointCloudsRead) {
   ASSERT_EQ(m.triangles.size(), 2u);
   EXPECT_DOUBLE_EQ(m.SurfaceArea(), 1.0);
   const std::string cloud =
-      "ply\nformat ascii 1.0\nelement vertex 2\nproperty double x\nproperty double y\nproperty double z\n"
+      "ply\nformat ascii 1.0\nelement vertex 2\nproperty double x\nproperty double y\nproperty "
+      "double z\n"
       "end_header\n1 2 3\n4 5 6\n";
   ASSERT_TRUE(WriteStringToFileAtomic(dir + "/cloud.ply", cloud).ok());
   ASSERT_TRUE(ReadTriangleMesh(dir + "/cloud.ply", &m).ok());
@@ -79,7 +82,8 @@ TEST(PlyTest, BadFilesGiveClearErrors) {
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("not a PLY file"), std::string::npos);
   const std::string bad_index =
-      "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+      "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float "
+      "z\n"
       "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n3 0 1 7\n";
   ASSERT_TRUE(WriteStringToFileAtomic(dir + "/idx.ply", bad_index).ok());
   s = ReadTriangleMesh(dir + "/idx.ply", &m);
@@ -102,14 +106,16 @@ TEST(PlyTest, GaussianPlyRoundTripHasStandardNames) {
   const PlyElement* v = ply.FindElement("vertex");
   ASSERT_NE(v, nullptr);
   // The attribute order of the original 3DGS writer, then ours.
-  const char* expected[] = {"x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "f_rest_0"};
+  const char* expected[] = {"x",  "y",      "z",      "nx",     "ny",
+                            "nz", "f_dc_0", "f_dc_1", "f_dc_2", "f_rest_0"};
   for (int i = 0; i < 10; ++i) EXPECT_EQ(v->properties[i].name, expected[i]);
   EXPECT_EQ(v->properties[6 + 3 + 45].name, "opacity");
   EXPECT_GE(v->FindProperty("rot_3"), 0);
   EXPECT_GE(v->FindProperty("ref_f_rest_44"), 0);
   EXPECT_GE(v->FindProperty("beta"), 0);
   // f_rest is channel-major: f_rest_15 is coefficient 1 of green.
-  EXPECT_FLOAT_EQ(static_cast<float>(v->columns[v->FindProperty("f_rest_15")][2]), g.sh[2 * 48 + 1 * 3 + 1]);
+  EXPECT_FLOAT_EQ(static_cast<float>(v->columns[v->FindProperty("f_rest_15")][2]),
+                  g.sh[2 * 48 + 1 * 3 + 1]);
 
   GaussianModel back;
   ASSERT_TRUE(ReadGaussianPly(dir + "/g.ply", &back).ok());

@@ -4,8 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <functional>
 #include <filesystem>
+#include <functional>
 #include <map>
 
 #include "mgsr/io/colmap_model.h"
@@ -137,7 +137,8 @@ TEST_F(SceneTest, AlphaBecomesTheMaskWithoutAMasksFolder) {
   ASSERT_TRUE(Load(&without).ok());
   ASSERT_TRUE(without.has_masks());
   const Image& alpha = without.views[3].alpha;
-  for (size_t i = 0; i < alpha.size(); ++i) ASSERT_EQ(without.views[3].mask.data()[i], alpha.data()[i]);
+  for (size_t i = 0; i < alpha.size(); ++i)
+    ASSERT_EQ(without.views[3].mask.data()[i], alpha.data()[i]);
   // The thresholded mask file and the alpha agree where alpha is decisive.
   for (size_t i = 0; i < alpha.size(); ++i) {
     if (alpha.data()[i] > 0.9f) {
@@ -246,14 +247,17 @@ TEST_F(SceneTest, BlenderBadJsonAndNanMatrix) {
   EXPECT_EQ(scene.source, "blender");
   std::string json;
   ASSERT_TRUE(ReadFileToString(dir_ + "/transforms_train.json", &json).ok());
-  ASSERT_TRUE(WriteStringToFileAtomic(dir_ + "/transforms_train.json", json.substr(0, json.size() / 2)).ok());
+  ASSERT_TRUE(
+      WriteStringToFileAtomic(dir_ + "/transforms_train.json", json.substr(0, json.size() / 2))
+          .ok());
   ExpectLoadFails(dir_ + "/transforms_train.json: invalid JSON");
   // NaN is not JSON; writers that emit it produce null.
   const size_t pos = json.find("\"transform_matrix\"");
   const size_t num = json.find_first_of("-0123456789", json.find('[', json.find('[', pos) + 1));
   const size_t end = json.find_first_of(",\n]", num);
   ASSERT_TRUE(WriteStringToFileAtomic(dir_ + "/transforms_train.json",
-                                      json.substr(0, num) + "null" + json.substr(end)).ok());
+                                      json.substr(0, num) + "null" + json.substr(end))
+                  .ok());
   ExpectLoadFails("has a non-number (NaN?)");
 }
 

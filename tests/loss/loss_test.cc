@@ -38,9 +38,12 @@ struct Fixture {
     };
     for (int b = 0; b < kNumBuffers; ++b) {
       const Buffer buf = static_cast<Buffer>(b);
-      if (buf == Buffer::kDepth || buf == Buffer::kMedianDepth) buffers[b] = random(1, 2.8, 3.2);
-      else if (buf == Buffer::kAlpha) buffers[b] = random(1, 0.5, 1.0);
-      else buffers[b] = random(BufferChannels(buf), -0.2, 1.2);
+      if (buf == Buffer::kDepth || buf == Buffer::kMedianDepth)
+        buffers[b] = random(1, 2.8, 3.2);
+      else if (buf == Buffer::kAlpha)
+        buffers[b] = random(1, 0.5, 1.0);
+      else
+        buffers[b] = random(BufferChannels(buf), -0.2, 1.2);
       in.Set(buf, &buffers[b]);
     }
     in.camera = &camera;
@@ -82,7 +85,8 @@ void ExpectGradientMatchesNumeric(const LossTerm& term, uint64_t seed = 1) {
       x.data()[i] = keep;
       const double numeric = scale * (vp - vm) / (2 * h);
       const double analytic = has_grad ? g.data()[i] : 0.0;
-      EXPECT_NEAR(analytic, numeric, 1e-6 + 1e-5 * std::abs(numeric)) << BufferName(b) << "[" << i << "]";
+      EXPECT_NEAR(analytic, numeric, 1e-6 + 1e-5 * std::abs(numeric))
+          << BufferName(b) << "[" << i << "]";
       nonzero += std::abs(numeric) > 1e-9;
     }
   }
@@ -121,9 +125,11 @@ class LossTermCostFunction : public ceres::CostFunction {
   LossTermCostFunction(const LossTerm* term, Fixture* fixture, Buffer buffer)
       : term_(term), f_(fixture), buffer_(buffer) {
     set_num_residuals(1);
-    mutable_parameter_block_sizes()->push_back(static_cast<int32_t>(f_->buffers[static_cast<int>(buffer)].size()));
+    mutable_parameter_block_sizes()->push_back(
+        static_cast<int32_t>(f_->buffers[static_cast<int>(buffer)].size()));
   }
-  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
     ImageD& x = f_->buffers[static_cast<int>(buffer_)];
     std::copy(parameters[0], parameters[0] + x.size(), x.data());
     RenderGradientsD grad;
@@ -149,14 +155,16 @@ TEST(LossGradientTest, CeresGradientCheckerAcceptsTheTerms) {
     const LossTerm* term = which == 0 ? static_cast<const LossTerm*>(&dssim) : &normal;
     const Buffer buffer = which == 0 ? Buffer::kColor : Buffer::kDepth;
     LossTermCostFunction cost(term, &f, buffer);
-    std::vector<double> x(f.buffers[static_cast<int>(buffer)].data(),
-                          f.buffers[static_cast<int>(buffer)].data() + f.buffers[static_cast<int>(buffer)].size());
+    std::vector<double> x(
+        f.buffers[static_cast<int>(buffer)].data(),
+        f.buffers[static_cast<int>(buffer)].data() + f.buffers[static_cast<int>(buffer)].size());
     const double* blocks[] = {x.data()};
     ceres::NumericDiffOptions options;
     // GradientChecker uses Ridders' method; its default first step (1% of the value) is too coarse
     // for the rough random depth maps of this fixture.
     options.ridders_relative_initial_step_size = 1e-4;
-    ceres::GradientChecker checker(&cost, static_cast<const std::vector<const ceres::Manifold*>*>(nullptr), options);
+    ceres::GradientChecker checker(
+        &cost, static_cast<const std::vector<const ceres::Manifold*>*>(nullptr), options);
     ceres::GradientChecker::ProbeResults results;
     EXPECT_TRUE(checker.Probe(blocks, 1e-5, &results)) << term->Name() << ": " << results.error_log;
   }
@@ -194,7 +202,8 @@ TEST(LossValueTest, HandComputedCases) {
 }
 
 TEST(LossValueTest, DepthOfATiltedPlaneGivesItsNormal) {
-  const Camera cam = LookAtCamera({0.5, -3, 1}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 20, 16, 24, 24);
+  const Camera cam =
+      LookAtCamera({0.5, -3, 1}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 20, 16, 24, 24);
   const Eigen::Vector3d n = Eigen::Vector3d(0.3, -1, 0.4).normalized();
   ImageD depth(20, 16, 1);
   for (int y = 0; y < 16; ++y) {
@@ -229,7 +238,8 @@ TEST(LossValueTest, DepthOfATiltedPlaneGivesItsNormal) {
 
 TEST(LossRegistryTest, CreatesByNameAndReportsBadConfigs) {
   Status s;
-  auto l1 = LossRegistry::Get().Create("l1", {{"buffer", "transmitted"}, {"target", "transmitted"}}, &s);
+  auto l1 =
+      LossRegistry::Get().Create("l1", {{"buffer", "transmitted"}, {"target", "transmitted"}}, &s);
   ASSERT_TRUE(s.ok());
   EXPECT_EQ(l1->Name(), "l1(transmitted, transmitted)");
   EXPECT_EQ(LossRegistry::Get().Create("l2", {}, &s), nullptr);
@@ -256,13 +266,15 @@ TEST(ProblemTest, SumsWeightedTermsOfOneBranchAndSkipsZeroWeights) {
   Problem problem;
   problem.AddTerm(std::make_unique<L1Loss>(), 0.8, Branch::kGaussians3D);
   problem.AddTerm(std::make_unique<DssimLoss>(), 0.2, Branch::kGaussians3D);
-  problem.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kTransmitted), 0.0, Branch::kGaussians3D);
+  problem.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kTransmitted), 0.0,
+                  Branch::kGaussians3D);
   problem.AddTerm(std::make_unique<L1Loss>(), 5.0, Branch::kSurfels2D);
   ASSERT_TRUE(problem.Check(Branch::kGaussians3D, in, t).ok());
   RenderGradients grad;
   std::vector<Problem::TermValue> breakdown;
   const double total = problem.Evaluate(Branch::kGaussians3D, in, t, &grad, &breakdown);
-  ASSERT_EQ(breakdown.size(), 2u);  // the zero-weight term is skipped, the 2D term is another branch
+  ASSERT_EQ(breakdown.size(),
+            2u);  // the zero-weight term is skipped, the 2D term is another branch
   EXPECT_NEAR(total, 0.8 * breakdown[0].value + 0.2 * breakdown[1].value, 1e-9);
   // Same as the render loss with lambda 0.8, value and gradient.
   RenderGradients ref;

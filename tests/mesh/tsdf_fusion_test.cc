@@ -32,7 +32,8 @@ TEST_P(TsdfOfExactDepthTest, ReconstructsTheGroundTruth) {
   for (int i : scene.TrainIndices()) {
     DepthFrame f;
     f.camera = scene.views[i].camera;
-    ASSERT_TRUE(ReadPfm(dir + "/gt/depth/" + FileStem(scene.views[i].name) + ".pfm", &f.depth).ok());
+    ASSERT_TRUE(
+        ReadPfm(dir + "/gt/depth/" + FileStem(scene.views[i].name) + ".pfm", &f.depth).ok());
     f.color = scene.views[i].image;
     f.weight = scene.views[i].mask;
     frames.push_back(std::move(f));
@@ -47,9 +48,10 @@ TEST_P(TsdfOfExactDepthTest, ReconstructsTheGroundTruth) {
   ASSERT_TRUE(ReadTriangleMesh(dir + "/gt/mesh.ply", &gt).ok());
   const MeshMetrics m = EvaluateMesh(mesh, gt, MeshMetricsOptions());
   ASSERT_TRUE(m.ok) << m.failure;
-  std::printf("[ tsdf     ] %s: voxel %.4f, %zu triangles, CD %.5f (%.2f voxels), NC %.4f, %.2f s\n",
-              GetParam().c_str(), voxel, mesh.triangles.size(), m.chamfer, m.chamfer / voxel,
-              m.normal_consistency, seconds);
+  std::printf(
+      "[ tsdf     ] %s: voxel %.4f, %zu triangles, CD %.5f (%.2f voxels), NC %.4f, %.2f s\n",
+      GetParam().c_str(), voxel, mesh.triangles.size(), m.chamfer, m.chamfer / voxel,
+      m.normal_consistency, seconds);
   EXPECT_LT(m.chamfer, 1.5 * voxel);
   EXPECT_GT(m.normal_consistency, 0.97);
   EXPECT_EQ(mesh.vertex_colors.size(), mesh.vertices.size());

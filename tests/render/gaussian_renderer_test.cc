@@ -13,7 +13,8 @@ namespace mgsr {
 namespace {
 
 Camera TestCamera(int w = 24, int h = 24) {
-  return LookAtCamera({0.3, -3.0, 0.4}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), w, h, 30.0 * w / 24, 30.0 * h / 24);
+  return LookAtCamera({0.3, -3.0, 0.4}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), w, h, 30.0 * w / 24,
+                      30.0 * h / 24);
 }
 
 GaussianModel RandomScene(int n, uint64_t seed, double scale_lo = 0.05, double scale_hi = 0.25) {
@@ -23,7 +24,8 @@ GaussianModel RandomScene(int n, uint64_t seed, double scale_lo = 0.05, double s
   m.Resize(n);
   for (int i = 0; i < n; ++i) {
     for (int k = 0; k < 3; ++k) m.means[3 * i + k] = static_cast<float>(rng.Uniform(-0.6, 0.6));
-    for (int k = 0; k < 3; ++k) m.log_scales[3 * i + k] = static_cast<float>(std::log(rng.Uniform(scale_lo, scale_hi)));
+    for (int k = 0; k < 3; ++k)
+      m.log_scales[3 * i + k] = static_cast<float>(std::log(rng.Uniform(scale_lo, scale_hi)));
     for (int k = 0; k < 4; ++k) m.quats[4 * i + k] = static_cast<float>(rng.Normal());
     m.opacity_logits[i] = static_cast<float>(rng.Uniform(-2.0, 1.5));
     m.ref_opacity_logits[i] = static_cast<float>(rng.Uniform(-2.0, 1.0));
@@ -101,7 +103,8 @@ TEST(GaussianRendererGradientTest, AllParametersAllOutputsMatchNumericDifferenti
     Image* target[] = {&grad.color, &grad.tran, &grad.ref, &grad.weight, &grad.depth, &grad.alpha};
     const int channels = which < 3 ? 3 : 1;
     *target[which] = Image(cam.width, cam.height, channels);
-    for (size_t i = 0; i < target[which]->size(); ++i) target[which]->data()[i] = static_cast<float>(rng.Uniform(-1, 1));
+    for (size_t i = 0; i < target[which]->size(); ++i)
+      target[which]->data()[i] = static_cast<float>(rng.Uniform(-1, 1));
     const Image& upstream = *target[which];
     GaussianGradients analytic;
     renderer.Backward(m, o, out, grad, &analytic);
@@ -126,7 +129,8 @@ TEST(GaussianRendererGradientTest, AllParametersAllOutputsMatchNumericDifferenti
         {"opacity", &testing::GaussianModelD::opacity_logits, &analytic.params.opacity_logits},
         {"sh", &testing::GaussianModelD::sh, &analytic.params.sh},
         {"ref_sh", &testing::GaussianModelD::ref_sh, &analytic.params.ref_sh},
-        {"ref_opacity", &testing::GaussianModelD::ref_opacity_logits, &analytic.params.ref_opacity_logits},
+        {"ref_opacity", &testing::GaussianModelD::ref_opacity_logits,
+         &analytic.params.ref_opacity_logits},
         {"beta", &testing::GaussianModelD::beta_logits, &analytic.params.beta_logits},
     };
     for (const Block& b : blocks) {
@@ -151,8 +155,11 @@ TEST(GaussianRendererGradientTest, AllParametersAllOutputsMatchNumericDifferenti
         EXPECT_NEAR(a, n, tol) << outputs[which] << " d/d " << b.name << "[" << k << "]";
         checked += std::abs(n) > 1e-4 * max_abs;
       }
-      if (max_abs > 0) EXPECT_GT(checked, static_cast<int>(values.size()) / 4) << outputs[which] << " " << b.name;
-      if (which == 0) std::printf("[ grad     ] color d/d %-11s %3d of %3zu derivatives checked (not tiny)\n", b.name, checked, values.size());
+      if (max_abs > 0)
+        EXPECT_GT(checked, static_cast<int>(values.size()) / 4) << outputs[which] << " " << b.name;
+      if (which == 0)
+        std::printf("[ grad     ] color d/d %-11s %3d of %3zu derivatives checked (not tiny)\n",
+                    b.name, checked, values.size());
     }
   }
 }
@@ -178,8 +185,8 @@ TEST(GaussianRendererEdgeCaseTest, EmptyBehindWholeImageAndDegenerate) {
       for (size_t i = 0; i < im->size(); ++i) ASSERT_TRUE(std::isfinite(im->data()[i])) << what;
     }
     renderer.Backward(m, o, out, grad, &g);
-    for (const auto* v : {&g.params.means, &g.params.log_scales, &g.params.quats, &g.params.opacity_logits,
-                          &g.params.sh, &g.params.ref_sh}) {
+    for (const auto* v : {&g.params.means, &g.params.log_scales, &g.params.quats,
+                          &g.params.opacity_logits, &g.params.sh, &g.params.ref_sh}) {
       ASSERT_TRUE(all_finite(*v)) << what;
     }
   };
@@ -189,7 +196,8 @@ TEST(GaussianRendererEdgeCaseTest, EmptyBehindWholeImageAndDegenerate) {
   EXPECT_FLOAT_EQ(out.alpha.at(0, 5, 5), 0.0f);
 
   GaussianModel behind = RandomScene(10, 5);
-  for (size_t i = 0; i < behind.size(); ++i) behind.means[3 * i + 1] = -4.0f;  // behind the camera at y = -3
+  for (size_t i = 0; i < behind.size(); ++i)
+    behind.means[3 * i + 1] = -4.0f;  // behind the camera at y = -3
   check(behind, "all behind");
   EXPECT_FLOAT_EQ(out.alpha.at(0, 16, 16), 0.0f);
 
@@ -206,7 +214,7 @@ TEST(GaussianRendererEdgeCaseTest, EmptyBehindWholeImageAndDegenerate) {
   weird.log_scales[4] = -40.0f;  // flat to a plane
   weird.log_scales[9] = -40.0f;
   weird.log_scales[10] = -40.0f;
-  weird.log_scales[11] = -40.0f;  // a point
+  weird.log_scales[11] = -40.0f;                              // a point
   for (int k = 0; k < 4; ++k) weird.quats[4 * 2 + k] = 0.0f;  // zero quaternion
   check(weird, "degenerate scales");
 }
@@ -218,7 +226,8 @@ TEST(GaussianRendererThreadTest, ResultsDoNotDependOnTheThreadCount) {
   GaussianRenderGrad grad;
   grad.color = Image(64, 48, 3);
   Rng rng(3);
-  for (size_t i = 0; i < grad.color.size(); ++i) grad.color.data()[i] = static_cast<float>(rng.Uniform(-1, 1));
+  for (size_t i = 0; i < grad.color.size(); ++i)
+    grad.color.data()[i] = static_cast<float>(rng.Uniform(-1, 1));
   GaussianRender out[2];
   GaussianGradients g[2];
   const int saved = omp_get_max_threads();
@@ -230,8 +239,10 @@ TEST(GaussianRendererThreadTest, ResultsDoNotDependOnTheThreadCount) {
   }
   omp_set_num_threads(saved);
   // Forward: every pixel is computed by one thread in the same order: identical.
-  for (size_t i = 0; i < out[0].color.size(); ++i) ASSERT_EQ(out[0].color.data()[i], out[1].color.data()[i]);
-  // Backward: per-tile gradients are reduced in tile order whatever the thread count: identical too.
+  for (size_t i = 0; i < out[0].color.size(); ++i)
+    ASSERT_EQ(out[0].color.data()[i], out[1].color.data()[i]);
+  // Backward: per-tile gradients are reduced in tile order whatever the thread count: identical
+  // too.
   const std::vector<ParamBlock> a = g[0].params.Blocks(), b = g[1].params.Blocks();
   for (size_t k = 0; k < a.size(); ++k) EXPECT_EQ(*a[k].data, *b[k].data) << a[k].name;
   EXPECT_EQ(g[0].mean2d, g[1].mean2d);

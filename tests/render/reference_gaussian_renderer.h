@@ -18,13 +18,17 @@ namespace mgsr::testing {
 // The model's parameter blocks in double precision, for numeric differentiation.
 struct GaussianModelD {
   int max_sh_degree = 3;
-  std::vector<double> means, log_scales, quats, opacity_logits, sh, ref_sh, ref_opacity_logits, beta_logits;
+  std::vector<double> means, log_scales, quats, opacity_logits, sh, ref_sh, ref_opacity_logits,
+      beta_logits;
   size_t size() const { return opacity_logits.size(); }
   int sh_coeffs() const { return (max_sh_degree + 1) * (max_sh_degree + 1); }
   explicit GaussianModelD(const GaussianModel& m)
-      : max_sh_degree(m.max_sh_degree), means(m.means.begin(), m.means.end()),
-        log_scales(m.log_scales.begin(), m.log_scales.end()), quats(m.quats.begin(), m.quats.end()),
-        opacity_logits(m.opacity_logits.begin(), m.opacity_logits.end()), sh(m.sh.begin(), m.sh.end()),
+      : max_sh_degree(m.max_sh_degree),
+        means(m.means.begin(), m.means.end()),
+        log_scales(m.log_scales.begin(), m.log_scales.end()),
+        quats(m.quats.begin(), m.quats.end()),
+        opacity_logits(m.opacity_logits.begin(), m.opacity_logits.end()),
+        sh(m.sh.begin(), m.sh.end()),
         ref_sh(m.ref_sh.begin(), m.ref_sh.end()),
         ref_opacity_logits(m.ref_opacity_logits.begin(), m.ref_opacity_logits.end()),
         beta_logits(m.beta_logits.begin(), m.beta_logits.end()) {}
@@ -37,7 +41,8 @@ struct ReferenceGaussianRender {
 };
 
 template <typename Scalar>
-inline void ReferenceShColor(int degree, const Scalar* sh, const Eigen::Vector3d& d, double rgb[3]) {
+inline void ReferenceShColor(int degree, const Scalar* sh, const Eigen::Vector3d& d,
+                             double rgb[3]) {
   const double x = d.x(), y = d.y(), z = d.z();
   double b[16] = {0.28209479177387814};
   b[1] = -0.4886025119029199 * y;
@@ -65,8 +70,9 @@ inline void ReferenceShColor(int degree, const Scalar* sh, const Eigen::Vector3d
 
 // Works on GaussianModel (float) and on the double copy below.
 template <typename Model>
-inline ReferenceGaussianRender RenderGaussiansReference(const Model& m, const Camera& cam, int sh_degree,
-                                                        bool reflection, const double bg[3]) {
+inline ReferenceGaussianRender RenderGaussiansReference(const Model& m, const Camera& cam,
+                                                        int sh_degree, bool reflection,
+                                                        const double bg[3]) {
   struct Splat {
     double u, v, a, b, c, radius, z, o, ro, beta, ct[3], cr[3];
   };
@@ -77,13 +83,16 @@ inline ReferenceGaussianRender RenderGaussiansReference(const Model& m, const Ca
     const Eigen::Vector3d mu(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
     const Eigen::Vector3d t = cam.R * mu + cam.t;
     if (!(t.z() > 0.2)) continue;
-    Eigen::Quaterniond q(m.quats[4 * i], m.quats[4 * i + 1], m.quats[4 * i + 2], m.quats[4 * i + 3]);
+    Eigen::Quaterniond q(m.quats[4 * i], m.quats[4 * i + 1], m.quats[4 * i + 2],
+                         m.quats[4 * i + 3]);
     q.normalize();
     const Eigen::Vector3d s(std::exp(m.log_scales[3 * i]), std::exp(m.log_scales[3 * i + 1]),
                             std::exp(m.log_scales[3 * i + 2]));
-    const Eigen::Matrix3d Sigma = q.toRotationMatrix() * s.cwiseAbs2().asDiagonal() * q.toRotationMatrix().transpose();
+    const Eigen::Matrix3d Sigma =
+        q.toRotationMatrix() * s.cwiseAbs2().asDiagonal() * q.toRotationMatrix().transpose();
     const double limx = 1.3 * 0.5 * cam.width / fx, limy = 1.3 * 0.5 * cam.height / fy;
-    const double rx = std::clamp(t.x() / t.z(), -limx, limx), ry = std::clamp(t.y() / t.z(), -limy, limy);
+    const double rx = std::clamp(t.x() / t.z(), -limx, limx),
+                 ry = std::clamp(t.y() / t.z(), -limy, limy);
     Eigen::Matrix<double, 2, 3> J;
     J << fx / t.z(), 0, -fx * rx / t.z(), 0, fy / t.z(), -fy * ry / t.z();
     Eigen::Matrix2d cov = J * cam.R * Sigma * cam.R.transpose() * J.transpose();
@@ -111,7 +120,8 @@ inline ReferenceGaussianRender RenderGaussiansReference(const Model& m, const Ca
     ReferenceShColor(degree, &m.ref_sh[i * K * 3], dir, sp.cr);
     splats.push_back(sp);
   }
-  std::stable_sort(splats.begin(), splats.end(), [](const Splat& a, const Splat& b) { return a.z < b.z; });
+  std::stable_sort(splats.begin(), splats.end(),
+                   [](const Splat& a, const Splat& b) { return a.z < b.z; });
   ReferenceGaussianRender r;
   r.width = cam.width;
   r.height = cam.height;

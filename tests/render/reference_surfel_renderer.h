@@ -20,9 +20,12 @@ struct SurfelModelD {
   size_t size() const { return opacity_logits.size(); }
   int sh_coeffs() const { return (max_sh_degree + 1) * (max_sh_degree + 1); }
   explicit SurfelModelD(const SurfelModel& m)
-      : max_sh_degree(m.max_sh_degree), means(m.means.begin(), m.means.end()),
-        log_scales(m.log_scales.begin(), m.log_scales.end()), quats(m.quats.begin(), m.quats.end()),
-        opacity_logits(m.opacity_logits.begin(), m.opacity_logits.end()), sh(m.sh.begin(), m.sh.end()) {}
+      : max_sh_degree(m.max_sh_degree),
+        means(m.means.begin(), m.means.end()),
+        log_scales(m.log_scales.begin(), m.log_scales.end()),
+        quats(m.quats.begin(), m.quats.end()),
+        opacity_logits(m.opacity_logits.begin(), m.opacity_logits.end()),
+        sh(m.sh.begin(), m.sh.end()) {}
 };
 
 struct ReferenceSurfelRender {
@@ -31,7 +34,8 @@ struct ReferenceSurfelRender {
 };
 
 template <typename Model>
-ReferenceSurfelRender RenderSurfelsReference(const Model& m, const Camera& cam, int sh_degree, const double bg[3]) {
+ReferenceSurfelRender RenderSurfelsReference(const Model& m, const Camera& cam, int sh_degree,
+                                             const double bg[3]) {
   struct S {
     Eigen::Matrix3d M;  // rows T_u, T_v, T_w
     Eigen::Vector2d center;
@@ -42,7 +46,8 @@ ReferenceSurfelRender RenderSurfelsReference(const Model& m, const Camera& cam, 
   Eigen::Matrix3d K;
   K << cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1;
   for (size_t i = 0; i < m.size(); ++i) {
-    Eigen::Quaterniond q(m.quats[4 * i], m.quats[4 * i + 1], m.quats[4 * i + 2], m.quats[4 * i + 3]);
+    Eigen::Quaterniond q(m.quats[4 * i], m.quats[4 * i + 1], m.quats[4 * i + 2],
+                         m.quats[4 * i + 3]);
     const Eigen::Matrix3d R = q.normalized().toRotationMatrix();
     const Eigen::Vector3d p(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
     const double su = std::exp(static_cast<double>(m.log_scales[2 * i]));
@@ -65,16 +70,19 @@ ReferenceSurfelRender RenderSurfelsReference(const Model& m, const Camera& cam, 
     if (d == 0) continue;
     const Eigen::Vector3d f = t / d;
     s.center = {f.dot(Tu.cwiseProduct(Tw)), f.dot(Tv.cwiseProduct(Tw))};
-    const double hx = std::sqrt(std::max(1e-4, s.center.x() * s.center.x() - f.dot(Tu.cwiseProduct(Tu))));
-    const double hy = std::sqrt(std::max(1e-4, s.center.y() * s.center.y() - f.dot(Tv.cwiseProduct(Tv))));
+    const double hx =
+        std::sqrt(std::max(1e-4, s.center.x() * s.center.x() - f.dot(Tu.cwiseProduct(Tu))));
+    const double hy =
+        std::sqrt(std::max(1e-4, s.center.y() * s.center.y() - f.dot(Tv.cwiseProduct(Tv))));
     // The renderer computes the radius in float; ceil() agrees away from integers.
     s.radius = std::ceil(std::max(std::max(hx, hy), 3 * std::sqrt(0.5)));
     s.o = 1 / (1 + std::exp(-static_cast<double>(m.opacity_logits[i])));
-    ReferenceShColor(std::min(sh_degree, m.max_sh_degree), &m.sh[i * m.sh_coeffs() * 3], (p - cam.Center()).normalized(),
-                     s.c.data());
+    ReferenceShColor(std::min(sh_degree, m.max_sh_degree), &m.sh[i * m.sh_coeffs() * 3],
+                     (p - cam.Center()).normalized(), s.c.data());
     splats.push_back(s);
   }
-  std::stable_sort(splats.begin(), splats.end(), [](const S& a, const S& b) { return a.depth < b.depth; });
+  std::stable_sort(splats.begin(), splats.end(),
+                   [](const S& a, const S& b) { return a.depth < b.depth; });
   const double near = 0.2, far = 100;
   const size_t np = static_cast<size_t>(cam.width) * cam.height;
   ReferenceSurfelRender r;
@@ -91,14 +99,16 @@ ReferenceSurfelRender RenderSurfelsReference(const Model& m, const Camera& cam, 
       double T = 1, D = 0, zmed = 0, M1 = 0, M2 = 0, dist = 0;
       Eigen::Vector3d C = Eigen::Vector3d::Zero(), N = Eigen::Vector3d::Zero();
       for (const S& s : splats) {
-        if (std::abs(px - s.center.x()) > s.radius || std::abs(py - s.center.y()) > s.radius) continue;
+        if (std::abs(px - s.center.x()) > s.radius || std::abs(py - s.center.y()) > s.radius)
+          continue;
         const Eigen::Vector3d k = px * s.M.row(2) - s.M.row(0);
         const Eigen::Vector3d l = py * s.M.row(2) - s.M.row(1);
         const Eigen::Vector3d p = k.cross(l);
         if (p.z() == 0) continue;
         const double u = p.x() / p.z(), v = p.y() / p.z();
         const double rho3d = u * u + v * v;
-        const double rho2d = 2 * ((s.center.x() - px) * (s.center.x() - px) + (s.center.y() - py) * (s.center.y() - py));
+        const double rho2d = 2 * ((s.center.x() - px) * (s.center.x() - px) +
+                                  (s.center.y() - py) * (s.center.y() - py));
         const double z = s.M(2, 0) * u + s.M(2, 1) * v + s.M(2, 2);
         if (z < near) continue;
         const double G = std::exp(-0.5 * std::min(rho3d, rho2d));

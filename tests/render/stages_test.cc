@@ -30,7 +30,8 @@ TEST(ShTest, MatchesTheReferenceAndItsBackwardMatchesNumericDifferences) {
     const float d_rgb[3] = {0.3f, -0.7f, 0.5f};
     float d_coeffs[48] = {}, d_dir[3], d_v[3];
     EvalShColorBackward(degree, coeffs, dir.data(), clamped, d_rgb, d_coeffs, d_dir);
-    const float vf[3] = {static_cast<float>(v.x()), static_cast<float>(v.y()), static_cast<float>(v.z())};
+    const float vf[3] = {static_cast<float>(v.x()), static_cast<float>(v.y()),
+                         static_cast<float>(v.z())};
     NormalizeBackward(vf, d_dir, d_v);
     auto loss = [&](const Eigen::Vector3d& vv, const float* cf) {
       double out[3];
@@ -92,8 +93,9 @@ TEST(TileBinningTest, MatchesBruteForceAndSortsByDepth) {
   std::vector<float> depths(n);
   const int tx = (W + 15) / 16, ty = (H + 15) / 16;
   for (int i = 0; i < n; ++i) {
-    rects[i] = TileRectFromBox(static_cast<float>(rng.Uniform(-20, 120)), static_cast<float>(rng.Uniform(-20, 90)),
-                               static_cast<float>(rng.Uniform(0, 30)), static_cast<float>(rng.Uniform(0, 30)), tx, ty);
+    rects[i] = TileRectFromBox(
+        static_cast<float>(rng.Uniform(-20, 120)), static_cast<float>(rng.Uniform(-20, 90)),
+        static_cast<float>(rng.Uniform(0, 30)), static_cast<float>(rng.Uniform(0, 30)), tx, ty);
     depths[i] = static_cast<float>(rng.Uniform(0.2, 10));
   }
   TileBins bins;
@@ -104,11 +106,13 @@ TEST(TileBinningTest, MatchesBruteForceAndSortsByDepth) {
     std::vector<std::pair<float, uint32_t>> expected;
     for (int i = 0; i < n; ++i) {
       const TileRect& r = rects[i];
-      if (tile % tx >= r.x0 && tile % tx < r.x1 && tile / tx >= r.y0 && tile / tx < r.y1) expected.push_back({depths[i], i});
+      if (tile % tx >= r.x0 && tile % tx < r.x1 && tile / tx >= r.y0 && tile / tx < r.y1)
+        expected.push_back({depths[i], i});
     }
     std::sort(expected.begin(), expected.end());
     ASSERT_EQ(bins.tile_start[tile + 1] - bins.tile_start[tile], expected.size()) << tile;
-    for (size_t k = 0; k < expected.size(); ++k) ASSERT_EQ(bins.ids[bins.tile_start[tile] + k], expected[k].second);
+    for (size_t k = 0; k < expected.size(); ++k)
+      ASSERT_EQ(bins.ids[bins.tile_start[tile] + k], expected[k].second);
   }
   // A box entirely off screen touches no tile.
   EXPECT_TRUE(TileRectFromBox(-50, -50, 10, 10, tx, ty).empty());

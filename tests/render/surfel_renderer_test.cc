@@ -12,7 +12,8 @@ namespace mgsr {
 namespace {
 
 Camera TestCamera(int w = 24, int h = 24) {
-  return LookAtCamera({0.3, -3.0, 0.4}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), w, h, 30.0 * w / 24, 30.0 * h / 24);
+  return LookAtCamera({0.3, -3.0, 0.4}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), w, h, 30.0 * w / 24,
+                      30.0 * h / 24);
 }
 
 SurfelModel RandomSurfels(int n, uint64_t seed, double scale_lo = 0.1, double scale_hi = 0.35) {
@@ -22,7 +23,8 @@ SurfelModel RandomSurfels(int n, uint64_t seed, double scale_lo = 0.1, double sc
   m.Resize(n);
   for (int i = 0; i < n; ++i) {
     for (int k = 0; k < 3; ++k) m.means[3 * i + k] = static_cast<float>(rng.Uniform(-0.6, 0.6));
-    for (int k = 0; k < 2; ++k) m.log_scales[2 * i + k] = static_cast<float>(std::log(rng.Uniform(scale_lo, scale_hi)));
+    for (int k = 0; k < 2; ++k)
+      m.log_scales[2 * i + k] = static_cast<float>(std::log(rng.Uniform(scale_lo, scale_hi)));
     for (int k = 0; k < 4; ++k) m.quats[4 * i + k] = static_cast<float>(rng.Normal());
     m.opacity_logits[i] = static_cast<float>(rng.Uniform(-1.0, 2.0));
   }
@@ -65,8 +67,10 @@ TEST(SurfelRendererTest, TiledRenderMatchesTheReference) {
     // is held to the same bound.
     double depth_err = 0, median_err = 0;
     for (size_t i = 0; i < out.depth.size(); ++i) {
-      depth_err = std::max(depth_err, std::abs(out.depth.data()[i] - ref.depth[i]) / std::max(1.0, std::abs(ref.depth[i])));
-      median_err = std::max(median_err, std::abs(out.median_depth.data()[i] - ref.median[i]) / std::max(1.0, std::abs(ref.median[i])));
+      depth_err = std::max(depth_err, std::abs(out.depth.data()[i] - ref.depth[i]) /
+                                          std::max(1.0, std::abs(ref.depth[i])));
+      median_err = std::max(median_err, std::abs(out.median_depth.data()[i] - ref.median[i]) /
+                                            std::max(1.0, std::abs(ref.median[i])));
     }
     EXPECT_LT(depth_err, 1e-4) << seed;
     EXPECT_LT(median_err, 1e-5) << seed;
@@ -79,30 +83,34 @@ TEST(SurfelRendererTest, TiledRenderMatchesTheReference) {
 
 // Gradient of every raw parameter for an upstream gradient on each output in turn, against central
 // differences of the double-precision reference.
-void CheckGradients(const SurfelModel& m, const Camera& cam, const char* label, bool expect_most_checked) {
+void CheckGradients(const SurfelModel& m, const Camera& cam, const char* label,
+                    bool expect_most_checked) {
   const SurfelRenderOptions o = Options(cam);
   const double bg[3] = {0.2, 0.5, 0.7};
   SurfelRenderer renderer;
   SurfelRender out;
   renderer.Forward(m, o, &out);
   const size_t np = static_cast<size_t>(cam.width) * cam.height;
-  const char* outputs[] = {"color", "depth", "alpha", "normal", "normal_world", "median_depth", "distortion"};
+  const char* outputs[] = {"color",        "depth",        "alpha",     "normal",
+                           "normal_world", "median_depth", "distortion"};
   for (int which = 0; which < 7; ++which) {
     Rng rng(200 + which);
     SurfelRenderGrad grad;
-    Image* target[] = {&grad.color, &grad.depth, &grad.alpha, &grad.normal, &grad.normal_world,
-                       &grad.median_depth, &grad.distortion};
+    Image* target[] = {&grad.color,        &grad.depth,        &grad.alpha,     &grad.normal,
+                       &grad.normal_world, &grad.median_depth, &grad.distortion};
     const int channels = (which == 0 || which == 3 || which == 4) ? 3 : 1;
     *target[which] = Image(cam.width, cam.height, channels);
     // Distortion values are small; scale its upstream gradient up so the check is meaningful.
     const float scale = which == 6 ? 100.0f : 1.0f;
-    for (size_t i = 0; i < target[which]->size(); ++i) target[which]->data()[i] = scale * static_cast<float>(rng.Uniform(-1, 1));
+    for (size_t i = 0; i < target[which]->size(); ++i)
+      target[which]->data()[i] = scale * static_cast<float>(rng.Uniform(-1, 1));
     const Image& upstream = *target[which];
     SurfelGradients analytic;
     renderer.Backward(m, o, out, grad, &analytic);
     auto loss = [&](const testing::SurfelModelD& md) {
       const auto r = testing::RenderSurfelsReference(md, cam, 3, bg);
-      const std::vector<double>* buf[] = {&r.color, &r.depth, &r.alpha, &r.normal, &r.normal_world, &r.median, &r.distortion};
+      const std::vector<double>* buf[] = {&r.color,        &r.depth,  &r.alpha,     &r.normal,
+                                          &r.normal_world, &r.median, &r.distortion};
       double l = 0;
       for (size_t i = 0; i < channels * np; ++i) l += upstream.data()[i] * (*buf[which])[i];
       return l;
@@ -147,11 +155,13 @@ void CheckGradients(const SurfelModel& m, const Camera& cam, const char* label, 
         // Relative 1e-3 where the derivative is not tiny; float rounding allows a floor of 1e-5 of
         // the output's largest derivative (exact zeros come out as ~1e-7 in float).
         const double tol = 1e-3 * std::abs(n) + 1e-4 * max_abs + 1e-5 * global_max + 1e-7;
-        EXPECT_NEAR(a, n, tol) << label << ": " << outputs[which] << " d/d " << b.name << "[" << k << "]";
+        EXPECT_NEAR(a, n, tol) << label << ": " << outputs[which] << " d/d " << b.name << "[" << k
+                               << "]";
         checked += std::abs(n) > 1e-4 * max_abs;
       }
       if (expect_most_checked && max_abs > 1e-3 * global_max) {
-        EXPECT_GT(checked, static_cast<int>(numeric[bi].size()) / 4) << outputs[which] << " " << b.name;
+        EXPECT_GT(checked, static_cast<int>(numeric[bi].size()) / 4)
+            << outputs[which] << " " << b.name;
       }
     }
   }
@@ -161,8 +171,9 @@ TEST(SurfelRendererGradientTest, AllParametersAllOutputsMatchNumericDifferentiat
   CheckGradients(RandomSurfels(8, 11, 0.15, 0.35), TestCamera(), "splats", true);
 }
 
-// Surfels far smaller than a pixel: the screen low-pass floor (rho2d < rho3d) decides their footprint
-// almost everywhere, so this checks that branch, including the gradient through the screen centre.
+// Surfels far smaller than a pixel: the screen low-pass floor (rho2d < rho3d) decides their
+// footprint almost everywhere, so this checks that branch, including the gradient through the
+// screen centre.
 TEST(SurfelRendererGradientTest, LowPassBranchMatchesNumericDifferentiation) {
   SurfelModel m = RandomSurfels(6, 12, 0.002, 0.004);
   for (size_t i = 0; i < m.size(); ++i) m.opacity_logits[i] = 2.0f;
@@ -177,7 +188,8 @@ TEST(SurfelRendererGeometryTest, FlatSplatFacingTheCamera) {
   m.means = {0, 0, 0};
   m.log_scales = {std::log(0.5f), std::log(0.5f)};
   // Rotate local z (the normal) onto -y: a quarter turn about x.
-  const Eigen::Quaternionf q(Eigen::AngleAxisf(static_cast<float>(M_PI / 2), Eigen::Vector3f::UnitX()));
+  const Eigen::Quaternionf q(
+      Eigen::AngleAxisf(static_cast<float>(M_PI / 2), Eigen::Vector3f::UnitX()));
   m.quats = {q.w(), q.x(), q.y(), q.z()};
   m.opacity_logits = {5.0f};
   m.sh = {0.1f, 0.2f, 0.3f};
@@ -192,7 +204,7 @@ TEST(SurfelRendererGeometryTest, FlatSplatFacingTheCamera) {
       ++covered;
       EXPECT_NEAR(out.depth.at(0, y, x), 3.0f, 1e-5f);
       const float a = out.alpha.at(0, y, x);
-      EXPECT_NEAR(out.normal.at(2, y, x) / a, -1.0f, 1e-5f);     // view space: towards the camera
+      EXPECT_NEAR(out.normal.at(2, y, x) / a, -1.0f, 1e-5f);  // view space: towards the camera
       EXPECT_NEAR(out.normal_world.at(1, y, x) / a, -1.0f, 1e-5f);  // world: towards -y
     }
   }
@@ -204,7 +216,8 @@ TEST(SurfelRendererGeometryTest, FlatSplatFacingTheCamera) {
 }
 
 TEST(SurfelRendererGeometryTest, PlaneOfOverlappingSplatsGivesConstantNormalAndExactDepth) {
-  const Camera cam = LookAtCamera({0.5, -3, 1.0}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 48, 48, 60, 60);
+  const Camera cam =
+      LookAtCamera({0.5, -3, 1.0}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 48, 48, 60, 60);
   // The plane through the origin with normal n; surfels on a grid in it, all with that normal.
   const Eigen::Vector3d n = Eigen::Vector3d(0.2, -1, 0.3).normalized();
   const Eigen::Vector3d e1 = n.unitOrthogonal(), e2 = n.cross(e1);
@@ -242,7 +255,8 @@ TEST(SurfelRendererGeometryTest, PlaneOfOverlappingSplatsGivesConstantNormalAndE
       // Ray-plane intersection at the pixel centre.
       const Eigen::Vector3d ray = cam.R.transpose() * cam.PixelToRay(x + 0.5, y + 0.5);
       const double t = -n.dot(cam.Center()) / n.dot(ray);
-      EXPECT_NEAR(out.depth.at(0, y, x), t, 1e-4) << x << "," << y;  // ray has camera z = 1: t is the depth
+      EXPECT_NEAR(out.depth.at(0, y, x), t, 1e-4)
+          << x << "," << y;  // ray has camera z = 1: t is the depth
       const Eigen::Vector3d nw(out.normal_world.at(0, y, x) / a, out.normal_world.at(1, y, x) / a,
                                out.normal_world.at(2, y, x) / a);
       EXPECT_NEAR((nw - n_facing).norm(), 0.0, 1e-4) << x << "," << y;
@@ -264,12 +278,13 @@ TEST(SurfelRendererEdgeCaseTest, EmptyBehindWholeImageAndDegenerate) {
   SurfelGradients gr;
   auto check = [&](const SurfelModel& m, const char* what) {
     renderer.Forward(m, o, &out);
-    for (const Image* im : {&out.color, &out.depth, &out.alpha, &out.normal, &out.median_depth, &out.distortion}) {
+    for (const Image* im :
+         {&out.color, &out.depth, &out.alpha, &out.normal, &out.median_depth, &out.distortion}) {
       for (size_t i = 0; i < im->size(); ++i) ASSERT_TRUE(std::isfinite(im->data()[i])) << what;
     }
     renderer.Backward(m, o, out, grad, &gr);
-    for (const auto* v : {&gr.params.means, &gr.params.log_scales, &gr.params.quats, &gr.params.opacity_logits,
-                          &gr.params.sh}) {
+    for (const auto* v : {&gr.params.means, &gr.params.log_scales, &gr.params.quats,
+                          &gr.params.opacity_logits, &gr.params.sh}) {
       for (float x : *v) ASSERT_TRUE(std::isfinite(x)) << what;
     }
   };

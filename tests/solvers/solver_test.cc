@@ -74,7 +74,8 @@ TEST(DensityControlTest, ClonesSplitsPrunesAndKeepsTheBudget) {
   Adam adam;
   GaussianGradients g;
   g.ResizeAndZero(m);
-  adam.Step(m.Blocks(), g.params.Blocks(), [](const std::string&, int, std::vector<float>* r) { r->assign(r->size(), 0.1f); });
+  adam.Step(m.Blocks(), g.params.Blocks(),
+            [](const std::string&, int, std::vector<float>* r) { r->assign(r->size(), 0.1f); });
   DensityStats stats;
   stats.Reset(4);
   stats.Accumulate({1e-3f, 1e-3f, 1e-6f, 1e-6f}, {1, 1, 1, 1});
@@ -141,7 +142,8 @@ double TestPsnr(MutualBoostedSolver* solver, const Scene& scene) {
     solver->RenderGaussians(scene.views[i].camera, &r);
     Image gt = scene.views[i].image;
     for (int c = 0; c < 3; ++c) {
-      for (size_t k = 0; k < gt.plane_size(); ++k) gt.plane(c)[k] *= scene.views[i].alpha.plane(0)[k];
+      for (size_t k = 0; k < gt.plane_size(); ++k)
+        gt.plane(c)[k] *= scene.views[i].alpha.plane(0)[k];
     }
     psnr += Psnr(r.color, gt);
   }
@@ -219,7 +221,8 @@ namespace {
 
 class StopAt : public IterationCallback {
  public:
-  StopAt(MutualBoostedSolver* solver, Stage stage, int iteration) : solver_(solver), stage_(stage), iteration_(iteration) {}
+  StopAt(MutualBoostedSolver* solver, Stage stage, int iteration)
+      : solver_(solver), stage_(stage), iteration_(iteration) {}
   void operator()(const IterationInfo& i) override {
     if (i.stage == stage_ && i.iteration == iteration_) solver_->RequestStop();
   }

@@ -41,7 +41,8 @@ Eigen::Vector3d ClosestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Ve
   const double vb = d5 * d2 - d1 * d6;
   if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + d2 / (d2 - d6) * ac;
   const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b);
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
+    return b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b);
   const double denom = 1.0 / (va + vb + vc);
   return a + ab * (vb * denom) + ac * (vc * denom);
 }
@@ -49,7 +50,9 @@ Eigen::Vector3d ClosestPointOnTriangle(const Eigen::Vector3d& p, const Eigen::Ve
 double DistanceToMesh(const Eigen::Vector3d& p, const TriangleMesh& m) {
   double best = 1e300;
   for (const auto& f : m.triangles) {
-    best = std::min(best, (p - ClosestPointOnTriangle(p, m.vertices[f[0]], m.vertices[f[1]], m.vertices[f[2]])).norm());
+    best = std::min(
+        best, (p - ClosestPointOnTriangle(p, m.vertices[f[0]], m.vertices[f[1]], m.vertices[f[2]]))
+                  .norm());
   }
   return best;
 }
@@ -81,10 +84,12 @@ TEST(RayCasterTest, MatchesBruteForceAndAnalyticSphere) {
   // The BVH finds the same nearest hit as testing every triangle.
   const Eigen::Vector3d o(0.3, -2, 0.1);
   for (int k = 0; k < 50; ++k) {
-    const Eigen::Vector3d d = Eigen::Vector3d(std::sin(k * 0.7) * 0.3, 1, std::cos(k * 1.3) * 0.3).normalized();
+    const Eigen::Vector3d d =
+        Eigen::Vector3d(std::sin(k * 0.7) * 0.3, 1, std::cos(k * 1.3) * 0.3).normalized();
     double best = 1e300;
     for (const auto& f : m.triangles) {
-      const Eigen::Vector3d a = m.vertices[f[0]], e1 = m.vertices[f[1]] - a, e2 = m.vertices[f[2]] - a;
+      const Eigen::Vector3d a = m.vertices[f[0]], e1 = m.vertices[f[1]] - a,
+                            e2 = m.vertices[f[2]] - a;
       Eigen::Matrix3d A;
       A << -d, e1, e2;
       const Eigen::Vector3d x = A.colPivHouseholderQr().solve(o - a);
@@ -125,7 +130,8 @@ TEST_P(SyntheticSceneTest, GroundTruthIsConsistentWithImagesMasksAndCameras) {
       bool hit = false;
       for (int dy = -1; dy <= 1 && !hit; ++dy) {
         for (int dx = -1; dx <= 1 && !hit; ++dx) {
-          const int xx = std::clamp(x + dx, 0, v.mask.width() - 1), yy = std::clamp(y + dy, 0, v.mask.height() - 1);
+          const int xx = std::clamp(x + dx, 0, v.mask.width() - 1),
+                    yy = std::clamp(y + dy, 0, v.mask.height() - 1);
           hit = v.mask.at(0, yy, xx) > 0.5f;
         }
       }
@@ -147,7 +153,8 @@ TEST_P(SyntheticSceneTest, GroundTruthIsConsistentWithImagesMasksAndCameras) {
         const float z = depth.at(0, y, x);
         if (z <= 0) continue;
         const Eigen::Vector3d X = v.camera.CameraToWorld(v.camera.PixelToRay(x + 0.5, y + 0.5) * z);
-        ASSERT_LT(DistanceToMesh(X, mesh), 1e-4 * scene.extent) << v.name << " pixel " << x << "," << y;
+        ASSERT_LT(DistanceToMesh(X, mesh), 1e-4 * scene.extent)
+            << v.name << " pixel " << x << "," << y;
         const Eigen::Vector3d n(normal.at(0, y, x), normal.at(1, y, x), normal.at(2, y, x));
         EXPECT_NEAR(n.norm(), 1.0, 1e-5);
         EXPECT_LE(n.dot(X - v.camera.Center()), 1e-6);
@@ -168,7 +175,8 @@ TEST(SyntheticSceneTest, DeterministicPerSeed) {
   o.seed = 2;
   ASSERT_TRUE(WriteSyntheticScene(o, dir + "/c").ok());
   std::string a, b, c;
-  for (const char* f : {"images/v003.png", "sparse/0/images.bin", "sparse/0/points3D.bin", "lights.json"}) {
+  for (const char* f :
+       {"images/v003.png", "sparse/0/images.bin", "sparse/0/points3D.bin", "lights.json"}) {
     ASSERT_TRUE(ReadFileToString(dir + "/a/" + f, &a).ok());
     ASSERT_TRUE(ReadFileToString(dir + "/b/" + f, &b).ok());
     ASSERT_TRUE(ReadFileToString(dir + "/c/" + f, &c).ok());

@@ -1,12 +1,12 @@
 // The CLIs: success paths, and every bad-input case gives a one-line error naming the file and a
 // non-zero exit status (never a crash).
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
-#include <unistd.h>
 
 #include "mgsr/io/colmap_model.h"
 #include "mgsr/io/file_util.h"
@@ -23,7 +23,9 @@ const std::string kTools = MGSR_TOOLS_DIR;
 class CliTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    base_ = (fs::path(::testing::TempDir()) / "mgsr_tests" / ("cli_base_" + std::to_string(getpid()))).string();
+    base_ =
+        (fs::path(::testing::TempDir()) / "mgsr_tests" / ("cli_base_" + std::to_string(getpid())))
+            .string();
     fs::remove_all(base_);
     const auto r = testing::RunCommand(kTools + "/mgsr_synth --output " + base_ +
                                        " --num_views 10 --width 32 --height 32 --num_points 100");
@@ -37,7 +39,8 @@ class CliTest : public ::testing::Test {
     return dir;
   }
   void ExpectSolveFails(const std::string& dir, const std::string& expected) {
-    const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir + "/out");
+    const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " +
+                                       dir + "/out");
     EXPECT_EQ(r.exit_code, 1) << r.output;
     EXPECT_EQ(r.output.rfind("error: ", 0), 0u) << r.output;
     EXPECT_NE(r.output.find(expected), std::string::npos) << r.output;
@@ -55,22 +58,28 @@ std::string CliTest::base_;
 
 TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
   const std::string out = Copy() + "/out";
-  const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + out +
-                                     " --warmup_max_iterations 40 --warmup_min_iterations 0 --mutual_iterations 10 --log_every 20");
+  const auto r =
+      testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + out +
+                          " --warmup_max_iterations 40 --warmup_min_iterations 0 "
+                          "--mutual_iterations 10 --log_every 20");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_NE(r.output.find("8 train / 2 test views, 32x32, 100 points, masks: yes"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("8 train / 2 test views, 32x32, 100 points, masks: yes"),
+            std::string::npos)
+      << r.output;
   EXPECT_NE(r.output.find("test views: PSNR"), std::string::npos) << r.output;
-  for (const char* f : {"metrics.json", "log.csv", "point_cloud_2d.ply", "point_cloud_3d.ply", "mesh.ply",
-                        "renders/v000_composite.png", "renders/v000_depth2d.png"}) {
+  for (const char* f : {"metrics.json", "log.csv", "point_cloud_2d.ply", "point_cloud_3d.ply",
+                        "mesh.ply", "renders/v000_composite.png", "renders/v000_depth2d.png"}) {
     EXPECT_TRUE(FileExists(out + "/" + f)) << f;
   }
   std::string metrics;
   ASSERT_TRUE(ReadFileToString(out + "/metrics.json", &metrics).ok());
   EXPECT_NE(metrics.find("\"psnr\""), std::string::npos);
   EXPECT_NE(metrics.find("\"psnr_aligned\""), std::string::npos);
-  EXPECT_NE(metrics.find("\"nc\""), std::string::npos);  // the synthetic scene has a ground-truth mesh
+  EXPECT_NE(metrics.find("\"nc\""),
+            std::string::npos);  // the synthetic scene has a ground-truth mesh
   // mgsr_eval scores the run folder: NC, CD, PSNR, SSIM, time.
-  const auto e = testing::RunCommand(kTools + "/mgsr_eval --run " + out + " --json " + out + "/eval.json");
+  const auto e =
+      testing::RunCommand(kTools + "/mgsr_eval --run " + out + " --json " + out + "/eval.json");
   ASSERT_EQ(e.exit_code, 0) << e.output;
   EXPECT_NE(e.output.find("NC x100"), std::string::npos) << e.output;
   ASSERT_TRUE(ReadFileToString(out + "/eval.json", &metrics).ok());
@@ -83,7 +92,8 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
 TEST_F(CliTest, SolveResumesFromItsCheckpointToTheSameResult) {
   const std::string dir = Copy();
   const std::string common = kTools + "/mgsr_solve --workspace " + base_ +
-                             " --warmup_max_iterations 30 --warmup_min_iterations 0 --mutual_iterations 12 --log_every 100";
+                             " --warmup_max_iterations 30 --warmup_min_iterations 0 "
+                             "--mutual_iterations 12 --log_every 100";
   auto r = testing::RunCommand(common + " --output " + dir + "/a");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   // A run that leaves a checkpoint every 7 iterations, then a resume from the last one.
@@ -108,12 +118,15 @@ TEST_F(CliTest, SolveRejectsBadOptions) {
   auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_);
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.output.find("--output is required"), std::string::npos);
-  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output /tmp/x --preset slow");
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --preset slow");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_EQ(r.output, "error: unknown --preset 'slow' (fast or paper)\n");
-  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output /tmp/x --mutual_mode both");
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --mutual_mode both");
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_NE(r.output.find("--mutual_mode must be alternate or joint"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("--mutual_mode must be alternate or joint"), std::string::npos)
+      << r.output;
 }
 
 TEST_F(CliTest, MissingWorkspaceFlagAndFolder) {
@@ -183,14 +196,17 @@ TEST_F(CliTest, EmptyPointsIsAWarningNotAnError) {
       im.point3D_ids.clear();
     }
   });
-  const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
-                                     "/out --warmup_max_iterations 5 --warmup_min_iterations 0 --mutual_iterations 2");
+  const auto r = testing::RunCommand(
+      kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
+      "/out --warmup_max_iterations 5 --warmup_min_iterations 0 --mutual_iterations 2");
   EXPECT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_NE(r.output.find("warning: " + dir + "/sparse/0: points3D is empty"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("warning: " + dir + "/sparse/0: points3D is empty"), std::string::npos)
+      << r.output;
 }
 
 TEST_F(CliTest, SynthRejectsBadOptions) {
-  auto r = testing::RunCommand(kTools + "/mgsr_synth --output " + testing::ScratchDir() + " --shape teapot");
+  auto r = testing::RunCommand(kTools + "/mgsr_synth --output " + testing::ScratchDir() +
+                               " --shape teapot");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("error: unknown shape 'teapot'"), std::string::npos) << r.output;
   r = testing::RunCommand(kTools + "/mgsr_synth");
@@ -200,27 +216,33 @@ TEST_F(CliTest, SynthRejectsBadOptions) {
 
 TEST_F(CliTest, EvalScoresMeshesAndImagesAndWritesJson) {
   const std::string out = testing::ScratchDir();
-  auto r = testing::RunCommand(kTools + "/mgsr_eval --mesh " + base_ + "/gt/mesh.ply --gt " + base_ +
-                               "/gt/mesh.ply --json " + out + "/mesh.json");
+  auto r = testing::RunCommand(kTools + "/mgsr_eval --mesh " + base_ + "/gt/mesh.ply --gt " +
+                               base_ + "/gt/mesh.ply --json " + out + "/mesh.json");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   std::string json;
   ASSERT_TRUE(ReadFileToString(out + "/mesh.json", &json).ok());
   EXPECT_NE(json.find("\"ok\": true"), std::string::npos) << json;
-  r = testing::RunCommand(kTools + "/mgsr_eval --renders " + base_ + "/images --gt_images " + base_ +
-                          "/images --json " + out + "/images.json");
+  r = testing::RunCommand(kTools + "/mgsr_eval --renders " + base_ + "/images --gt_images " +
+                          base_ + "/images --json " + out + "/images.json");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_NE(r.output.find("mean                      100.000   1.0000    100.000     1.0000"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("mean                      100.000   1.0000    100.000     1.0000"),
+            std::string::npos)
+      << r.output;
 }
 
 TEST_F(CliTest, EvalBadInput) {
   const std::string dir = Copy();
-  auto r = testing::RunCommand(kTools + "/mgsr_eval --mesh " + dir + "/nope.ply --gt " + dir + "/gt/mesh.ply");
+  auto r = testing::RunCommand(kTools + "/mgsr_eval --mesh " + dir + "/nope.ply --gt " + dir +
+                               "/gt/mesh.ply");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_EQ(r.output, "error: " + dir + "/nope.ply: cannot open (missing or unreadable)\n");
   ASSERT_TRUE(WriteImage(dir + "/masks/v001.png", Image(16, 16, 1)).ok());
-  r = testing::RunCommand(kTools + "/mgsr_eval --renders " + dir + "/masks --gt_images " + dir + "/images");
+  r = testing::RunCommand(kTools + "/mgsr_eval --renders " + dir + "/masks --gt_images " + dir +
+                          "/images");
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_NE(r.output.find("error: " + dir + "/masks/v001.png: render is 16x16 but"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("error: " + dir + "/masks/v001.png: render is 16x16 but"),
+            std::string::npos)
+      << r.output;
   r = testing::RunCommand(kTools + "/mgsr_eval --mesh a.ply");
   EXPECT_EQ(r.exit_code, 2);
 }
