@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 #include <cmath>
+#include <cstdint>
 #include <vector>
 
 #include "mgsr/loss/loss_term.h"
@@ -96,39 +97,50 @@ double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const Targets
   auto P = [&](int x, int y) -> V { return C + D.at(0, y, x) * ray(x, y); };
   ImageT<T>* gN = grad ? &grad->Get(Buffer::kNormal, N) : nullptr;
   ImageT<T>* gD = grad ? &grad->Get(Buffer::kDepth, D) : nullptr;
-  double total = 0;
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      const T gamma = t.mask != nullptr ? t.mask->at(0, y, x) : T(1);
-      const V n_rend(N.at(0, y, x), N.at(1, y, x), N.at(2, y, x));
-      const bool interior = x > 0 && y > 0 && x + 1 < w && y + 1 < h;
-      V dy = V::Zero(), dx = V::Zero(), c = V::Zero();
-      T len = 0;
-      if (interior) {
-        dy = P(x, y + 1) - P(x, y - 1);
-        dx = P(x + 1, y) - P(x - 1, y);
-        c = dy.cross(dx);
-        len = c.norm();
+  // Pixel (x, y) writes the depth gradient of rows y - 1 .. y + 1: rows are processed in three
+  // interleaved phases (y mod 3), each in parallel, so no two threads touch one row; per-row sums
+  // are added in row order (deterministic for any thread count).
+  std::vector<double> row_total(h, 0.0);
+  for (int phase = 0; phase < 3; ++phase) {
+#pragma omp parallel for schedule(static) if (static_cast <int64_t>(w) * h >= 16384)
+    for (int y = phase; y < h; y += 3) {
+      double total = 0;
+      for (int x = 0; x < w; ++x) {
+        const T gamma = t.mask != nullptr ? t.mask->at(0, y, x) : T(1);
+        const V n_rend(N.at(0, y, x), N.at(1, y, x), N.at(2, y, x));
+        const bool interior = x > 0 && y > 0 && x + 1 < w && y + 1 < h;
+        V dy = V::Zero(), dx = V::Zero(), c = V::Zero();
+        T len = 0;
+        if (interior) {
+          dy = P(x, y + 1) - P(x, y - 1);
+          dx = P(x + 1, y) - P(x - 1, y);
+          c = dy.cross(dx);
+          len = c.norm();
+        }
+        const bool defined = interior && len > T(0);
+        const V n_surf = defined ? V(c / len) : V::Zero();
+        const T a = A.at(0, y, x);  // held constant (stop-gradient)
+        total += gamma * (1 - n_rend.dot(n_surf) * a);
+        if (!grad || gamma == T(0)) continue;
+        const T s = static_cast<T>(-scale * inv_n) * gamma * a;
+        for (int k = 0; k < 3; ++k) gN->at(k, y, x) += s * n_surf[k];
+        if (!defined) continue;
+        // d/d n_surf = s n_rend -> through the normalisation -> the cross product -> the four
+        // depths.
+        const V dn = s * n_rend;
+        const V dc = (dn - n_surf * n_surf.dot(dn)) / len;
+        const V d_dy = dx.cross(dc);  // c = dy x dx
+        const V d_dx = dc.cross(dy);
+        gD->at(0, y + 1, x) += d_dy.dot(ray(x, y + 1));
+        gD->at(0, y - 1, x) -= d_dy.dot(ray(x, y - 1));
+        gD->at(0, y, x + 1) += d_dx.dot(ray(x + 1, y));
+        gD->at(0, y, x - 1) -= d_dx.dot(ray(x - 1, y));
       }
-      const bool defined = interior && len > T(0);
-      const V n_surf = defined ? V(c / len) : V::Zero();
-      const T a = A.at(0, y, x);  // held constant (stop-gradient)
-      total += gamma * (1 - n_rend.dot(n_surf) * a);
-      if (!grad || gamma == T(0)) continue;
-      const T s = static_cast<T>(-scale * inv_n) * gamma * a;
-      for (int k = 0; k < 3; ++k) gN->at(k, y, x) += s * n_surf[k];
-      if (!defined) continue;
-      // d/d n_surf = s n_rend -> through the normalisation -> the cross product -> the four depths.
-      const V dn = s * n_rend;
-      const V dc = (dn - n_surf * n_surf.dot(dn)) / len;
-      const V d_dy = dx.cross(dc);  // c = dy x dx
-      const V d_dx = dc.cross(dy);
-      gD->at(0, y + 1, x) += d_dy.dot(ray(x, y + 1));
-      gD->at(0, y - 1, x) -= d_dy.dot(ray(x, y - 1));
-      gD->at(0, y, x + 1) += d_dx.dot(ray(x + 1, y));
-      gD->at(0, y, x - 1) -= d_dx.dot(ray(x - 1, y));
+      row_total[y] = total;
     }
   }
+  double total = 0;
+  for (double r : row_total) total += r;
   return total * inv_n;
 }
 
