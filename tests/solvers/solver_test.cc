@@ -359,3 +359,29 @@ TEST(MutualBoostedSolverTest, BidirectionalChangesWhichBranchesLearn) {
 
 }  // namespace
 }  // namespace mgsr
+
+#include <omp.h>
+
+namespace mgsr {
+namespace {
+
+TEST(CheckpointTest, OneAndTwoThreadsGiveIdenticalModels) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  SolverOptions o = TinyOptions();
+  o.warmup_max_iterations = 40;
+  o.mutual_iterations = 10;
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  MutualBoostedSolver one(o, scene);
+  SolveSummary s1;
+  ASSERT_TRUE(one.Solve(&s1).ok());
+  omp_set_num_threads(2);
+  MutualBoostedSolver two(o, scene);
+  SolveSummary s2;
+  ASSERT_TRUE(two.Solve(&s2).ok());
+  omp_set_num_threads(saved);
+  ExpectSameModels(one, two);
+}
+
+}  // namespace
+}  // namespace mgsr
