@@ -39,6 +39,9 @@ Status LoadScene(const std::string& path, const SceneOptions& options, Scene* sc
   const bool colmap = DirectoryExists(JoinPath(path, "sparse"));
   const bool blender = FileExists(JoinPath(path, "transforms_train.json"));
   if (colmap) return LoadColmapScene(path, options, scene);
+  // `colmap image_undistorter` output inside a workspace: dense/images + dense/sparse/.
+  const std::string dense = JoinPath(path, "dense");
+  if (!blender && DirectoryExists(JoinPath(dense, "sparse"))) return LoadColmapScene(dense, options, scene);
   if (blender) return LoadBlenderScene(path, options, scene);
   return Status::Error(path +
                        ": not a scene (expected sparse/ for COLMAP or transforms_train.json "

@@ -2,7 +2,9 @@
 // folder.
 //
 // COLMAP workspace:  images/, optional masks/<stem>.png|jpg (or <name>.png), sparse/0/ or sparse/
-//                    (binary or text), optional split.txt / test.txt listing test image names.
+//                    (binary or text), optional split.txt / test.txt listing test image names; or
+//                    the `colmap image_undistorter` output (dense/images + dense/sparse/), given as
+//                    the workspace or as the dense/ folder itself.
 // Blender folder:    transforms_train.json, transforms_test.json, images referenced by file_path
 //                    (RGBA), masks from the frame's mask_path, masks/<basename>.png, or alpha.
 #pragma once

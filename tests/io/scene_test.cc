@@ -177,6 +177,23 @@ TEST_F(SceneTest, EmptyPoints3DInitialisesRandomlyInsideTheCommonView) {
   }
 }
 
+TEST_F(SceneTest, UndistorterLayoutFromTheWorkspaceOrTheDenseFolder) {
+  // dense/images + dense/sparse/ (no 0/), as `colmap image_undistorter` writes them.
+  fs::create_directories(dir_ + "/ws/dense/sparse");
+  fs::copy(dir_ + "/images", dir_ + "/ws/dense/images", fs::copy_options::recursive);
+  for (const char* f : {"cameras.bin", "images.bin", "points3D.bin"}) {
+    fs::copy(dir_ + "/sparse/0/" + f, dir_ + "/ws/dense/sparse/" + f);
+  }
+  Scene a, b, ref;
+  ASSERT_TRUE(Load(&ref).ok());
+  ASSERT_TRUE(LoadScene(dir_ + "/ws", SceneOptions(), &a).ok());
+  ASSERT_TRUE(LoadScene(dir_ + "/ws/dense", SceneOptions(), &b).ok());
+  ASSERT_EQ(a.views.size(), ref.views.size());
+  ASSERT_EQ(b.views.size(), ref.views.size());
+  EXPECT_EQ(a.views[3].camera.t, ref.views[3].camera.t);
+  EXPECT_EQ(b.views[3].name, ref.views[3].name);
+}
+
 TEST_F(SceneTest, MissingFolderAndUnknownLayout) {
   Scene scene;
   Status s = LoadScene(dir_ + "/nope", SceneOptions(), &scene);
