@@ -19,19 +19,6 @@ double Now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-// Ground truth composited onto a background with the image's alpha (reference 1.12).
-Image Composite(const View& v, float background) {
-  Image out = v.image;
-  if (v.alpha.empty()) return out;
-  for (int c = 0; c < 3; ++c) {
-    for (size_t i = 0; i < out.plane_size(); ++i) {
-      const float a = v.alpha.plane(0)[i];
-      out.plane(c)[i] = out.plane(c)[i] * a + background * (1 - a);
-    }
-  }
-  return out;
-}
-
 // Log-linear decay from init to final over max_steps (reference 1.8).
 double PositionLearningRate(const SolverOptions& o, int step, double extent) {
   const double t = std::clamp(static_cast<double>(step) / o.position_lr_max_steps, 0.0, 1.0);
@@ -122,9 +109,9 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   train_ = scene.TrainIndices();
   for (const View& v : scene.views) {
     ViewTargets t;
-    t.gt_2d = Composite(v, options.white_background_2d ? 1.0f : 0.0f);
-    t.gt_3d = Composite(v, options.white_background_3d ? 1.0f : 0.0f);
-    t.gt_white = Composite(v, 1.0f);
+    t.gt_2d = CompositeOnBackground(v, options.white_background_2d ? 1.0f : 0.0f);
+    t.gt_3d = CompositeOnBackground(v, options.white_background_3d ? 1.0f : 0.0f);
+    t.gt_white = CompositeOnBackground(v, 1.0f);
     targets_.push_back(std::move(t));
   }
   // Initial points: a seeded subset when there are more than the options allow.
@@ -166,32 +153,36 @@ void MutualBoostedSolver::Notify(Stage stage, int iteration, Branch branch, doub
   for (IterationCallback* c : callbacks_) (*c)(info);
 }
 
-void MutualBoostedSolver::RenderGaussians(const Camera& camera, GaussianRender* out) {
+GaussianRenderOptions MutualBoostedSolver::GaussianOptions(const Camera& camera) const {
   GaussianRenderOptions o;
   o.camera = camera;
   o.sh_degree = sh_degree_;
   const float bg = options_.white_background_3d ? 1.0f : 0.0f;
   o.background[0] = o.background[1] = o.background[2] = bg;
-  gaussian_renderer_.Forward(gaussians_, o, out);
+  return o;
 }
 
-void MutualBoostedSolver::RenderSurfels(const Camera& camera, SurfelRender* out) {
+SurfelRenderOptions MutualBoostedSolver::SurfelOptions(const Camera& camera) const {
   SurfelRenderOptions o;
   o.camera = camera;
   o.sh_degree = sh_degree_;
   const float bg = options_.white_background_2d ? 1.0f : 0.0f;
   o.background[0] = o.background[1] = o.background[2] = bg;
-  surfel_renderer_.Forward(surfels_, o, out);
+  return o;
+}
+
+void MutualBoostedSolver::RenderGaussians(const Camera& camera, GaussianRender* out) {
+  gaussian_renderer_.Forward(gaussians_, GaussianOptions(camera), out);
+}
+
+void MutualBoostedSolver::RenderSurfels(const Camera& camera, SurfelRender* out) {
+  surfel_renderer_.Forward(surfels_, SurfelOptions(camera), out);
 }
 
 double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Image* transmitted) {
   const View& v = scene_.views[view];
   const SolverOptions& o = options_;
-  SurfelRenderOptions ro;
-  ro.camera = v.camera;
-  ro.sh_degree = sh_degree_;
-  const float bg = o.white_background_2d ? 1.0f : 0.0f;
-  ro.background[0] = ro.background[1] = ro.background[2] = bg;
+  const SurfelRenderOptions ro = SurfelOptions(v.camera);
   SurfelRender render;
   surfel_renderer_.Forward(surfels_, ro, &render);
 
@@ -247,11 +238,7 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it,
                                           const Image* surfel_depth) {
   const View& v = scene_.views[view];
   const SolverOptions& o = options_;
-  GaussianRenderOptions ro;
-  ro.camera = v.camera;
-  ro.sh_degree = sh_degree_;
-  const float bg = o.white_background_3d ? 1.0f : 0.0f;
-  ro.background[0] = ro.background[1] = ro.background[2] = bg;
+  const GaussianRenderOptions ro = GaussianOptions(v.camera);
   GaussianRender render;
   gaussian_renderer_.Forward(gaussians_, ro, &render);
 
@@ -297,11 +284,7 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it,
 void MutualBoostedSolver::BackpropIntoGaussians(int view, int it, GaussianRender* render,
                                                 Image d_transmitted) {
   const View& v = scene_.views[view];
-  GaussianRenderOptions ro;
-  ro.camera = v.camera;
-  ro.sh_degree = sh_degree_;
-  const float bg = options_.white_background_3d ? 1.0f : 0.0f;
-  ro.background[0] = ro.background[1] = ro.background[2] = bg;
+  const GaussianRenderOptions ro = GaussianOptions(v.camera);
   GaussianRenderGrad rg;
   rg.tran = std::move(d_transmitted);
   GaussianGradients grads;
@@ -312,11 +295,7 @@ void MutualBoostedSolver::BackpropIntoGaussians(int view, int it, GaussianRender
 void MutualBoostedSolver::BackpropIntoSurfels(int view, int it, SurfelRender* render,
                                               Image d_depth) {
   const View& v = scene_.views[view];
-  SurfelRenderOptions ro;
-  ro.camera = v.camera;
-  ro.sh_degree = sh_degree_;
-  const float bg = options_.white_background_2d ? 1.0f : 0.0f;
-  ro.background[0] = ro.background[1] = ro.background[2] = bg;
+  const SurfelRenderOptions ro = SurfelOptions(v.camera);
   SurfelRenderGrad rg;
   rg.depth = std::move(d_depth);
   SurfelGradients grads;
@@ -415,7 +394,7 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
             }
           }
         }
-        RenderGaussians(scene_.views[view].camera, &g);
+        // The Gaussian renderer still holds g's forward state (the 2DGS step does not use it).
         BackpropIntoGaussians(view, it, &g, std::move(dt));
       }
       Notify(Stage::kMutual, it, Branch::kSurfels2D, sum.final_loss_2d);

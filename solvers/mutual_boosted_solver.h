@@ -88,6 +88,9 @@ class MutualBoostedSolver {
   // state its renderer still holds) and steps that branch.
   void BackpropIntoGaussians(int view, int iteration, GaussianRender* render, Image d_transmitted);
   void BackpropIntoSurfels(int view, int iteration, SurfelRender* render, Image d_depth);
+  // Render options of each branch for a camera: active SH degree and the branch's background.
+  GaussianRenderOptions GaussianOptions(const Camera& camera) const;
+  SurfelRenderOptions SurfelOptions(const Camera& camera) const;
   int NextView();
   void Notify(Stage stage, int iteration, Branch branch, double loss);
 

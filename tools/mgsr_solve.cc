@@ -103,13 +103,7 @@ class TestEvaluation : public mgsr::IterationCallback {
     for (int v : test) {
       mgsr::GaussianRender r;
       solver_->RenderGaussians(scene_.views[v].camera, &r);
-      mgsr::Image gt = scene_.views[v].image;
-      if (!scene_.views[v].alpha.empty()) {
-        for (int c = 0; c < 3; ++c) {
-          for (size_t k = 0; k < gt.plane_size(); ++k)
-            gt.plane(c)[k] *= scene_.views[v].alpha.plane(0)[k];
-        }
-      }
+      const mgsr::Image gt = mgsr::CompositeOnBackground(scene_.views[v], 0.0f);
       psnr += std::min(100.0, mgsr::Psnr(r.color, gt));
     }
     std::printf("[%s %5d] test PSNR %.2f dB (%zu views)\n",
@@ -290,13 +284,7 @@ int main(int argc, char** argv) {
     mgsr::SurfelRender sr;
     solver.RenderGaussians(v.camera, &g);
     solver.RenderSurfels(v.camera, &sr);
-    mgsr::Image gt = v.image;
-    if (!v.alpha.empty()) {
-      for (int c = 0; c < 3; ++c) {
-        for (size_t k = 0; k < gt.plane_size(); ++k)
-          gt.plane(c)[k] *= v.alpha.plane(0)[k];  // black background
-      }
-    }
+    const mgsr::Image gt = mgsr::CompositeOnBackground(v, 0.0f);  // the 3DGS black background
     const double p = std::min(100.0, mgsr::Psnr(g.color, gt)), q = mgsr::Ssim(g.color, gt);
     psnr += p;
     ssim += q;

@@ -32,6 +32,18 @@ bool Scene::has_masks() const {
   return !views.empty();
 }
 
+Image CompositeOnBackground(const View& v, float background) {
+  Image out = v.image;
+  if (v.alpha.empty()) return out;
+  for (int c = 0; c < 3; ++c) {
+    for (size_t i = 0; i < out.plane_size(); ++i) {
+      const float a = v.alpha.plane(0)[i];
+      out.plane(c)[i] = out.plane(c)[i] * a + background * (1 - a);
+    }
+  }
+  return out;
+}
+
 Status LoadScene(const std::string& path, const SceneOptions& options, Scene* scene) {
   if (options.downscale < 1) return Status::Error("--downscale must be >= 1");
   if (options.max_width < 0) return Status::Error("--max_width must be >= 0");
@@ -41,7 +53,8 @@ Status LoadScene(const std::string& path, const SceneOptions& options, Scene* sc
   if (colmap) return LoadColmapScene(path, options, scene);
   // `colmap image_undistorter` output inside a workspace: dense/images + dense/sparse/.
   const std::string dense = JoinPath(path, "dense");
-  if (!blender && DirectoryExists(JoinPath(dense, "sparse"))) return LoadColmapScene(dense, options, scene);
+  if (!blender && DirectoryExists(JoinPath(dense, "sparse")))
+    return LoadColmapScene(dense, options, scene);
   if (blender) return LoadBlenderScene(path, options, scene);
   return Status::Error(path +
                        ": not a scene (expected sparse/ for COLMAP or transforms_train.json "

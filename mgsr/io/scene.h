@@ -54,6 +54,10 @@ struct Scene {
   bool has_masks() const;
 };
 
+// The view's image composited onto a uniform background with its alpha (the image itself when it
+// has no alpha): the ground truth a branch rendering on that background is compared with.
+Image CompositeOnBackground(const View& view, float background);
+
 // Detects the layout and loads. Every error names the file and the problem.
 Status LoadScene(const std::string& path, const SceneOptions& options, Scene* scene);
 

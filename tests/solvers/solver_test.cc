@@ -140,11 +140,7 @@ double TestPsnr(MutualBoostedSolver* solver, const Scene& scene) {
   for (int i : scene.TestIndices()) {
     GaussianRender r;
     solver->RenderGaussians(scene.views[i].camera, &r);
-    Image gt = scene.views[i].image;
-    for (int c = 0; c < 3; ++c) {
-      for (size_t k = 0; k < gt.plane_size(); ++k)
-        gt.plane(c)[k] *= scene.views[i].alpha.plane(0)[k];
-    }
+    const Image gt = CompositeOnBackground(scene.views[i], 0.0f);
     psnr += Psnr(r.color, gt);
   }
   return psnr / scene.TestIndices().size();
