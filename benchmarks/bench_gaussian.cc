@@ -56,16 +56,7 @@ void BM_GaussianForwardBackward(benchmark::State& state) {
   }
 }
 
-void Args(benchmark::internal::Benchmark* b) {
-  for (int width : {256, 512}) {
-    for (int count : {10000, 100000}) {
-      for (int threads : {1, 2}) b->Args({width, count, threads});
-    }
-  }
-  b->ArgNames({"width", "count", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
-}
-
-BENCHMARK(BM_GaussianForward)->Apply(Args);
-BENCHMARK(BM_GaussianForwardBackward)->Apply(Args);
+BENCHMARK(BM_GaussianForward)->Apply(mgsr::bench::RenderBenchmarkArgs);
+BENCHMARK(BM_GaussianForwardBackward)->Apply(mgsr::bench::RenderBenchmarkArgs);
 
 }  // namespace

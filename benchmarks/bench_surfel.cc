@@ -59,16 +59,7 @@ void BM_SurfelForwardBackward(benchmark::State& state) {
   }
 }
 
-void Args(benchmark::internal::Benchmark* b) {
-  for (int width : {256, 512}) {
-    for (int count : {10000, 100000}) {
-      for (int threads : {1, 2}) b->Args({width, count, threads});
-    }
-  }
-  b->ArgNames({"width", "count", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
-}
-
-BENCHMARK(BM_SurfelForward)->Apply(Args);
-BENCHMARK(BM_SurfelForwardBackward)->Apply(Args);
+BENCHMARK(BM_SurfelForward)->Apply(mgsr::bench::RenderBenchmarkArgs);
+BENCHMARK(BM_SurfelForwardBackward)->Apply(mgsr::bench::RenderBenchmarkArgs);
 
 }  // namespace

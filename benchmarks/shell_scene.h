@@ -2,6 +2,8 @@
 // distance 3, with scales matched to the spacing of the points, as a trained object model has.
 #pragma once
 
+#include <benchmark/benchmark.h>
+
 #include <Eigen/Geometry>
 #include <cmath>
 
@@ -63,6 +65,17 @@ inline SurfelModel ShellSurfels(int count, uint64_t seed) {
   }
   for (float& v : m.sh) v = static_cast<float>(rng.Normal(0, 0.2));
   return m;
+}
+
+// The argument grid of the render benchmarks: width 256 and 512, 10k and 100k primitives, 1 and 2
+// threads, reported in milliseconds of wall time.
+inline void RenderBenchmarkArgs(benchmark::internal::Benchmark* b) {
+  for (int width : {256, 512}) {
+    for (int count : {10000, 100000}) {
+      for (int threads : {1, 2}) b->Args({width, count, threads});
+    }
+  }
+  b->ArgNames({"width", "count", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
 }
 
 }  // namespace mgsr::bench

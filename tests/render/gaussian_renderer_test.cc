@@ -8,14 +8,10 @@
 
 #include "mgsr/core/rng.h"
 #include "reference_gaussian_renderer.h"
+#include "render_test_util.h"
 
 namespace mgsr {
 namespace {
-
-Camera TestCamera(int w = 24, int h = 24) {
-  return LookAtCamera({0.3, -3.0, 0.4}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), w, h, 30.0 * w / 24,
-                      30.0 * h / 24);
-}
 
 GaussianModel RandomScene(int n, uint64_t seed, double scale_lo = 0.05, double scale_hi = 0.25) {
   Rng rng(seed);
@@ -47,19 +43,13 @@ GaussianRenderOptions Options(const Camera& cam, bool reflection = true) {
   return o;
 }
 
-double MaxAbsDiff(const Image& im, const std::vector<double>& ref) {
-  double d = 0;
-  for (size_t i = 0; i < im.size(); ++i) d = std::max(d, std::abs(im.data()[i] - ref[i]));
-  return d;
-}
-
 class GaussianRendererTest : public ::testing::TestWithParam<bool> {};
 
 TEST_P(GaussianRendererTest, TiledRenderMatchesTheReference) {
   const bool reflection = GetParam();
   for (uint64_t seed : {1, 2, 3, 4}) {
     // 40 x 36 pixels: several tiles, partial tiles at the border.
-    const Camera cam = TestCamera(40, 36);
+    const Camera cam = testing::RenderTestCamera(40, 36);
     const GaussianModel m = RandomScene(30, seed);
     GaussianRenderer renderer;
     GaussianRender out;
@@ -67,13 +57,14 @@ TEST_P(GaussianRendererTest, TiledRenderMatchesTheReference) {
     renderer.Forward(m, o, &out);
     const double bg[3] = {0.2, 0.5, 0.7};
     const auto ref = testing::RenderGaussiansReference(m, cam, 3, reflection, bg);
-    EXPECT_LT(MaxAbsDiff(out.color, ref.color), 1e-5) << seed;
-    EXPECT_LT(MaxAbsDiff(out.tran, ref.tran), 1e-5) << seed;
-    EXPECT_LT(MaxAbsDiff(out.alpha, ref.alpha), 1e-5) << seed;
-    EXPECT_LT(MaxAbsDiff(out.depth, ref.depth), 1e-5 * 4) << seed;  // depths are ~3: relative 1e-5
+    EXPECT_LT(testing::MaxAbsDiff(out.color, ref.color), 1e-5) << seed;
+    EXPECT_LT(testing::MaxAbsDiff(out.tran, ref.tran), 1e-5) << seed;
+    EXPECT_LT(testing::MaxAbsDiff(out.alpha, ref.alpha), 1e-5) << seed;
+    EXPECT_LT(testing::MaxAbsDiff(out.depth, ref.depth), 1e-5 * 4)
+        << seed;  // depths are ~3: relative 1e-5
     if (reflection) {
-      EXPECT_LT(MaxAbsDiff(out.ref, ref.ref), 1e-5) << seed;
-      EXPECT_LT(MaxAbsDiff(out.weight, ref.weight), 1e-5) << seed;
+      EXPECT_LT(testing::MaxAbsDiff(out.ref, ref.ref), 1e-5) << seed;
+      EXPECT_LT(testing::MaxAbsDiff(out.weight, ref.weight), 1e-5) << seed;
     }
     // The scene is not trivial: most pixels are covered.
     double covered = 0;
@@ -87,7 +78,7 @@ INSTANTIATE_TEST_SUITE_P(WithAndWithoutReflection, GaussianRendererTest, ::testi
 // Every raw parameter's gradient, for an upstream gradient on each output buffer in turn, against
 // central differences of the double-precision reference.
 TEST(GaussianRendererGradientTest, AllParametersAllOutputsMatchNumericDifferentiation) {
-  const Camera cam = TestCamera();
+  const Camera cam = testing::RenderTestCamera();
   const GaussianModel m = RandomScene(8, 11, 0.1, 0.3);
   const GaussianRenderOptions o = Options(cam);
   const double bg[3] = {0.2, 0.5, 0.7};
@@ -165,7 +156,7 @@ TEST(GaussianRendererGradientTest, AllParametersAllOutputsMatchNumericDifferenti
 }
 
 TEST(GaussianRendererEdgeCaseTest, EmptyBehindWholeImageAndDegenerate) {
-  const Camera cam = TestCamera(32, 32);
+  const Camera cam = testing::RenderTestCamera(32, 32);
   const GaussianRenderOptions o = Options(cam);
   GaussianRenderer renderer;
   GaussianRender out;
@@ -220,7 +211,7 @@ TEST(GaussianRendererEdgeCaseTest, EmptyBehindWholeImageAndDegenerate) {
 }
 
 TEST(GaussianRendererThreadTest, ResultsDoNotDependOnTheThreadCount) {
-  const Camera cam = TestCamera(64, 48);
+  const Camera cam = testing::RenderTestCamera(64, 48);
   const GaussianModel m = RandomScene(200, 21, 0.02, 0.15);
   const GaussianRenderOptions o = Options(cam);
   GaussianRenderGrad grad;

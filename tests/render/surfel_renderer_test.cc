@@ -7,14 +7,10 @@
 
 #include "mgsr/core/rng.h"
 #include "reference_surfel_renderer.h"
+#include "render_test_util.h"
 
 namespace mgsr {
 namespace {
-
-Camera TestCamera(int w = 24, int h = 24) {
-  return LookAtCamera({0.3, -3.0, 0.4}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), w, h, 30.0 * w / 24,
-                      30.0 * h / 24);
-}
 
 SurfelModel RandomSurfels(int n, uint64_t seed, double scale_lo = 0.1, double scale_hi = 0.35) {
   Rng rng(seed);
@@ -42,25 +38,19 @@ SurfelRenderOptions Options(const Camera& cam) {
   return o;
 }
 
-double MaxAbsDiff(const Image& im, const std::vector<double>& ref) {
-  double d = 0;
-  for (size_t i = 0; i < im.size(); ++i) d = std::max(d, std::abs(im.data()[i] - ref[i]));
-  return d;
-}
-
 TEST(SurfelRendererTest, TiledRenderMatchesTheReference) {
   const double bg[3] = {0.2, 0.5, 0.7};
   for (uint64_t seed : {1, 2, 3, 4}) {
-    const Camera cam = TestCamera(40, 36);
+    const Camera cam = testing::RenderTestCamera(40, 36);
     const SurfelModel m = RandomSurfels(30, seed);
     SurfelRenderer renderer;
     SurfelRender out;
     renderer.Forward(m, Options(cam), &out);
     const auto ref = testing::RenderSurfelsReference(m, cam, 3, bg);
-    EXPECT_LT(MaxAbsDiff(out.color, ref.color), 1e-5) << seed;
-    EXPECT_LT(MaxAbsDiff(out.alpha, ref.alpha), 1e-5) << seed;
-    EXPECT_LT(MaxAbsDiff(out.normal, ref.normal), 1e-5) << seed;
-    EXPECT_LT(MaxAbsDiff(out.normal_world, ref.normal_world), 1e-5) << seed;
+    EXPECT_LT(testing::MaxAbsDiff(out.color, ref.color), 1e-5) << seed;
+    EXPECT_LT(testing::MaxAbsDiff(out.alpha, ref.alpha), 1e-5) << seed;
+    EXPECT_LT(testing::MaxAbsDiff(out.normal, ref.normal), 1e-5) << seed;
+    EXPECT_LT(testing::MaxAbsDiff(out.normal_world, ref.normal_world), 1e-5) << seed;
     // Depths: relative 1e-4. The screen low-pass lets a nearly edge-on surfel contribute where the
     // pixel ray meets its plane far behind it (z of tens of units); that intersection is
     // ill-conditioned, and float and double differ there by ~1e-5 of z. The median (front surface)
@@ -74,7 +64,7 @@ TEST(SurfelRendererTest, TiledRenderMatchesTheReference) {
     }
     EXPECT_LT(depth_err, 1e-4) << seed;
     EXPECT_LT(median_err, 1e-5) << seed;
-    EXPECT_LT(MaxAbsDiff(out.distortion, ref.distortion), 1e-5) << seed;
+    EXPECT_LT(testing::MaxAbsDiff(out.distortion, ref.distortion), 1e-5) << seed;
     double covered = 0;
     for (size_t i = 0; i < out.alpha.size(); ++i) covered += out.alpha.data()[i] > 0.1f;
     EXPECT_GT(covered, 0.3 * out.alpha.size());
@@ -168,7 +158,7 @@ void CheckGradients(const SurfelModel& m, const Camera& cam, const char* label,
 }
 
 TEST(SurfelRendererGradientTest, AllParametersAllOutputsMatchNumericDifferentiation) {
-  CheckGradients(RandomSurfels(8, 11, 0.15, 0.35), TestCamera(), "splats", true);
+  CheckGradients(RandomSurfels(8, 11, 0.15, 0.35), testing::RenderTestCamera(), "splats", true);
 }
 
 // Surfels far smaller than a pixel: the screen low-pass floor (rho2d < rho3d) decides their
@@ -177,7 +167,7 @@ TEST(SurfelRendererGradientTest, AllParametersAllOutputsMatchNumericDifferentiat
 TEST(SurfelRendererGradientTest, LowPassBranchMatchesNumericDifferentiation) {
   SurfelModel m = RandomSurfels(6, 12, 0.002, 0.004);
   for (size_t i = 0; i < m.size(); ++i) m.opacity_logits[i] = 2.0f;
-  CheckGradients(m, TestCamera(), "low-pass", false);
+  CheckGradients(m, testing::RenderTestCamera(), "low-pass", false);
 }
 
 TEST(SurfelRendererGeometryTest, FlatSplatFacingTheCamera) {
@@ -266,7 +256,7 @@ TEST(SurfelRendererGeometryTest, PlaneOfOverlappingSplatsGivesConstantNormalAndE
 }
 
 TEST(SurfelRendererEdgeCaseTest, EmptyBehindWholeImageAndDegenerate) {
-  const Camera cam = TestCamera(32, 32);
+  const Camera cam = testing::RenderTestCamera(32, 32);
   const SurfelRenderOptions o = Options(cam);
   SurfelRenderer renderer;
   SurfelRender out;
