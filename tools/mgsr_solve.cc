@@ -20,9 +20,14 @@
 #include "mgsr/io/scene.h"
 #include "mgsr/mesh/tsdf_fusion.h"
 #include "solvers/mutual_boosted_solver.h"
+#include "tools/colmap_flags.h"
 
 DEFINE_string(workspace, "",
               "COLMAP workspace (images/, sparse/0/) or Blender folder (transforms_*.json).");
+DEFINE_string(images, "",
+              "Instead of --workspace: a folder of photos; colmap recovers the poses first "
+              "(into OUTPUT/colmap), see mgsr_colmap.");
+DEFINE_string(masks, "", "With --images: optional folder of foreground masks (<stem>.png).");
 DEFINE_string(output, "", "Output folder (created).");
 DEFINE_string(preset, "fast", "fast | paper: iteration counts and schedules.");
 DEFINE_int32(downscale, 1, "Divide the input resolution by this factor.");
@@ -165,10 +170,16 @@ mgsr::Image Colorize(const mgsr::Image& one, float lo, float hi) {
 
 int main(int argc, char** argv) {
   gflags::SetUsageMessage(
-      "mgsr_solve --workspace DIR --output DIR [--preset fast|paper] [options]");
+      "mgsr_solve (--workspace DIR | --images DIR [--masks DIR]) --output DIR [--preset "
+      "fast|paper] "
+      "[options]");
   gflags::ParseCommandLineFlags(&argc, &argv, true);
-  if (FLAGS_workspace.empty()) {
-    std::fprintf(stderr, "error: --workspace is required\n");
+  if (FLAGS_workspace.empty() == FLAGS_images.empty()) {
+    std::fprintf(stderr, "error: give either --workspace or --images\n");
+    return 2;
+  }
+  if (!FLAGS_masks.empty() && FLAGS_images.empty()) {
+    std::fprintf(stderr, "error: --masks goes with --images (a workspace has its own masks/)\n");
     return 2;
   }
   if (FLAGS_output.empty()) {
@@ -208,6 +219,30 @@ int main(int argc, char** argv) {
   if (!valid.ok()) return Fail(valid.message());
 
   mgsr::Timer total;
+  nlohmann::json colmap_metrics;
+  if (!FLAGS_images.empty()) {
+    mgsr::ColmapPipelineOptions co = mgsr_tools::ColmapOptionsFromFlags();
+    co.images = FLAGS_images;
+    co.masks = FLAGS_masks;
+    co.workspace = mgsr::JoinPath(FLAGS_output, "colmap");
+    const std::string dense = mgsr::JoinPath(co.workspace, "dense");
+    if (FLAGS_resume && mgsr::DirectoryExists(mgsr::JoinPath(dense, "sparse"))) {
+      std::printf("colmap: reusing %s (--resume)\n", dense.c_str());
+    } else {
+      mgsr::ColmapPipelineSummary cs;
+      const mgsr::Status ran = mgsr::RunColmapPipeline(co, &cs);
+      if (!ran.ok()) return Fail(ran.message());
+      mgsr_tools::PrintColmapSummary(cs);
+      colmap_metrics = {{"images_given", cs.images_given},
+                        {"images_registered", cs.images_registered},
+                        {"unregistered", cs.unregistered},
+                        {"points", cs.points},
+                        {"mean_reprojection_error_px", cs.mean_reprojection_error}};
+      for (const auto& step : cs.steps) colmap_metrics["seconds"][step.name] = step.seconds;
+    }
+    FLAGS_workspace = dense;
+  }
+  mgsr::Timer load_timer;
   mgsr::SceneOptions so;
   so.downscale = FLAGS_downscale;
   so.max_width = FLAGS_max_width;
@@ -219,7 +254,7 @@ int main(int argc, char** argv) {
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   s = mgsr::MakeDirectories(mgsr::JoinPath(FLAGS_output, "renders"));
   if (!s.ok()) return Fail(s.message());
-  const double load_seconds = total.ElapsedSeconds();
+  const double load_seconds = load_timer.ElapsedSeconds();
   const mgsr::Camera& cam0 = scene.views.front().camera;
   std::printf("scene: %s (%s), %zu train / %zu test views, %dx%d, %zu points, masks: %s\n",
               FLAGS_workspace.c_str(), scene.source.c_str(), scene.TrainIndices().size(),
@@ -407,6 +442,7 @@ int main(int argc, char** argv) {
        {{"path", s.ok() ? mesh_path : ""},
         {"vertices", mesh.vertices.size()},
         {"triangles", mesh.triangles.size()}}}};
+  if (!colmap_metrics.is_null()) metrics["colmap"] = colmap_metrics;
   if (depth_views > 0) {
     metrics["test"]["depth_abs_error"] = depth_err / depth_views;
     metrics["test"]["depth_abs_error_over_extent"] = depth_err / depth_views / scene.extent;

@@ -247,5 +247,27 @@ TEST_F(CliTest, EvalBadInput) {
   EXPECT_EQ(r.exit_code, 2);
 }
 
+TEST_F(CliTest, PhotoPipelineBadInput) {
+  const std::string dir = Copy();
+  auto r = testing::RunCommand(kTools + "/mgsr_colmap --images " + dir + "/nope --workspace " +
+                               dir + "/ws");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.output, "error: " + dir + "/nope: folder of photos does not exist\n");
+  r = testing::RunCommand(kTools + "/mgsr_colmap --images " + dir + "/images --workspace " + dir +
+                          "/ws --colmap " + dir + "/no_colmap");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.output.rfind("error: " + dir + "/no_colmap: program not found", 0), 0u) << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  r = testing::RunCommand(kTools + "/mgsr_solve --images " + dir + "/images --output " + dir +
+                          "/out --colmap " + dir + "/no_colmap");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.output.rfind("error: " + dir + "/no_colmap: program not found", 0), 0u) << r.output;
+  EXPECT_FALSE(FileExists(dir + "/out/metrics.json"));
+  r = testing::RunCommand(kTools + "/mgsr_solve --images " + dir + "/images --workspace " + dir +
+                          " --output " + dir + "/out");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.output, "error: give either --workspace or --images\n");
+}
+
 }  // namespace
 }  // namespace mgsr

@@ -1,0 +1,24 @@
+// Running an external program (the `colmap` binary) without a shell: arguments are passed as they
+// are, so paths with spaces or quotes need no escaping.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace mgsr {
+
+// The absolute path of `program` (searched on PATH unless it contains a '/'); "" when there is no
+// executable file by that name.
+std::string FindProgram(const std::string& program);
+
+struct ProgramResult {
+  bool started = false;  // false: the program could not be executed
+  int exit_code = -1;    // exit status; 128 + signal number when killed by a signal
+};
+
+// Runs argv[0] (a path, as FindProgram gives) with the given arguments and extra environment
+// entries ("NAME=value"), appending its stdout and stderr to `log_path`, and waits for it.
+ProgramResult RunProgram(const std::vector<std::string>& argv,
+                         const std::vector<std::string>& extra_env, const std::string& log_path);
+
+}  // namespace mgsr
