@@ -229,7 +229,10 @@ Status RunColmapPipeline(const ColmapPipelineOptions& options, ColmapPipelineSum
 
   const Status mapped =
       run.Run("mapping", {"mapper", "--database_path", database, "--image_path", options.images,
-                          "--output_path", sparse, "--Mapper.num_threads", Threads(options)});
+                          "--output_path", sparse, "--Mapper.num_threads", Threads(options),
+                          // colmap drops models under 10 images by default; a small photo set
+                          // should still reconstruct (3 is what the solver needs).
+                          "--Mapper.min_model_size", "3"});
   std::string model_dir;
   ColmapModel model;
   MGSR_RETURN_IF_ERROR(PickLargestModel(sparse, &model_dir, &model, &summary->num_models));
