@@ -10,7 +10,8 @@
 namespace mgsr {
 namespace {
 
-constexpr char kMagic[8] = {'M', 'G', 'S', 'R', 'C', 'K', 'P', '1'};
+// Format 2 added the exposure models.
+constexpr char kMagic[8] = {'M', 'G', 'S', 'R', 'C', 'K', 'P', '2'};
 
 template <typename T>
 void WriteVector(BinaryWriter* w, const std::vector<T>& v) {
@@ -131,6 +132,10 @@ Status MutualBoostedSolver::SaveCheckpoint(const std::string& path) const {
     WriteVector(&w, st->grad_sum);
     WriteVector(&w, st->count);
   }
+  w.Write<int32_t>(static_cast<int32_t>(options_.exposure));
+  WriteVector(&w, exposure_3d_.SaveState());
+  WriteVector(&w, exposure_2d_.SaveState());
+  w.Write<double>(s.exposure_fit_seconds);
   return WriteStringToFileAtomic(path, w.data());
 }
 
@@ -138,10 +143,14 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
   std::string data;
   MGSR_RETURN_IF_ERROR(ReadFileToString(path, &data));
   BinaryReader r(path, data);
-  for (char c : kMagic) {
-    char got = 0;
-    MGSR_RETURN_IF_ERROR(r.Read(&got));
-    if (got != c) return Status::Error(path + ": not an MGSR checkpoint");
+  char magic[8] = {};
+  for (char& c : magic) MGSR_RETURN_IF_ERROR(r.Read(&c));
+  if (std::string(magic, 7) != std::string(kMagic, 7))
+    return Status::Error(path + ": not an MGSR checkpoint");
+  if (magic[7] != kMagic[7]) {
+    return Status::Error(path + ": checkpoint format " + std::string(1, magic[7]) +
+                         " is from another version of mgsr (this one reads format " +
+                         std::string(1, kMagic[7]) + "); start again without --resume");
   }
   uint32_t views = 0;
   MGSR_RETURN_IF_ERROR(r.Read(&views));
@@ -185,6 +194,21 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
     MGSR_RETURN_IF_ERROR(ReadVector(&r, &st->grad_sum));
     MGSR_RETURN_IF_ERROR(ReadVector(&r, &st->count));
   }
+  int32_t exposure_mode = 0;
+  std::vector<double> e3, e2;
+  MGSR_RETURN_IF_ERROR(r.Read(&exposure_mode));
+  MGSR_RETURN_IF_ERROR(ReadVector(&r, &e3));
+  MGSR_RETURN_IF_ERROR(ReadVector(&r, &e2));
+  MGSR_RETURN_IF_ERROR(r.Read(&s.exposure_fit_seconds));
+  if (exposure_mode != static_cast<int32_t>(options_.exposure)) {
+    return Status::Error(path + ": checkpoint was written with another --exposure mode");
+  }
+  ExposureModel ex3, ex2;
+  const int num_views = static_cast<int>(scene_.views.size());
+  if (!ex3.LoadState(e3, num_views, options_.exposure) ||
+      !ex2.LoadState(e2, num_views, options_.exposure)) {
+    return Status::Error(path + ": corrupt checkpoint (exposure models)");
+  }
   if (!r.AtEnd()) return Status::Error(path + ": trailing bytes (corrupt checkpoint)");
   for (int v : stack) {
     if (v < 0 || v >= static_cast<int>(scene_.views.size()))
@@ -206,6 +230,8 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
   adam_2d_ = std::move(adam2);
   stats_3d_ = std::move(st3);
   stats_2d_ = std::move(st2);
+  exposure_3d_ = std::move(ex3);
+  exposure_2d_ = std::move(ex2);
   return Status::Ok();
 }
 

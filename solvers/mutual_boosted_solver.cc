@@ -11,6 +11,7 @@
 #include "mgsr/loss/normal_consistency_loss.h"
 #include "mgsr/loss/render_loss.h"
 #include "mgsr/model/init_from_points.h"
+#include "solvers/exposure_fit.h"
 
 namespace mgsr {
 namespace {
@@ -133,6 +134,47 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   InitSurfelsFromPoints(points, colors, options.sh_degree, options.seed + 1, &surfels_);
   stats_3d_.Reset(gaussians_.size());
   stats_2d_.Reset(surfels_.size());
+  exposure_3d_.Reset(static_cast<int>(scene.views.size()), options.exposure);
+  exposure_2d_.Reset(static_cast<int>(scene.views.size()), options.exposure);
+}
+
+std::unique_ptr<LossTerm> MutualBoostedSolver::PhotoLoss(int view, Branch branch,
+                                                         ExposureCompensatedLoss** wrapped) {
+  auto render = std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, options_.lambda_l1);
+  *wrapped = nullptr;
+  if (options_.exposure == ExposureMode::kOff) return render;
+  auto term = std::make_unique<ExposureCompensatedLoss>(std::move(render),
+                                                        ExposureFor(branch).transform(view));
+  *wrapped = term.get();
+  return term;
+}
+
+void MutualBoostedSolver::StepExposure(int view, Branch branch,
+                                       const ExposureCompensatedLoss* wrapped) {
+  if (wrapped == nullptr) return;
+  ExposureFor(branch).Step(view, wrapped->parameter_gradient(), options_.exposure_lr,
+                           options_.exposure_prior, options_.exposure_offset_prior);
+}
+
+void MutualBoostedSolver::FitExposures() {
+  ExposureFitOptions fo;
+  fo.mode = options_.exposure;
+  fo.offset_prior = options_.exposure_offset_prior;
+  for (int view : train_) {
+    const View& v = scene_.views[view];
+    const Image* mask = v.mask.empty() ? nullptr : &v.mask;
+    GaussianRender g;
+    RenderGaussians(v.camera, &g);
+    ColorTransform p;
+    if (FitColorTransform(g.color, targets_[view].gt_3d, mask, fo, &p).ok())
+      exposure_3d_.SetTransform(view, p);
+    if (options_.exposure_per_branch) {
+      SurfelRender s;
+      RenderSurfels(v.camera, &s);
+      if (FitColorTransform(s.color, targets_[view].gt_2d, mask, fo, &p).ok())
+        exposure_2d_.SetTransform(view, p);
+    }
+  }
 }
 
 int MutualBoostedSolver::NextView() {
@@ -188,13 +230,13 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
 
   // The 2DGS loss of the stage (reference 1.3 warm-up, 1.5 mutual).
   Problem p;
+  ExposureCompensatedLoss* exposure_term = nullptr;
   Targets t;
   t.mask = v.mask.empty() ? nullptr : &v.mask;
   if (stage == Stage::kWarmup) {
     const double ln = it > o.normal_from_iteration ? o.lambda_normal : 0.0;
     t.image = &targets_[view].gt_2d;
-    p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, o.lambda_l1), 1.0,
-              Branch::kSurfels2D);
+    p.AddTerm(PhotoLoss(view, Branch::kSurfels2D, &exposure_term), 1.0, Branch::kSurfels2D);
     p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kImage),
               o.depth_tv_warmup_2d, Branch::kSurfels2D);
     p.AddTerm(std::make_unique<NormalConsistencyLoss>(), ln, Branch::kSurfels2D);
@@ -204,9 +246,18 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
     t.image = &targets_[view].gt_white;
     t.transmitted = transmitted;
     const double w = o.w_2d;
-    p.AddTerm(std::make_unique<MutualRenderLoss>(o.mutual_transmitted_weight, o.mutual_image_weight,
-                                                 o.lambda_l1),
-              w, Branch::kSurfels2D);
+    if (o.exposure == ExposureMode::kOff) {
+      p.AddTerm(std::make_unique<MutualRenderLoss>(o.mutual_transmitted_weight,
+                                                   o.mutual_image_weight, o.lambda_l1),
+                w, Branch::kSurfels2D);
+    } else {
+      // The two halves of the mutual render loss: the transmitted image is already at the
+      // scene's neutral exposure, only the photo needs the view's transform.
+      p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kTransmitted, o.lambda_l1),
+                w * o.mutual_transmitted_weight, Branch::kSurfels2D);
+      p.AddTerm(PhotoLoss(view, Branch::kSurfels2D, &exposure_term), w * o.mutual_image_weight,
+                Branch::kSurfels2D);
+    }
     p.AddTerm(std::make_unique<NormalConsistencyLoss>(), w * o.lambda_normal, Branch::kSurfels2D);
     p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kTransmitted),
               w * o.lambda_normal, Branch::kSurfels2D);
@@ -223,6 +274,7 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
   in.Set(Buffer::kDistortion, &render.distortion);
   RenderGradients g;
   const double loss = p.Evaluate(Branch::kSurfels2D, in, t, &g);
+  StepExposure(view, Branch::kSurfels2D, exposure_term);
   SurfelRenderGrad rg;
   MoveGradients(&g, &rg);
   SurfelGradients grads;
@@ -244,19 +296,19 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it,
 
   // The 3DGS loss of the stage (reference 1.4 warm-up, 1.5 mutual).
   Problem p;
+  ExposureCompensatedLoss* exposure_term = nullptr;
   Targets t;
   t.image = &targets_[view].gt_3d;
   t.mask = v.mask.empty() ? nullptr : &v.mask;
   if (stage == Stage::kWarmup) {
-    p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, o.lambda_l1), 1.0,
-              Branch::kGaussians3D);
+    p.AddTerm(PhotoLoss(view, Branch::kGaussians3D, &exposure_term), 1.0, Branch::kGaussians3D);
     p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kTransmitted, TargetKind::kImage),
               o.transmitted_tv_3d, Branch::kGaussians3D);
     p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kImage), o.depth_tv_3d,
               Branch::kGaussians3D);
   } else {
     t.other_depth = surfel_depth;
-    p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, o.lambda_l1), o.w_3d,
+    p.AddTerm(PhotoLoss(view, Branch::kGaussians3D, &exposure_term), o.w_3d,
               Branch::kGaussians3D);
     p.AddTerm(std::make_unique<MutualDepthLoss>(false), o.w_depth, Branch::kGaussians3D);
   }
@@ -270,6 +322,7 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it,
   in.Set(Buffer::kAlpha, &render.alpha);
   RenderGradients g;
   const double loss = p.Evaluate(Branch::kGaussians3D, in, t, &g);
+  StepExposure(view, Branch::kGaussians3D, exposure_term);
   GaussianRenderGrad rg;
   MoveGradients(&g, &rg);
   GaussianGradients grads;
@@ -325,6 +378,12 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
     const bool done_2d = sum.auto_stopped_2d || sum.warmup_iterations_2d >= o.warmup_max_iterations;
     const bool done_3d = sum.auto_stopped_3d || sum.warmup_iterations_3d >= o.warmup_max_iterations;
     if (done_2d && done_3d) {
+      if (o.exposure != ExposureMode::kOff && o.exposure_fit_at_mutual) {
+        Timer fit;
+        sh_degree_ = o.sh_degree;
+        FitExposures();
+        sum.exposure_fit_seconds = fit.ElapsedSeconds();
+      }
       stage_ = Stage::kMutual;
       next_iteration_ = 1;
       break;

@@ -22,6 +22,7 @@
 #include "solvers/adam.h"
 #include "solvers/auto_stop.h"
 #include "solvers/density_control.h"
+#include "solvers/exposure_model.h"
 #include "solvers/solver_options.h"
 
 namespace mgsr {
@@ -48,6 +49,7 @@ struct SolveSummary {
   int warmup_iterations_2d = 0, warmup_iterations_3d = 0, mutual_iterations = 0;
   bool auto_stopped_2d = false, auto_stopped_3d = false;
   double warmup_seconds = 0, mutual_seconds = 0;
+  double exposure_fit_seconds = 0;  // the Ceres fits at the start of the mutual stage
   size_t num_gaussians = 0, num_surfels = 0;
   double final_loss_2d = 0, final_loss_3d = 0;
   std::string BriefReport() const;
@@ -73,6 +75,8 @@ class MutualBoostedSolver {
   const GaussianModel& gaussians() const { return gaussians_; }
   const SurfelModel& surfels() const { return surfels_; }
   int active_sh_degree() const { return sh_degree_; }
+  // Per-view colour transforms (indexed like scene.views; identity for test views).
+  const ExposureModel& exposure(Branch branch) const { return ExposureFor(branch); }
 
   // Renders of one view with the trained models (for outputs and evaluation).
   void RenderGaussians(const Camera& camera, GaussianRender* out);
@@ -92,6 +96,18 @@ class MutualBoostedSolver {
   GaussianRenderOptions GaussianOptions(const Camera& camera) const;
   SurfelRenderOptions SurfelOptions(const Camera& camera) const;
   int NextView();
+  const ExposureModel& ExposureFor(Branch b) const {
+    return options_.exposure_per_branch && b == Branch::kSurfels2D ? exposure_2d_ : exposure_3d_;
+  }
+  ExposureModel& ExposureFor(Branch b) {
+    return options_.exposure_per_branch && b == Branch::kSurfels2D ? exposure_2d_ : exposure_3d_;
+  }
+  // The render loss against the photo, behind the view's colour transform when compensation is
+  // on (then *wrapped points at the term, to read its parameter gradient after evaluation).
+  std::unique_ptr<LossTerm> PhotoLoss(int view, Branch branch, ExposureCompensatedLoss** wrapped);
+  void StepExposure(int view, Branch branch, const ExposureCompensatedLoss* wrapped);
+  // Ceres fit of every training view's transform against the current renders.
+  void FitExposures();
   void Notify(Stage stage, int iteration, Branch branch, double loss);
 
   SolverOptions options_;
@@ -102,6 +118,7 @@ class MutualBoostedSolver {
   SurfelModel surfels_;
   Adam adam_3d_, adam_2d_;
   DensityStats stats_3d_, stats_2d_;
+  ExposureModel exposure_3d_, exposure_2d_;
   GaussianRenderer gaussian_renderer_;
   SurfelRenderer surfel_renderer_;
   Rng rng_;

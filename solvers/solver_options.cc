@@ -56,6 +56,12 @@ Status SolverOptions::Validate() const {
     if (!(w >= 0) || !std::isfinite(w))
       return Status::Error("loss weights must be finite and >= 0");
   }
+  if (!(exposure_lr >= 0) || !std::isfinite(exposure_lr))
+    return Status::Error("--exposure_lr must be finite and >= 0");
+  if (!(exposure_prior >= 0) || !std::isfinite(exposure_prior))
+    return Status::Error("--exposure_prior must be finite and >= 0");
+  if (!(exposure_offset_prior >= 0) || !std::isfinite(exposure_offset_prior))
+    return Status::Error("--exposure_offset_prior must be finite and >= 0");
   if (max_init_points < 1) return Status::Error("--max_init_points must be >= 1");
   return Status::Ok();
 }

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "mgsr/core/status.h"
+#include "mgsr/loss/exposure_compensation.h"
 
 namespace mgsr {
 
@@ -55,6 +56,16 @@ struct SolverOptions {
   int sh_degree = 3, sh_interval = 1000;
   // Backgrounds: 2DGS white, 3DGS black (reference 1.12, OmniObject3D setting).
   bool white_background_2d = true, white_background_3d = false;
+  // Per-view exposure compensation (mgsr/loss/exposure_compensation.h): an affine colour model per
+  // training view in front of every comparison with a photo, learned at its own rate with a weak
+  // prior towards identity, re-fitted with Ceres (Huber) against the warmed-up render when the
+  // mutual stage starts. Shared by both branches unless exposure_per_branch.
+  ExposureMode exposure = ExposureMode::kOff;
+  double exposure_lr = 5e-3;
+  double exposure_prior = 1e-3;         // on A - I
+  double exposure_offset_prior = 1.0;   // on b: exposure is a gain; offsets only where needed
+  bool exposure_per_branch = false;
+  bool exposure_fit_at_mutual = true;
   size_t max_init_points = 100000;
   uint64_t seed = 0;
 

@@ -52,6 +52,16 @@ DEFINE_double(lambda_normal, 0.05, "Weight of the normal consistency and normal 
 DEFINE_double(
     mutual_transmitted_weight, 0.2,
     "2DGS mutual loss: weight of the render loss against the 3DGS transmitted image (lambda_6).");
+DEFINE_string(exposure, "off",
+              "Per-view exposure compensation: off | diag (gain + offset per channel) | affine "
+              "(3x3 colour matrix + offsets).");
+DEFINE_double(exposure_lr, 5e-3, "Learning rate of the per-view colour transforms.");
+DEFINE_double(exposure_prior, 1e-3, "Weight of the prior pulling each colour matrix to identity.");
+DEFINE_double(exposure_offset_prior, 1.0, "Weight of the prior pulling each offset to zero.");
+DEFINE_bool(exposure_per_branch, false,
+            "Separate colour transforms for the 2DGS and 3DGS branches (default: shared).");
+DEFINE_bool(exposure_fit, true,
+            "Re-fit every view's transform with Ceres (Huber) when the mutual stage starts.");
 DEFINE_int32(auto_stop_window, -1, "Auto-stop window in iterations (-1: preset).");
 DEFINE_double(auto_stop_range, 0.01,
               "Auto-stop when max - min of the window's losses falls below this.");
@@ -207,6 +217,15 @@ int main(int argc, char** argv) {
   if (FLAGS_auto_stop_window >= 0) options.auto_stop_window = FLAGS_auto_stop_window;
   options.auto_stop_range = FLAGS_auto_stop_range;
   options.seed = FLAGS_seed;
+  {
+    const mgsr::Status e = mgsr::ParseExposureMode(FLAGS_exposure, &options.exposure);
+    if (!e.ok()) return Fail(e.message());
+  }
+  options.exposure_lr = FLAGS_exposure_lr;
+  options.exposure_prior = FLAGS_exposure_prior;
+  options.exposure_offset_prior = FLAGS_exposure_offset_prior;
+  options.exposure_per_branch = FLAGS_exposure_per_branch;
+  options.exposure_fit_at_mutual = FLAGS_exposure_fit;
   if (FLAGS_log_every < 1) return Fail("--log_every must be >= 1");
   if (FLAGS_mesh_depth != "expected" && FLAGS_mesh_depth != "median")
     return Fail("--mesh_depth must be expected or median");
@@ -443,6 +462,21 @@ int main(int argc, char** argv) {
         {"vertices", mesh.vertices.size()},
         {"triangles", mesh.triangles.size()}}}};
   if (!colmap_metrics.is_null()) metrics["colmap"] = colmap_metrics;
+  metrics["exposure"] = {{"mode", mgsr::ExposureModeName(options.exposure)},
+                         {"per_branch", options.exposure_per_branch},
+                         {"fit_seconds", summary.exposure_fit_seconds}};
+  if (options.exposure != mgsr::ExposureMode::kOff) {
+    // The learned transforms of the training views (the 3DGS branch's when per branch).
+    nlohmann::json views = nlohmann::json::array();
+    const mgsr::ExposureModel& ex = solver.exposure(mgsr::Branch::kGaussians3D);
+    for (int v : scene.TrainIndices()) {
+      const mgsr::ColorTransform& p = ex.transform(v);
+      views.push_back({{"name", scene.views[v].name},
+                       {"matrix", std::vector<double>(p.begin(), p.begin() + 9)},
+                       {"offset", std::vector<double>(p.begin() + 9, p.end())}});
+    }
+    metrics["exposure"]["views"] = views;
+  }
   if (depth_views > 0) {
     metrics["test"]["depth_abs_error"] = depth_err / depth_views;
     metrics["test"]["depth_abs_error_over_extent"] = depth_err / depth_views / scene.extent;

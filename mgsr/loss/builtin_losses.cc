@@ -1,6 +1,7 @@
 // The registration lines of the built-in loss terms: one per term.
 #include "mgsr/loss/dssim_loss.h"
 #include "mgsr/loss/edge_aware_tv_loss.h"
+#include "mgsr/loss/exposure_compensation.h"
 #include "mgsr/loss/l1_loss.h"
 #include "mgsr/loss/loss_registry.h"
 #include "mgsr/loss/mutual_depth_loss.h"
@@ -73,6 +74,28 @@ void RegisterBuiltinLosses(LossRegistry* r) {
   r->Register("mutual_depth", [](const nlohmann::json& c, Status*) -> std::unique_ptr<LossTerm> {
     return std::make_unique<MutualDepthLoss>(c.contains("masked") && c["masked"].is_boolean() &&
                                              c["masked"].get<bool>());
+  });
+  // The render loss behind a fixed per-view colour transform ("transform": A row-major, then b);
+  // the solver sets each view's transform itself.
+  r->Register("exposure_render", [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
+    ColorTransform p = IdentityColorTransform();
+    if (c.contains("transform")) {
+      const auto& a = c["transform"];
+      if (!a.is_array() || a.size() != kColorTransformSize) {
+        *s = Status::Error("'transform' must be an array of 12 numbers (A row-major, then b)");
+        return nullptr;
+      }
+      for (int i = 0; i < kColorTransformSize; ++i) {
+        if (!a[i].is_number()) {
+          *s = Status::Error("'transform' must be an array of 12 numbers (A row-major, then b)");
+          return nullptr;
+        }
+        p[i] = a[i].get<double>();
+      }
+    }
+    return std::make_unique<ExposureCompensatedLoss>(
+        std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, Number(c, "lambda", 0.8)),
+        p);
   });
   r->Register("distortion", [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {
     return std::make_unique<DistortionLoss>();

@@ -9,6 +9,7 @@
 #include "mgsr/eval/image_metrics.h"
 #include "mgsr/loss/dssim_loss.h"
 #include "mgsr/loss/edge_aware_tv_loss.h"
+#include "mgsr/loss/exposure_compensation.h"
 #include "mgsr/loss/l1_loss.h"
 #include "mgsr/loss/loss_registry.h"
 #include "mgsr/loss/mutual_depth_loss.h"
@@ -107,6 +108,67 @@ TEST(LossGradientTest, EveryTermMatchesNumericDifferentiation) {
   ExpectGradientMatchesNumeric(MutualDepthLoss(false));
   ExpectGradientMatchesNumeric(MutualDepthLoss(true));
   ExpectGradientMatchesNumeric(DistortionLoss());
+  ExpectGradientMatchesNumeric(ExposureCompensatedLoss(
+      std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, 0.8),
+      {1.3, 0.1, -0.05, 0.02, 0.8, 0.1, -0.1, 0.05, 1.1, 0.03, -0.02, 0.05}));
+}
+
+// The colour transform's own parameters: analytic against central differences, with and without
+// a mask, through the full render loss (L1 + D-SSIM).
+TEST(LossGradientTest, ExposureParametersMatchNumericDifferentiation) {
+  for (bool masked : {true, false}) {
+    SCOPED_TRACE(masked ? "masked" : "unmasked");
+    Fixture f(7);
+    if (!masked) f.targets.mask = nullptr;
+    const ColorTransform p0 = {1.2, 0.1, -0.05, 0.02, 0.85, 0.1, -0.1, 0.05, 1.1, 0.03, -0.02, 0.05};
+    ExposureCompensatedLoss term(
+        std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, 0.8), p0);
+    RenderGradientsD grad;
+    const double scale = 0.6;
+    term.Evaluate(f.in, f.targets, scale, &grad);
+    const ColorTransform analytic = term.parameter_gradient();
+    for (int k = 0; k < kColorTransformSize; ++k) {
+      const double h = 1e-6;
+      ColorTransform p = p0;
+      p[k] += h;
+      term.set_transform(p);
+      const double vp = term.Evaluate(f.in, f.targets, 1.0, nullptr);
+      p[k] -= 2 * h;
+      term.set_transform(p);
+      const double vm = term.Evaluate(f.in, f.targets, 1.0, nullptr);
+      const double numeric = scale * (vp - vm) / (2 * h);
+      EXPECT_NEAR(analytic[k], numeric, 1e-7 + 1e-5 * std::abs(numeric)) << "parameter " << k;
+      EXPECT_GT(std::abs(numeric), 1e-6) << "parameter " << k << " should matter";
+    }
+    term.set_transform(p0);
+  }
+}
+
+TEST(LossValueTest, ExposureTransformUndoesAKnownGainAndLeavesTheBackgroundAlone) {
+  Fixture f(11);
+  // The photo is the render with gains (0.5, 0.7, 1.4) and an offset inside the mask; outside it,
+  // the render as it is. The matching transform gives zero loss, identity does not.
+  const ImageD& color = f.buffers[static_cast<int>(Buffer::kColor)];
+  ImageD photo(color.width(), color.height(), 3);
+  const double gain[3] = {0.5, 0.7, 1.4}, offset[3] = {0.02, -0.01, 0.03};
+  for (int c = 0; c < 3; ++c) {
+    for (size_t i = 0; i < photo.plane_size(); ++i) {
+      const double m = f.mask.plane(0)[i];
+      const double x = color.plane(c)[i];
+      photo.plane(c)[i] = m * (gain[c] * x + offset[c]) + (1 - m) * x;
+    }
+  }
+  f.targets.image = &photo;
+  ExposureCompensatedLoss term(std::make_unique<L1Loss>(Buffer::kColor, TargetKind::kImage));
+  EXPECT_GT(term.Evaluate(f.in, f.targets, 1.0, nullptr), 0.01);
+  term.set_transform({0.5, 0, 0, 0, 0.7, 0, 0, 0, 1.4, 0.02, -0.01, 0.03});
+  EXPECT_LT(term.Evaluate(f.in, f.targets, 1.0, nullptr), 1e-12);
+  ExposureMode mode;
+  EXPECT_TRUE(ParseExposureMode("diag", &mode).ok());
+  EXPECT_EQ(mode, ExposureMode::kDiagonal);
+  EXPECT_FALSE(ParseExposureMode("full", &mode).ok());
+  EXPECT_TRUE(ColorTransformParameterIsFree(ExposureMode::kDiagonal, 4));
+  EXPECT_FALSE(ColorTransformParameterIsFree(ExposureMode::kDiagonal, 1));
 }
 
 TEST(LossGradientTest, EveryRegisteredTermPassesTheHarness) {

@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
+#include <map>
 
 #include "mgsr/core/rng.h"
 #include "mgsr/eval/image_metrics.h"
@@ -10,6 +12,7 @@
 #include "solvers/adam.h"
 #include "solvers/auto_stop.h"
 #include "solvers/density_control.h"
+#include "solvers/exposure_fit.h"
 #include "solvers/mutual_boosted_solver.h"
 #include "test_util.h"
 
@@ -243,7 +246,10 @@ void ExpectSameModels(const MutualBoostedSolver& a, const MutualBoostedSolver& b
 TEST(CheckpointTest, InterruptedAndResumedRunEqualsAnUninterruptedOne) {
   const std::string dir = testing::ScratchDir();
   const Scene scene = TinyScene(dir + "/scene");
+  for (ExposureMode exposure : {ExposureMode::kOff, ExposureMode::kAffine}) {
+  SCOPED_TRACE(ExposureModeName(exposure));
   SolverOptions o = TinyOptions();
+  o.exposure = exposure;
   o.warmup_max_iterations = 60;
   o.mutual_iterations = 16;
   o.schedule_2d = {10, 50, 10, 30, 0.05f};
@@ -270,6 +276,11 @@ TEST(CheckpointTest, InterruptedAndResumedRunEqualsAnUninterruptedOne) {
     ExpectSameModels(full, second);
     EXPECT_EQ(s2.warmup_iterations_2d, s_full.warmup_iterations_2d);
     EXPECT_EQ(s2.mutual_iterations, s_full.mutual_iterations);
+    for (int v : scene.TrainIndices()) {
+      EXPECT_EQ(full.exposure(Branch::kGaussians3D).transform(v),
+                second.exposure(Branch::kGaussians3D).transform(v));
+    }
+  }
   }
 }
 
@@ -289,6 +300,133 @@ TEST(CheckpointTest, BadCheckpointsAreRefused) {
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("not an MGSR checkpoint"), std::string::npos) << s.message();
   EXPECT_TRUE(solver.LoadCheckpoint(dir + "/ok.ckpt").ok());
+}
+
+// The Ceres fit alone: a photo that is the render under a known transform (per-channel gains with
+// or without offsets, or a full colour matrix), with 5% of its foreground replaced by highlights
+// the transform cannot explain.
+TEST(ExposureFitTest, RecoversKnownTransformsDespiteHighlights) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  const View& v = scene.views[1];
+  const Image render = CompositeOnBackground(v, 0.0f);
+  struct Case {
+    ExposureMode mode;
+    ColorTransform truth;
+    double offset_prior;
+  };
+  const Case cases[] = {
+      {ExposureMode::kDiagonal, {0.62, 0, 0, 0, 0.81, 0, 0, 0, 0.93, 0, 0, 0}, 1.0},
+      {ExposureMode::kDiagonal, {0.62, 0, 0, 0, 0.81, 0, 0, 0, 0.93, 0.03, -0.02, 0.01}, 0.0},
+      {ExposureMode::kAffine, {0.62, 0.08, 0, 0, 0.81, -0.06, 0.05, 0, 0.93, 0.03, -0.02, 0.01},
+       0.0},
+  };
+  Rng rng(3);
+  for (const Case& k : cases) {
+    SCOPED_TRACE(std::string(ExposureModeName(k.mode)) + " offset prior " +
+                 std::to_string(k.offset_prior));
+    Image photo;
+    ApplyColorTransform(k.truth, render, &v.mask, &photo);
+    std::vector<uint8_t> outlier(photo.plane_size(), 0);
+    for (size_t i = 0; i < photo.plane_size(); ++i) {
+      if (v.mask.plane(0)[i] > 0.5f && rng.Uniform() < 0.05) {
+        outlier[i] = 1;
+        for (int c = 0; c < 3; ++c) photo.plane(c)[i] = std::min(0.98f, photo.plane(c)[i] + 0.5f);
+      }
+    }
+    ExposureFitOptions fo;
+    fo.mode = k.mode;
+    fo.offset_prior = k.offset_prior;
+    ColorTransform fitted;
+    ExposureFitSummary summary;
+    ASSERT_TRUE(FitColorTransform(render, photo, &v.mask, fo, &fitted, &summary).ok());
+    EXPECT_GT(summary.samples, 100);
+    for (int i : {0, 4, 8}) EXPECT_NEAR(fitted[i] / k.truth[i], 1.0, 0.02) << "gain " << i;
+    // The mapped colours of the inlier pixels (off-diagonal terms of correlated channels are not
+    // individually determined; what they do to the image is).
+    Image mapped;
+    ApplyColorTransform(fitted, render, &v.mask, &mapped);
+    double err = 0;
+    int n = 0;
+    for (size_t i = 0; i < photo.plane_size(); ++i) {
+      if (outlier[i] || v.mask.plane(0)[i] <= 0.5f) continue;
+      for (int c = 0; c < 3; ++c) err += std::abs(mapped.plane(c)[i] - photo.plane(c)[i]);
+      n += 3;
+    }
+    EXPECT_LT(err / n, 0.005);
+    if (k.mode == ExposureMode::kDiagonal) {
+      EXPECT_EQ(fitted[1], 0.0);  // held at identity
+    }
+  }
+  ColorTransform p;
+  EXPECT_FALSE(FitColorTransform(render, Image(3, 3, 3), nullptr, ExposureFitOptions(), &p).ok());
+}
+
+// Relative gain errors: per view and channel the ratio estimate / truth, normalised by its median
+// over the views (the scene's colours and the transforms share one free scale), then |r - 1|.
+std::vector<double> RelativeGainErrors(const std::map<int, std::array<double, 3>>& truth,
+                                       const std::function<double(int, int)>& estimate) {
+  std::vector<double> errors;
+  for (int c = 0; c < 3; ++c) {
+    std::vector<double> ratios;
+    for (const auto& [v, g] : truth) ratios.push_back(estimate(v, c) / g[c]);
+    std::vector<double> sorted = ratios;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const double median = sorted[sorted.size() / 2];
+    for (double r : ratios) errors.push_back(std::abs(r / median - 1));
+  }
+  return errors;
+}
+
+double Median(std::vector<double> v) {
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+// The whole solver on a scene whose training photos differ only by known per-channel gains: the
+// learned transforms move towards the truth. How close they get is bounded by how well the model
+// renders each view: on this 64 px scene after 500 iterations (training views at 23-29 dB), the
+// median view is within about 5% and a view the model renders with floaters (v001) 15-30% off;
+// the Ceres fit itself is exact to 2% against a faithful render (ExposureFitTest).
+TEST(MutualBoostedSolverTest, ExposureCompensationLearnsKnownGains) {
+  const std::string dir = testing::ScratchDir();
+  SynthOptions so = testing::SmallSynthOptions();
+  so.width = so.height = 64;
+  so.varying_light = false;
+  so.num_views = 24;
+  so.specular = 0.0;  // a diffuse object: what differs between photos is the gain alone
+  ASSERT_TRUE(WriteSyntheticScene(so, dir).ok());
+  Scene scene;
+  ASSERT_TRUE(LoadScene(dir, SceneOptions(), &scene).ok());
+  Rng rng(5);
+  std::map<int, std::array<double, 3>> gains;
+  for (int v : scene.TrainIndices()) {
+    std::array<double, 3>& g = gains[v];
+    for (int c = 0; c < 3; ++c) {
+      g[c] = rng.Uniform(0.55, 1.0);  // darker only: nothing clips
+      float* plane = scene.views[v].image.plane(c);
+      for (size_t i = 0; i < scene.views[v].image.plane_size(); ++i) plane[i] *= g[c];
+    }
+  }
+  SolverOptions o = TinyOptions();
+  o.exposure = ExposureMode::kDiagonal;
+  o.warmup_max_iterations = o.warmup_min_iterations = 500;
+  o.mutual_iterations = 60;
+  o.schedule_2d = {20, 300, 20, 1000, 0.05f};
+  o.schedule_3d = {20, 300, 10, 1000, 0.005f};
+  MutualBoostedSolver solver(o, scene);
+  SolveSummary summary;
+  ASSERT_TRUE(solver.Solve(&summary).ok());
+  EXPECT_GT(summary.exposure_fit_seconds, 0.0);
+  const ExposureModel& ex = solver.exposure(Branch::kGaussians3D);
+  const std::vector<double> learned =
+      RelativeGainErrors(gains, [&](int v, int c) { return ex.transform(v)[4 * c]; });
+  const std::vector<double> none = RelativeGainErrors(gains, [](int, int) { return 1.0; });
+  std::printf("exposure: relative gain error median %.1f%% (without compensation %.1f%%), "
+              "max %.1f%%\n",
+              100 * Median(learned), 100 * Median(none),
+              100 * *std::max_element(learned.begin(), learned.end()));
+  EXPECT_LT(Median(learned), 0.5 * Median(none));
+  EXPECT_LT(Median(learned), 0.08);
 }
 
 }  // namespace

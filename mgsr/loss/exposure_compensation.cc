@@ -1,0 +1,142 @@
+#include "mgsr/loss/exposure_compensation.h"
+
+#include "mgsr/loss/loss_util.h"
+
+namespace mgsr {
+
+Status ParseExposureMode(const std::string& name, ExposureMode* mode) {
+  if (name == "off") {
+    *mode = ExposureMode::kOff;
+  } else if (name == "diag") {
+    *mode = ExposureMode::kDiagonal;
+  } else if (name == "affine") {
+    *mode = ExposureMode::kAffine;
+  } else {
+    return Status::Error("--exposure: '" + name + "' is not one of off, diag, affine");
+  }
+  return Status::Ok();
+}
+
+const char* ExposureModeName(ExposureMode mode) {
+  switch (mode) {
+    case ExposureMode::kOff:
+      return "off";
+    case ExposureMode::kDiagonal:
+      return "diag";
+    case ExposureMode::kAffine:
+      return "affine";
+  }
+  return "?";
+}
+
+ColorTransform IdentityColorTransform() { return {1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0}; }
+
+bool ColorTransformParameterIsFree(ExposureMode mode, int index) {
+  switch (mode) {
+    case ExposureMode::kOff:
+      return false;
+    case ExposureMode::kDiagonal:
+      return index == 0 || index == 4 || index == 8 || index >= 9;
+    case ExposureMode::kAffine:
+      return true;
+  }
+  return false;
+}
+
+template <typename T>
+void ApplyColorTransform(const ColorTransform& p, const ImageT<T>& in, const ImageT<T>* mask,
+                         ImageT<T>* out) {
+  if (!out->SameShape(in)) *out = ImageT<T>(in.width(), in.height(), 3);
+  const size_t n = in.plane_size();
+  const T* c[3] = {in.plane(0), in.plane(1), in.plane(2)};
+  const T* m = mask != nullptr ? mask->plane(0) : nullptr;
+  for (int o = 0; o < 3; ++o) {
+    const T a0 = static_cast<T>(p[3 * o]), a1 = static_cast<T>(p[3 * o + 1]),
+            a2 = static_cast<T>(p[3 * o + 2]), b = static_cast<T>(p[9 + o]);
+    T* dst = out->plane(o);
+    for (size_t i = 0; i < n; ++i) {
+      const T mapped = a0 * c[0][i] + a1 * c[1][i] + a2 * c[2][i] + b;
+      dst[i] = m != nullptr ? m[i] * mapped + (T(1) - m[i]) * c[o][i] : mapped;
+    }
+  }
+}
+
+template <typename T>
+void ColorTransformBackward(const ColorTransform& p, const ImageT<T>& in, const ImageT<T>* mask,
+                            const ImageT<T>& d_out, ImageT<T>* d_in, ColorTransform* d_params) {
+  const size_t n = in.plane_size();
+  const T* m = mask != nullptr ? mask->plane(0) : nullptr;
+  ColorTransform dp{};
+  for (int o = 0; o < 3; ++o) {
+    const T* g = d_out.plane(o);
+    // d out_o / d c_k = m A_ok + (1 - m) [o == k];  d out_o / d A_ok = m c_k;  d out_o / d b_o = m.
+    double sums[4] = {0, 0, 0, 0};
+    for (int k = 0; k < 3; ++k) {
+      const T a = static_cast<T>(p[3 * o + k]);
+      const T* c = in.plane(k);
+      T* dc = d_in->plane(k);
+      double s = 0;
+      for (size_t i = 0; i < n; ++i) {
+        const T w = m != nullptr ? m[i] : T(1);
+        const T identity = (o == k) ? (T(1) - w) : T(0);
+        dc[i] += g[i] * (w * a + identity);
+        s += static_cast<double>(g[i] * w * c[i]);
+      }
+      sums[k] = s;
+    }
+    for (size_t i = 0; i < n; ++i) sums[3] += static_cast<double>(m != nullptr ? g[i] * m[i] : g[i]);
+    for (int k = 0; k < 3; ++k) dp[3 * o + k] = sums[k];
+    dp[9 + o] = sums[3];
+  }
+  for (int i = 0; i < kColorTransformSize; ++i) (*d_params)[i] += dp[i];
+}
+
+Status ExposureCompensatedLoss::Check(const RenderBuffers& in, const Targets& t) const {
+  MGSR_RETURN_IF_ERROR(RequireImage(Name(), BufferName(Buffer::kColor), in.Get(Buffer::kColor),
+                                    static_cast<const Image*>(nullptr), 3));
+  if (t.mask != nullptr) {
+    MGSR_RETURN_IF_ERROR(RequireImage(Name(), "mask", t.mask, in.Get(Buffer::kColor), 1));
+  }
+  return inner_->Check(in, t);
+}
+
+template <typename T>
+double ExposureCompensatedLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t,
+                                        double scale, RenderGradientsT<T>* grad) const {
+  const ImageT<T>& color = *in.Get(Buffer::kColor);
+  ImageT<T> mapped;
+  ApplyColorTransform(transform_, color, t.mask, &mapped);
+  RenderBuffersT<T> inner_in = in;
+  inner_in.Set(Buffer::kColor, &mapped);
+  parameter_gradient_ = ColorTransform{};
+  if (grad == nullptr) return inner_->Evaluate(inner_in, t, scale, nullptr);
+
+  RenderGradientsT<T> inner_grad;
+  const double value = inner_->Evaluate(inner_in, t, scale, &inner_grad);
+  for (int b = 0; b < kNumBuffers; ++b) {
+    const ImageT<T>& g = inner_grad.images[b];
+    if (g.empty()) continue;
+    if (static_cast<Buffer>(b) == Buffer::kColor) {
+      ColorTransformBackward(transform_, color, t.mask, g, &grad->Get(Buffer::kColor, color),
+                             &parameter_gradient_);
+    } else {
+      ImageT<T>& dst = grad->Get(static_cast<Buffer>(b), g);
+      for (size_t i = 0; i < g.size(); ++i) dst.data()[i] += g.data()[i];
+    }
+  }
+  return value;
+}
+
+template void ApplyColorTransform<float>(const ColorTransform&, const Image&, const Image*, Image*);
+template void ApplyColorTransform<double>(const ColorTransform&, const ImageD&, const ImageD*,
+                                          ImageD*);
+template void ColorTransformBackward<float>(const ColorTransform&, const Image&, const Image*,
+                                            const Image&, Image*, ColorTransform*);
+template void ColorTransformBackward<double>(const ColorTransform&, const ImageD&, const ImageD*,
+                                             const ImageD&, ImageD*, ColorTransform*);
+template double ExposureCompensatedLoss::Compute<float>(const RenderBuffers&, const Targets&,
+                                                        double, RenderGradients*) const;
+template double ExposureCompensatedLoss::Compute<double>(const RenderBuffersD&, const TargetsD&,
+                                                         double, RenderGradientsD*) const;
+
+}  // namespace mgsr
