@@ -69,10 +69,9 @@ Status FitColorTransform(const Image& render, const Image& photo, const Image* m
     const size_t i = usable[k];
     const float c[3] = {render.plane(0)[i], render.plane(1)[i], render.plane(2)[i]};
     const float y[3] = {photo.plane(0)[i], photo.plane(1)[i], photo.plane(2)[i]};
-    problem.AddResidualBlock(
-        new ceres::AutoDiffCostFunction<PixelResidual, 3, kColorTransformSize>(
-            new PixelResidual(c, y)),
-        &huber, p.data());
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<PixelResidual, 3, kColorTransformSize>(
+                                 new PixelResidual(c, y)),
+                             &huber, p.data());
     ++samples;
   }
   if (options.offset_prior > 0) {

@@ -12,10 +12,10 @@ namespace mgsr {
 
 struct ExposureFitOptions {
   ExposureMode mode = ExposureMode::kDiagonal;
-  double huber_delta = 0.05;     // residuals beyond this (in [0, 1] colour units) count linearly
-  int max_samples = 8000;        // pixels used (an even stride over the foreground)
-  float mask_threshold = 0.5f;   // foreground: mask above this
-  float saturation = 0.99f;      // photo pixels at or above this in any channel are clipped: left out
+  double huber_delta = 0.05;    // residuals beyond this (in [0, 1] colour units) count linearly
+  int max_samples = 8000;       // pixels used (an even stride over the foreground)
+  float mask_threshold = 0.5f;  // foreground: mask above this
+  float saturation = 0.99f;  // photo pixels at or above this in any channel are clipped: left out
   // Offsets cost offset_prior * samples * |b|^2: an exposure change is a gain; a free offset
   // trades against the gain wherever the render is imperfect and biases it.
   double offset_prior = 1.0;

@@ -38,6 +38,11 @@ Adam::LearningRates Rates(const SolverOptions& o, int step, double extent) {
       r = static_cast<float>(o.rotation_lr);
     else if (name == "opacity_logits" || name == "ref_opacity_logits" || name == "beta_logits")
       r = static_cast<float>(o.opacity_lr);
+    if (!o.reflection &&
+        (name == "ref_sh" || name == "ref_opacity_logits" || name == "beta_logits")) {
+      std::fill(rates->begin(), rates->end(), 0.0f);
+      return;
+    }
     if (name == "sh" || name == "ref_sh") {
       // Band 0 (the first 3 columns) at the feature rate, higher bands at 1/20 of it.
       for (int k = 0; k < width; ++k)
@@ -132,6 +137,10 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   }
   InitGaussiansFromPoints(points, colors, options.sh_degree, &gaussians_);
   InitSurfelsFromPoints(points, colors, options.sh_degree, options.seed + 1, &surfels_);
+  if (!options.reflection) {
+    // Plain 3DGS: no reflected layer (sigmoid(-30) ~ 1e-13), and its blocks never learn.
+    std::fill(gaussians_.ref_opacity_logits.begin(), gaussians_.ref_opacity_logits.end(), -30.0f);
+  }
   stats_3d_.Reset(gaussians_.size());
   stats_2d_.Reset(surfels_.size());
   exposure_3d_.Reset(static_cast<int>(scene.views.size()), options.exposure);
@@ -140,7 +149,8 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
 
 std::unique_ptr<LossTerm> MutualBoostedSolver::PhotoLoss(int view, Branch branch,
                                                          ExposureCompensatedLoss** wrapped) {
-  auto render = std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, options_.lambda_l1);
+  auto render =
+      std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, options_.lambda_l1);
   *wrapped = nullptr;
   if (options_.exposure == ExposureMode::kOff) return render;
   auto term = std::make_unique<ExposureCompensatedLoss>(std::move(render),
@@ -308,8 +318,7 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it,
               Branch::kGaussians3D);
   } else {
     t.other_depth = surfel_depth;
-    p.AddTerm(PhotoLoss(view, Branch::kGaussians3D, &exposure_term), o.w_3d,
-              Branch::kGaussians3D);
+    p.AddTerm(PhotoLoss(view, Branch::kGaussians3D, &exposure_term), o.w_3d, Branch::kGaussians3D);
     p.AddTerm(std::make_unique<MutualDepthLoss>(false), o.w_depth, Branch::kGaussians3D);
   }
   RenderBuffers in;
@@ -375,10 +384,13 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
   Timer warmup;
   const double warmup_before = sum.warmup_seconds;
   while (stage_ == Stage::kWarmup) {
-    const bool done_2d = sum.auto_stopped_2d || sum.warmup_iterations_2d >= o.warmup_max_iterations;
-    const bool done_3d = sum.auto_stopped_3d || sum.warmup_iterations_3d >= o.warmup_max_iterations;
+    const bool done_2d =
+        !o.train_2d || sum.auto_stopped_2d || sum.warmup_iterations_2d >= o.warmup_max_iterations;
+    const bool done_3d =
+        !o.train_3d || sum.auto_stopped_3d || sum.warmup_iterations_3d >= o.warmup_max_iterations;
     if (done_2d && done_3d) {
-      if (o.exposure != ExposureMode::kOff && o.exposure_fit_at_mutual) {
+      if (o.exposure != ExposureMode::kOff && o.exposure_fit_at_mutual && o.train_2d &&
+          o.train_3d) {
         Timer fit;
         sh_degree_ = o.sh_degree;
         FitExposures();
@@ -412,7 +424,8 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
   // Mutual stage: the supervising branch's render is a constant target.
   Timer mutual;
   const double mutual_before = sum.mutual_seconds;
-  while (next_iteration_ <= o.mutual_iterations) {
+  const bool both = o.train_2d && o.train_3d;
+  while (both && next_iteration_ <= o.mutual_iterations) {
     const int it = next_iteration_;
     const int view = NextView();
     const bool joint = o.mutual_mode == "joint";

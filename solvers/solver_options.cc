@@ -35,7 +35,25 @@ bool SolverOptions::FromPreset(const std::string& name, SolverOptions* o) {
   return true;
 }
 
+bool SolverOptions::ApplyMethod(const std::string& method, SolverOptions* o) {
+  if (method == "mgsr") return true;
+  if (method == "2dgs") {
+    o->train_3d = false;
+  } else if (method == "3dgs") {
+    o->train_2d = false;
+    o->reflection = false;
+  } else if (method == "3dgs-ref") {
+    o->train_2d = false;
+  } else {
+    return false;
+  }
+  o->warmup_max_iterations += o->mutual_iterations;
+  o->mutual_iterations = 0;
+  return true;
+}
+
 Status SolverOptions::Validate() const {
+  if (!train_2d && !train_3d) return Status::Error("at least one branch must train");
   if (warmup_max_iterations < 1) return Status::Error("--warmup_max_iterations must be >= 1");
   if (warmup_min_iterations < 0 || warmup_min_iterations > warmup_max_iterations) {
     return Status::Error("--warmup_min_iterations must be in [0, --warmup_max_iterations]");

@@ -32,6 +32,10 @@ struct SolverOptions {
   // 3DGS transmitted image for the 2DGS render loss, through the 2DGS depth for the depth loss) and
   // steps with it. The TV guides stay constant.
   bool bidirectional = false;
+  // Which parts train (the harness's methods): a single branch skips the mutual stage; without
+  // reflection the 3DGS branch is plain 3DGS (reflected opacity ~0 and frozen, so C = C_tran).
+  bool train_2d = true, train_3d = true;
+  bool reflection = true;
   // Loss weights (reference 1.3-1.7).
   double lambda_l1 = 0.8;            // render loss: lambda L1 + (1 - lambda) D-SSIM
   double lambda_normal = 0.05;       // normal consistency and normal TV
@@ -62,8 +66,8 @@ struct SolverOptions {
   // mutual stage starts. Shared by both branches unless exposure_per_branch.
   ExposureMode exposure = ExposureMode::kOff;
   double exposure_lr = 5e-3;
-  double exposure_prior = 1e-3;         // on A - I
-  double exposure_offset_prior = 1.0;   // on b: exposure is a gain; offsets only where needed
+  double exposure_prior = 1e-3;        // on A - I
+  double exposure_offset_prior = 1.0;  // on b: exposure is a gain; offsets only where needed
   bool exposure_per_branch = false;
   bool exposure_fit_at_mutual = true;
   size_t max_init_points = 100000;
@@ -71,6 +75,10 @@ struct SolverOptions {
 
   // "paper": the reference counts; "fast": every iteration count scaled to minutes on a laptop CPU.
   static bool FromPreset(const std::string& name, SolverOptions* options);
+  // Sets train_2d / train_3d / reflection for "mgsr", "2dgs" (ablation B), "3dgs" (plain, no
+  // reflection) or "3dgs-ref" (ablation A). A single branch gets the warm-up cap plus the mutual
+  // iterations as its own cap (auto-stop still applies) and no mutual stage.
+  static bool ApplyMethod(const std::string& method, SolverOptions* options);
   Status Validate() const;
 };
 

@@ -18,6 +18,7 @@
 #include "mgsr/io/model_ply.h"
 #include "mgsr/io/ply.h"
 #include "mgsr/io/scene.h"
+#include "mgsr/loss/normal_consistency_loss.h"
 #include "mgsr/mesh/tsdf_fusion.h"
 #include "solvers/mutual_boosted_solver.h"
 #include "tools/colmap_flags.h"
@@ -30,6 +31,9 @@ DEFINE_string(images, "",
 DEFINE_string(masks, "", "With --images: optional folder of foreground masks (<stem>.png).");
 DEFINE_string(output, "", "Output folder (created).");
 DEFINE_string(preset, "fast", "fast | paper: iteration counts and schedules.");
+DEFINE_string(method, "mgsr",
+              "mgsr (both branches) | 2dgs (the 2DGS branch alone) | 3dgs (plain 3DGS alone, no "
+              "reflection) | 3dgs-ref (the 3DGS branch with reflection, alone).");
 DEFINE_int32(downscale, 1, "Divide the input resolution by this factor.");
 DEFINE_int32(max_width, 1600, "Cap the image width after downscaling (0: no cap).");
 DEFINE_int32(test_every, 8,
@@ -169,6 +173,53 @@ class ProgressLog : public mgsr::IterationCallback {
   double loss_2d_ = 0, loss_3d_ = 0;
 };
 
+// What the outputs show: appearance from the 3DGS branch and geometry from the 2DGS branch, or
+// both from the one branch a single-branch method trains.
+struct Appearance {
+  mgsr::Image color, tran, ref, weight;
+  float background = 0;
+};
+struct Geometry {
+  mgsr::Image depth, median_depth, alpha, normal_world;
+};
+
+void RenderAppearance(mgsr::MutualBoostedSolver* solver, const mgsr::SolverOptions& o,
+                      const mgsr::Camera& camera, Appearance* out) {
+  if (o.train_3d) {
+    mgsr::GaussianRender g;
+    solver->RenderGaussians(camera, &g);
+    *out = {std::move(g.color), std::move(g.tran), std::move(g.ref), std::move(g.weight),
+            o.white_background_3d ? 1.0f : 0.0f};
+    return;
+  }
+  mgsr::SurfelRender sr;
+  solver->RenderSurfels(camera, &sr);
+  const int w = sr.color.width(), h = sr.color.height();
+  *out = {sr.color, sr.color, mgsr::Image(w, h, 3), mgsr::Image(w, h, 1),
+          o.white_background_2d ? 1.0f : 0.0f};
+}
+
+void RenderGeometry(mgsr::MutualBoostedSolver* solver, const mgsr::SolverOptions& o,
+                    const mgsr::Camera& camera, Geometry* out) {
+  if (o.train_2d) {
+    mgsr::SurfelRender sr;
+    solver->RenderSurfels(camera, &sr);
+    *out = {std::move(sr.depth), std::move(sr.median_depth), std::move(sr.alpha),
+            std::move(sr.normal_world)};
+    return;
+  }
+  // 3DGS: expected depth (no median), normals from the depth.
+  mgsr::GaussianRender g;
+  solver->RenderGaussians(camera, &g);
+  mgsr::Image normal = mgsr::DepthToNormal(g.depth, camera);
+  for (size_t k = 0; k < g.alpha.size(); ++k) {
+    if (g.alpha.data()[k] < 0.5f) {
+      for (int c = 0; c < 3; ++c) normal.plane(c)[k] = 0;
+    }
+  }
+  *out = {g.depth, g.depth, std::move(g.alpha), std::move(normal)};
+}
+
 mgsr::Image Colorize(const mgsr::Image& one, float lo, float hi) {
   mgsr::Image out(one.width(), one.height(), 1);
   for (size_t i = 0; i < one.size(); ++i)
@@ -203,6 +254,8 @@ int main(int argc, char** argv) {
   if (FLAGS_warmup_max_iterations >= 0) options.warmup_max_iterations = FLAGS_warmup_max_iterations;
   if (FLAGS_warmup_min_iterations >= 0) options.warmup_min_iterations = FLAGS_warmup_min_iterations;
   if (FLAGS_mutual_iterations >= 0) options.mutual_iterations = FLAGS_mutual_iterations;
+  if (!mgsr::SolverOptions::ApplyMethod(FLAGS_method, &options))
+    return Fail("unknown --method '" + FLAGS_method + "' (mgsr, 2dgs, 3dgs or 3dgs-ref)");
   options.auto_stop = FLAGS_auto_stop;
   options.bidirectional = FLAGS_bidirectional;
   options.max_gaussians = FLAGS_max_gaussians;
@@ -325,8 +378,8 @@ int main(int argc, char** argv) {
                                solver.gaussians());
   if (!s.ok()) return Fail(s.message());
 
-  // Test views: PSNR / SSIM of the 3DGS composite against the ground truth on its background, and
-  // the renders a person looks at.
+  // Test views: PSNR / SSIM of the composite (3DGS, or 2DGS for the 2dgs method) against the
+  // ground truth on its background, and the renders a person looks at.
   mgsr::Timer eval_timer;
   double psnr = 0, ssim = 0, psnr_aligned = 0, ssim_aligned = 0, depth_err = 0;
   int depth_views = 0;
@@ -334,11 +387,11 @@ int main(int argc, char** argv) {
   nlohmann::json per_view = nlohmann::json::array();
   for (int i : test) {
     const mgsr::View& v = scene.views[i];
-    mgsr::GaussianRender g;
-    mgsr::SurfelRender sr;
-    solver.RenderGaussians(v.camera, &g);
-    solver.RenderSurfels(v.camera, &sr);
-    const mgsr::Image gt = mgsr::CompositeOnBackground(v, 0.0f);  // the 3DGS black background
+    Appearance g;
+    Geometry sr;
+    RenderAppearance(&solver, options, v.camera, &g);
+    RenderGeometry(&solver, options, v.camera, &sr);
+    const mgsr::Image gt = mgsr::CompositeOnBackground(v, g.background);
     const double p = std::min(100.0, mgsr::Psnr(g.color, gt)), q = mgsr::Ssim(g.color, gt);
     psnr += p;
     ssim += q;
@@ -402,19 +455,26 @@ int main(int argc, char** argv) {
   }
 
   // Mesh: TSDF fusion of the 2DGS expected depth over the training views, foreground and alpha >=
-  // 0.5, coloured by the 3DGS transmitted (reflection-free) render.
+  // 0.5, coloured by the 3DGS transmitted (reflection-free) render (single-branch methods: that
+  // branch's depth and colour).
   mgsr::Timer mesh_timer;
   std::vector<mgsr::DepthFrame> frames;
   for (int i : scene.TrainIndices()) {
     const mgsr::View& v = scene.views[i];
-    mgsr::SurfelRender sr;
-    mgsr::GaussianRender g;
-    solver.RenderSurfels(v.camera, &sr);
-    solver.RenderGaussians(v.camera, &g);
+    Geometry sr;
+    Appearance g;
+    RenderGeometry(&solver, options, v.camera, &sr);
+    RenderAppearance(&solver, options, v.camera, &g);
     mgsr::DepthFrame f;
     f.camera = v.camera;
     f.depth = FLAGS_mesh_depth == "median" ? sr.median_depth : sr.depth;
-    f.color = FLAGS_mesh_color == "surfel" ? sr.color : g.tran;
+    if (FLAGS_mesh_color == "surfel" && options.train_2d) {
+      mgsr::SurfelRender c;
+      solver.RenderSurfels(v.camera, &c);
+      f.color = std::move(c.color);
+    } else {
+      f.color = std::move(g.tran);
+    }
     f.weight = sr.alpha;
     if (!v.mask.empty()) {
       for (size_t k = 0; k < f.weight.size(); ++k)
@@ -432,35 +492,37 @@ int main(int argc, char** argv) {
   if (!s.ok()) std::fprintf(stderr, "warning: no mesh: %s\n", s.message().c_str());
   const double mesh_seconds = mesh_timer.ElapsedSeconds();
 
-  nlohmann::json metrics = {
-      {"scene", FLAGS_workspace},
-      {"preset", FLAGS_preset},
-      {"mutual_mode", options.mutual_mode},
-      {"seconds",
-       {{"load", load_seconds},
-        {"warmup", summary.warmup_seconds},
-        {"mutual", summary.mutual_seconds},
-        {"mesh", mesh_seconds},
-        {"total", total.ElapsedSeconds()}}},
-      {"peak_memory_mb", mgsr::PeakMemoryBytes() / 1048576.0},
-      {"iterations",
-       {{"warmup_2d", summary.warmup_iterations_2d},
-        {"warmup_3d", summary.warmup_iterations_3d},
-        {"auto_stopped_2d", summary.auto_stopped_2d},
-        {"auto_stopped_3d", summary.auto_stopped_3d},
-        {"mutual", summary.mutual_iterations}}},
-      {"counts", {{"gaussians", summary.num_gaussians}, {"surfels", summary.num_surfels}}},
-      {"test",
-       {{"views", test.size()},
-        {"psnr", psnr},
-        {"ssim", ssim},
-        {"psnr_aligned", psnr_aligned},
-        {"ssim_aligned", ssim_aligned},
-        {"per_view", per_view}}},
-      {"mesh",
-       {{"path", s.ok() ? mesh_path : ""},
-        {"vertices", mesh.vertices.size()},
-        {"triangles", mesh.triangles.size()}}}};
+  nlohmann::json metrics = {{"scene", FLAGS_workspace},
+                            {"preset", FLAGS_preset},
+                            {"method", FLAGS_method},
+                            {"mutual_mode", options.mutual_mode},
+                            {"seconds",
+                             {{"load", load_seconds},
+                              {"warmup", summary.warmup_seconds},
+                              {"mutual", summary.mutual_seconds},
+                              {"mesh", mesh_seconds},
+                              {"total", total.ElapsedSeconds()}}},
+                            {"peak_memory_mb", mgsr::PeakMemoryBytes() / 1048576.0},
+                            {"iterations",
+                             {{"warmup_2d", summary.warmup_iterations_2d},
+                              {"warmup_3d", summary.warmup_iterations_3d},
+                              {"auto_stopped_2d", summary.auto_stopped_2d},
+                              {"auto_stopped_3d", summary.auto_stopped_3d},
+                              {"mutual", summary.mutual_iterations}}},
+                            {"counts",
+                             {{"gaussians", options.train_3d ? summary.num_gaussians : 0},
+                              {"surfels", options.train_2d ? summary.num_surfels : 0}}},
+                            {"test",
+                             {{"views", test.size()},
+                              {"psnr", psnr},
+                              {"ssim", ssim},
+                              {"psnr_aligned", psnr_aligned},
+                              {"ssim_aligned", ssim_aligned},
+                              {"per_view", per_view}}},
+                            {"mesh",
+                             {{"path", s.ok() ? mesh_path : ""},
+                              {"vertices", mesh.vertices.size()},
+                              {"triangles", mesh.triangles.size()}}}};
   if (!colmap_metrics.is_null()) metrics["colmap"] = colmap_metrics;
   metrics["exposure"] = {{"mode", mgsr::ExposureModeName(options.exposure)},
                          {"per_branch", options.exposure_per_branch},

@@ -26,6 +26,11 @@ DEFINE_bool(varying_light, true,
 DEFINE_double(exposure_stops, 1.0, "Per-view exposure range +-stops (with --varying_light).");
 DEFINE_int32(num_points, 2000, "Surface points written to points3D.");
 DEFINE_bool(text, false, "Write sparse/0 in COLMAP's text format instead of binary.");
+DEFINE_double(pose_noise_deg, 0,
+              "Noisy poses: rms rotation error (degrees) of the written cameras.");
+DEFINE_double(pose_noise_rel, 0,
+              "Noisy poses: rms camera-centre error, as a fraction of the camera distance.");
+DEFINE_bool(masks, true, "Write masks/ and RGBA photos; false: RGB photos on grey, no masks.");
 DEFINE_bool(constant_light_copy, false, "Also render images_constant/ under one fixed light.");
 
 int main(int argc, char** argv) {
@@ -53,6 +58,9 @@ int main(int argc, char** argv) {
   o.num_points = FLAGS_num_points;
   o.write_text_model = FLAGS_text;
   o.constant_light_copy = FLAGS_constant_light_copy;
+  o.pose_noise_deg = FLAGS_pose_noise_deg;
+  o.pose_noise_rel = FLAGS_pose_noise_rel;
+  o.masks = FLAGS_masks;
   mgsr::Timer timer;
   const mgsr::Status s = mgsr::WriteSyntheticScene(o, FLAGS_output);
   if (!s.ok()) {

@@ -84,7 +84,8 @@ void ColorTransformBackward(const ColorTransform& p, const ImageT<T>& in, const 
       }
       sums[k] = s;
     }
-    for (size_t i = 0; i < n; ++i) sums[3] += static_cast<double>(m != nullptr ? g[i] * m[i] : g[i]);
+    for (size_t i = 0; i < n; ++i)
+      sums[3] += static_cast<double>(m != nullptr ? g[i] * m[i] : g[i]);
     for (int k = 0; k < 3; ++k) dp[3 * o + k] = sums[k];
     dp[9 + o] = sums[3];
   }

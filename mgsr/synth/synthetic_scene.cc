@@ -143,6 +143,10 @@ Status SynthOptions::Validate() const {
   if (!(mirror >= 0 && mirror <= 1)) return Status::Error("--mirror must be in [0, 1]");
   if (!(exposure_stops >= 0 && exposure_stops <= 6))
     return Status::Error("--exposure_stops must be in [0, 6]");
+  if (!(pose_noise_deg >= 0 && pose_noise_deg <= 30))
+    return Status::Error("--pose_noise_deg must be in [0, 30]");
+  if (!(pose_noise_rel >= 0 && pose_noise_rel <= 0.5))
+    return Status::Error("--pose_noise_rel must be in [0, 0.5]");
   return Status::Ok();
 }
 
@@ -233,12 +237,34 @@ void RenderSyntheticView(const RayCaster& caster, const TriangleMesh& mesh, cons
   }
 }
 
+// The camera as the model records it: the true one, or a perturbed copy (pose_noise_*).
+Camera RecordedCamera(const Camera& truth, const SynthOptions& o, Rng* rng) {
+  if (o.pose_noise_deg <= 0 && o.pose_noise_rel <= 0) return truth;
+  auto gaussian3 = [&](double rms) {
+    // Box-Muller per axis, scaled so the vector's rms length is `rms`.
+    Eigen::Vector3d v;
+    for (int k = 0; k < 3; ++k) {
+      const double u1 = std::max(1e-12, rng->Uniform()), u2 = rng->Uniform();
+      v[k] = std::sqrt(-2 * std::log(u1)) * std::cos(2 * kPi * u2) * rms / std::sqrt(3.0);
+    }
+    return v;
+  };
+  const Eigen::Vector3d rot = gaussian3(o.pose_noise_deg * kPi / 180);
+  const Eigen::Vector3d center = truth.Center() + gaussian3(o.pose_noise_rel * o.distance);
+  Camera c = truth;
+  if (rot.norm() > 0)
+    c.R = Eigen::AngleAxisd(rot.norm(), rot.normalized()).toRotationMatrix() * c.R;
+  c.t = -c.R * center;
+  return c;
+}
+
 Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
   SyntheticScene s;
   MGSR_RETURN_IF_ERROR(MakeSyntheticScene(o, &s));
-  for (const char* d : {"images", "masks", "sparse/0", "gt/depth", "gt/normal"}) {
+  for (const char* d : {"images", "sparse/0", "gt/depth", "gt/normal"}) {
     MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, d)));
   }
+  if (o.masks) MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, "masks")));
   if (o.constant_light_copy)
     MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, "images_constant")));
   const RayCaster caster(s.mesh);
@@ -250,8 +276,21 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
     for (size_t k = 0; k < mask.size(); ++k)
       mask.data()[k] = rgba.plane(3)[k] >= 0.5f ? 1.0f : 0.0f;
     const std::string stem = FileStem(s.names[i]);
-    MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "images/" + s.names[i]), rgba));
-    MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "masks/" + stem + ".png"), mask));
+    if (o.masks) {
+      MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "images/" + s.names[i]), rgba));
+      MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "masks/" + stem + ".png"), mask));
+    } else {
+      // A photo without a cut-out: the object over a plain grey background, no alpha.
+      constexpr float kBackground = 0.6f;
+      Image rgb(rgba.width(), rgba.height(), 3);
+      for (int c = 0; c < 3; ++c) {
+        for (size_t k = 0; k < rgb.plane_size(); ++k) {
+          const float a = rgba.plane(3)[k];
+          rgb.plane(c)[k] = a * rgba.plane(c)[k] + (1 - a) * kBackground;
+        }
+      }
+      MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "images/" + s.names[i]), rgb));
+    }
     MGSR_RETURN_IF_ERROR(WritePfm(JoinPath(out, "gt/depth/" + stem + ".pfm"), depth));
     MGSR_RETURN_IF_ERROR(WritePfm(JoinPath(out, "gt/normal/" + stem + ".pfm"), normal));
     if (o.constant_light_copy) {
@@ -271,11 +310,14 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
   cam.height = o.height;
   cam.params = {s.cameras[0].fx, s.cameras[0].fy, s.cameras[0].cx, s.cameras[0].cy};
   model.cameras.push_back(cam);
+  Rng pose_rng(o.seed ^ 0xBADC0DEull);
+  std::vector<Camera> recorded;
+  for (const Camera& c : s.cameras) recorded.push_back(RecordedCamera(c, o, &pose_rng));
   for (size_t i = 0; i < s.cameras.size(); ++i) {
     ColmapImage im;
     im.image_id = static_cast<uint32_t>(i + 1);
-    im.qvec = s.cameras[i].RotationQuaternion();
-    im.tvec = s.cameras[i].t;
+    im.qvec = recorded[i].RotationQuaternion();
+    im.tvec = recorded[i].t;
     im.camera_id = 1;
     im.name = s.names[i];
     model.images.push_back(im);
@@ -359,14 +401,13 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
     const std::string stem = FileStem(s.names[i]);
     if (s.is_test[i]) split += s.names[i] + "\n";
     // COLMAP world-to-camera -> OpenGL camera-to-world (y up, looking down -z).
-    Eigen::Matrix4d c2w = s.cameras[i].WorldToCameraMatrix().inverse();
+    Eigen::Matrix4d c2w = recorded[i].WorldToCameraMatrix().inverse();
     c2w.col(1) *= -1;
     c2w.col(2) *= -1;
     nlohmann::json m = nlohmann::json::array();
     for (int r = 0; r < 4; ++r) m.push_back({c2w(r, 0), c2w(r, 1), c2w(r, 2), c2w(r, 3)});
-    nlohmann::json frame = {{"file_path", "./images/" + stem},
-                            {"mask_path", "./masks/" + stem + ".png"},
-                            {"transform_matrix", m}};
+    nlohmann::json frame = {{"file_path", "./images/" + stem}, {"transform_matrix", m}};
+    if (o.masks) frame["mask_path"] = "./masks/" + stem + ".png";
     (s.is_test[i] ? test : train)["frames"].push_back(frame);
     const ViewLight& l = s.lights[i];
     lights.push_back({{"name", s.names[i]},
@@ -391,6 +432,9 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
                          {"mirror", o.mirror},
                          {"varying_light", o.varying_light},
                          {"exposure_stops", o.exposure_stops},
+                         {"pose_noise_deg", o.pose_noise_deg},
+                         {"pose_noise_rel", o.pose_noise_rel},
+                         {"masks", o.masks},
                          {"views", lights}};
   return WriteStringToFileAtomic(JoinPath(out, "lights.json"), info.dump(2));
 }

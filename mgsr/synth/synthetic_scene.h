@@ -38,6 +38,12 @@ struct SynthOptions {
   int num_points = 2000;          // surface points written to points3D (seen by >= 2 train views)
   bool write_text_model = false;  // sparse/0 as text instead of binary
   bool constant_light_copy = false;  // also render images_constant/ under one fixed light
+  // Noisy poses: the cameras written to the model (COLMAP and json) are turned by about this many
+  // degrees (rms, random axes) and moved by this fraction of the camera distance (rms); the images
+  // are rendered with the true cameras.
+  double pose_noise_deg = 0.0, pose_noise_rel = 0.0;
+  // false: no masks/ and no alpha; RGB photos with the object on a grey background.
+  bool masks = true;
 
   Status Validate() const;
 };
@@ -67,7 +73,8 @@ void RenderSyntheticView(const RayCaster& caster, const TriangleMesh& mesh, cons
                          const ViewLight& light, const SynthOptions& options, Image* rgba,
                          Image* depth, Image* normal);
 
-// Writes the whole scene into `out_dir` (created). Files: images/, masks/, sparse/0/, split.txt,
+// Writes the whole scene into `out_dir` (created). Files: images/, masks/ (unless !masks),
+// sparse/0/, split.txt,
 // transforms_{train,test}.json, points3d.ply, lights.json, gt/mesh.ply, gt/depth/*.pfm,
 // gt/normal/*.pfm and, if asked, images_constant/.
 Status WriteSyntheticScene(const SynthOptions& options, const std::string& out_dir);

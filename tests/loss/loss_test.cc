@@ -120,7 +120,8 @@ TEST(LossGradientTest, ExposureParametersMatchNumericDifferentiation) {
     SCOPED_TRACE(masked ? "masked" : "unmasked");
     Fixture f(7);
     if (!masked) f.targets.mask = nullptr;
-    const ColorTransform p0 = {1.2, 0.1, -0.05, 0.02, 0.85, 0.1, -0.1, 0.05, 1.1, 0.03, -0.02, 0.05};
+    const ColorTransform p0 = {1.2,  0.1,  -0.05, 0.02, 0.85,  0.1,
+                               -0.1, 0.05, 1.1,   0.03, -0.02, 0.05};
     ExposureCompensatedLoss term(
         std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, 0.8), p0);
     RenderGradientsD grad;

@@ -201,6 +201,39 @@ TEST(MutualBoostedSolverTest, AlternateAndJointCallOrder) {
   }
 }
 
+// The harness's methods: one branch alone leaves the other untouched and skips the mutual stage;
+// plain 3DGS keeps its reflected layer at zero.
+TEST(MutualBoostedSolverTest, SingleBranchMethods) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  for (const char* method : {"2dgs", "3dgs", "3dgs-ref"}) {
+    SCOPED_TRACE(method);
+    SolverOptions o = TinyOptions();
+    o.warmup_max_iterations = 40;
+    o.mutual_iterations = 20;
+    ASSERT_TRUE(SolverOptions::ApplyMethod(method, &o));
+    EXPECT_EQ(o.warmup_max_iterations, 60);
+    EXPECT_EQ(o.mutual_iterations, 0);
+    MutualBoostedSolver solver(o, scene);
+    const GaussianModel g0 = solver.gaussians();
+    const SurfelModel s0 = solver.surfels();
+    SolveSummary summary;
+    ASSERT_TRUE(solver.Solve(&summary).ok());
+    EXPECT_EQ(summary.mutual_iterations, 0);
+    EXPECT_EQ(summary.warmup_iterations_2d, o.train_2d ? 60 : 0);
+    EXPECT_EQ(summary.warmup_iterations_3d, o.train_3d ? 60 : 0);
+    EXPECT_EQ(solver.gaussians().means == g0.means, !o.train_3d);
+    EXPECT_EQ(solver.surfels().means == s0.means, !o.train_2d);
+    if (std::string(method) == "3dgs") {
+      for (float l : solver.gaussians().ref_opacity_logits) EXPECT_LT(Sigmoid(l), 1e-6f);
+    }
+    if (std::string(method) == "3dgs-ref") {
+      EXPECT_NE(solver.gaussians().ref_sh, g0.ref_sh);
+    }
+  }
+  SolverOptions o;
+  EXPECT_FALSE(SolverOptions::ApplyMethod("nerf", &o));
+}
+
 TEST(MutualBoostedSolverTest, InvalidOptionsAreRejected) {
   const Scene scene = TinyScene(testing::ScratchDir());
   SolverOptions o = TinyOptions();
@@ -247,40 +280,40 @@ TEST(CheckpointTest, InterruptedAndResumedRunEqualsAnUninterruptedOne) {
   const std::string dir = testing::ScratchDir();
   const Scene scene = TinyScene(dir + "/scene");
   for (ExposureMode exposure : {ExposureMode::kOff, ExposureMode::kAffine}) {
-  SCOPED_TRACE(ExposureModeName(exposure));
-  SolverOptions o = TinyOptions();
-  o.exposure = exposure;
-  o.warmup_max_iterations = 60;
-  o.mutual_iterations = 16;
-  o.schedule_2d = {10, 50, 10, 30, 0.05f};
-  o.schedule_3d = {10, 50, 5, 30, 0.005f};
-  MutualBoostedSolver full(o, scene);
-  SolveSummary s_full;
-  ASSERT_TRUE(full.Solve(&s_full).ok());
-  for (Stage stage : {Stage::kWarmup, Stage::kMutual}) {
-    const int at = stage == Stage::kWarmup ? 37 : 7;
-    MutualBoostedSolver first(o, scene);
-    StopAt stop(&first, stage, at);
-    first.AddCallback(&stop);
-    SolveSummary s1;
-    const Status interrupted = first.Solve(&s1);
-    ASSERT_FALSE(interrupted.ok());
-    EXPECT_EQ(interrupted.message().rfind("interrupted", 0), 0u) << interrupted.message();
-    const std::string ckpt = dir + "/run.ckpt";
-    ASSERT_TRUE(first.SaveCheckpoint(ckpt).ok());
-    // A fresh solver (a new process, in practice) continues from the file.
-    MutualBoostedSolver second(o, scene);
-    ASSERT_TRUE(second.LoadCheckpoint(ckpt).ok());
-    SolveSummary s2;
-    ASSERT_TRUE(second.Solve(&s2).ok());
-    ExpectSameModels(full, second);
-    EXPECT_EQ(s2.warmup_iterations_2d, s_full.warmup_iterations_2d);
-    EXPECT_EQ(s2.mutual_iterations, s_full.mutual_iterations);
-    for (int v : scene.TrainIndices()) {
-      EXPECT_EQ(full.exposure(Branch::kGaussians3D).transform(v),
-                second.exposure(Branch::kGaussians3D).transform(v));
+    SCOPED_TRACE(ExposureModeName(exposure));
+    SolverOptions o = TinyOptions();
+    o.exposure = exposure;
+    o.warmup_max_iterations = 60;
+    o.mutual_iterations = 16;
+    o.schedule_2d = {10, 50, 10, 30, 0.05f};
+    o.schedule_3d = {10, 50, 5, 30, 0.005f};
+    MutualBoostedSolver full(o, scene);
+    SolveSummary s_full;
+    ASSERT_TRUE(full.Solve(&s_full).ok());
+    for (Stage stage : {Stage::kWarmup, Stage::kMutual}) {
+      const int at = stage == Stage::kWarmup ? 37 : 7;
+      MutualBoostedSolver first(o, scene);
+      StopAt stop(&first, stage, at);
+      first.AddCallback(&stop);
+      SolveSummary s1;
+      const Status interrupted = first.Solve(&s1);
+      ASSERT_FALSE(interrupted.ok());
+      EXPECT_EQ(interrupted.message().rfind("interrupted", 0), 0u) << interrupted.message();
+      const std::string ckpt = dir + "/run.ckpt";
+      ASSERT_TRUE(first.SaveCheckpoint(ckpt).ok());
+      // A fresh solver (a new process, in practice) continues from the file.
+      MutualBoostedSolver second(o, scene);
+      ASSERT_TRUE(second.LoadCheckpoint(ckpt).ok());
+      SolveSummary s2;
+      ASSERT_TRUE(second.Solve(&s2).ok());
+      ExpectSameModels(full, second);
+      EXPECT_EQ(s2.warmup_iterations_2d, s_full.warmup_iterations_2d);
+      EXPECT_EQ(s2.mutual_iterations, s_full.mutual_iterations);
+      for (int v : scene.TrainIndices()) {
+        EXPECT_EQ(full.exposure(Branch::kGaussians3D).transform(v),
+                  second.exposure(Branch::kGaussians3D).transform(v));
+      }
     }
-  }
   }
 }
 
@@ -317,7 +350,8 @@ TEST(ExposureFitTest, RecoversKnownTransformsDespiteHighlights) {
   const Case cases[] = {
       {ExposureMode::kDiagonal, {0.62, 0, 0, 0, 0.81, 0, 0, 0, 0.93, 0, 0, 0}, 1.0},
       {ExposureMode::kDiagonal, {0.62, 0, 0, 0, 0.81, 0, 0, 0, 0.93, 0.03, -0.02, 0.01}, 0.0},
-      {ExposureMode::kAffine, {0.62, 0.08, 0, 0, 0.81, -0.06, 0.05, 0, 0.93, 0.03, -0.02, 0.01},
+      {ExposureMode::kAffine,
+       {0.62, 0.08, 0, 0, 0.81, -0.06, 0.05, 0, 0.93, 0.03, -0.02, 0.01},
        0.0},
   };
   Rng rng(3);
@@ -421,10 +455,11 @@ TEST(MutualBoostedSolverTest, ExposureCompensationLearnsKnownGains) {
   const std::vector<double> learned =
       RelativeGainErrors(gains, [&](int v, int c) { return ex.transform(v)[4 * c]; });
   const std::vector<double> none = RelativeGainErrors(gains, [](int, int) { return 1.0; });
-  std::printf("exposure: relative gain error median %.1f%% (without compensation %.1f%%), "
-              "max %.1f%%\n",
-              100 * Median(learned), 100 * Median(none),
-              100 * *std::max_element(learned.begin(), learned.end()));
+  std::printf(
+      "exposure: relative gain error median %.1f%% (without compensation %.1f%%), "
+      "max %.1f%%\n",
+      100 * Median(learned), 100 * Median(none),
+      100 * *std::max_element(learned.begin(), learned.end()));
   EXPECT_LT(Median(learned), 0.5 * Median(none));
   EXPECT_LT(Median(learned), 0.08);
 }

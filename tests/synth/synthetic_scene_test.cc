@@ -222,6 +222,48 @@ TEST(SyntheticSceneTest, LightVariesPerViewAndConstantCopyDoesNot) {
   EXPECT_GT(hi / lo, 2.0);
 }
 
+// The stress variants of the benchmark suite: noisy recorded poses (images from the true ones) and
+// photos without masks.
+TEST(SyntheticSceneTest, NoisyPosesAndNoMasks) {
+  const std::string dir = testing::ScratchDir();
+  SynthOptions o = testing::SmallSynthOptions();
+  o.num_views = 20;
+  ASSERT_TRUE(WriteSyntheticScene(o, dir + "/clean").ok());
+  o.pose_noise_deg = 1.0;
+  o.pose_noise_rel = 0.01;
+  o.masks = false;
+  ASSERT_TRUE(WriteSyntheticScene(o, dir + "/noisy").ok());
+  Scene clean, noisy;
+  ASSERT_TRUE(LoadScene(dir + "/clean", SceneOptions(), &clean).ok());
+  ASSERT_TRUE(LoadScene(dir + "/noisy", SceneOptions(), &noisy).ok());
+  EXPECT_TRUE(clean.has_masks());
+  EXPECT_FALSE(noisy.has_masks());
+  EXPECT_FALSE(DirectoryExists(dir + "/noisy/masks"));
+  EXPECT_TRUE(noisy.views[0].alpha.empty());
+  double rms_rot = 0, rms_center = 0;
+  for (size_t i = 0; i < clean.views.size(); ++i) {
+    const Camera& t = clean.views[i].camera;
+    const Camera& n = noisy.views[i].camera;
+    const double angle = Eigen::AngleAxisd(n.R * t.R.transpose()).angle() * 180 / M_PI;
+    rms_rot += angle * angle / clean.views.size();
+    rms_center += (n.Center() - t.Center()).squaredNorm() / clean.views.size();
+  }
+  // rms 1 degree and 1% of the 3.5 distance, within sampling spread of 20 draws.
+  EXPECT_NEAR(std::sqrt(rms_rot), 1.0, 0.4);
+  EXPECT_NEAR(std::sqrt(rms_center), 0.035, 0.015);
+  // Same photos apart from the background: the object pixels agree.
+  const View& c0 = clean.views[3];
+  const View& n0 = noisy.views[3];
+  int checked = 0;
+  for (size_t k = 0; k < c0.alpha.size(); ++k) {
+    if (c0.alpha.data()[k] < 1.0f) continue;
+    for (int ch = 0; ch < 3; ++ch)
+      EXPECT_NEAR(c0.image.plane(ch)[k], n0.image.plane(ch)[k], 1.0f / 255);
+    ++checked;
+  }
+  EXPECT_GT(checked, 50);
+}
+
 TEST(SyntheticSceneTest, OptionsAreValidated) {
   SynthOptions o;
   o.shape = "teapot";
