@@ -14,6 +14,8 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   # real COLMAP, for interoperability tests and the photo pipeline
   colmap
+  # charts of the benchmark harness (mgsr_bench)
+  gnuplot-nox
 )
 
 missing=()

@@ -6,6 +6,8 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <chrono>
+#include <csignal>
 #include <cstdlib>
 #include <cstring>
 
@@ -39,7 +41,8 @@ std::string FindProgram(const std::string& program) {
 }
 
 ProgramResult RunProgram(const std::vector<std::string>& argv,
-                         const std::vector<std::string>& extra_env, const std::string& log_path) {
+                         const std::vector<std::string>& extra_env, const std::string& log_path,
+                         double timeout_seconds) {
   ProgramResult result;
   if (argv.empty()) return result;
   // Everything the child needs is prepared before fork(): after it only async-signal-safe calls.
@@ -78,15 +81,33 @@ ProgramResult RunProgram(const std::vector<std::string>& argv,
   }
   close(log_fd);
   int status = 0;
-  while (waitpid(pid, &status, 0) < 0) {
-    if (errno != EINTR) return result;
+  const auto start = std::chrono::steady_clock::now();
+  while (true) {
+    const pid_t done = waitpid(pid, &status, timeout_seconds > 0 ? WNOHANG : 0);
+    if (done == pid) break;
+    if (done < 0) {
+      if (errno == EINTR) continue;
+      return result;
+    }
+    // Still running (WNOHANG): check the clock, then poll again shortly.
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (elapsed > timeout_seconds) {
+      kill(pid, SIGKILL);
+      result.timed_out = true;
+      while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+      }
+      break;
+    }
+    usleep(50 * 1000);
   }
   if (WIFEXITED(status)) {
     result.exit_code = WEXITSTATUS(status);
     result.started = result.exit_code != 127;
   } else if (WIFSIGNALED(status)) {
     result.started = true;
-    result.exit_code = 128 + WTERMSIG(status);
+    result.signal = WTERMSIG(status);
+    result.exit_code = 128 + result.signal;
   }
   return result;
 }

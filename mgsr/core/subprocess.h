@@ -14,11 +14,15 @@ std::string FindProgram(const std::string& program);
 struct ProgramResult {
   bool started = false;  // false: the program could not be executed
   int exit_code = -1;    // exit status; 128 + signal number when killed by a signal
+  int signal = 0;        // the signal that ended it, 0 when it exited
+  bool timed_out = false;
 };
 
 // Runs argv[0] (a path, as FindProgram gives) with the given arguments and extra environment
 // entries ("NAME=value"), appending its stdout and stderr to `log_path`, and waits for it.
+// With timeout_seconds > 0 the program is killed (SIGKILL) when it runs longer.
 ProgramResult RunProgram(const std::vector<std::string>& argv,
-                         const std::vector<std::string>& extra_env, const std::string& log_path);
+                         const std::vector<std::string>& extra_env, const std::string& log_path,
+                         double timeout_seconds = 0);
 
 }  // namespace mgsr

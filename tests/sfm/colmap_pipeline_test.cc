@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <csignal>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -209,6 +210,9 @@ TEST(Subprocess, FindsProgramsAndReportsExitStatus) {
   ASSERT_TRUE(ReadFileToString(log, &text).ok());
   EXPECT_EQ(text, "hello there\n");
   EXPECT_FALSE(RunProgram({"/nonexistent/program"}, {}, log).started);
+  const ProgramResult slow = RunProgram({FindProgram("sleep"), "5"}, {}, log, 0.3);
+  EXPECT_TRUE(slow.timed_out);
+  EXPECT_EQ(slow.signal, SIGKILL);
 }
 
 // The real colmap on a rendered scene: SIFT on the photos alone must give back the true poses.

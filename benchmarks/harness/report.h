@@ -1,0 +1,52 @@
+// The harness's report: what each run measured (read from its metrics.json), whether it failed and
+// why, and the files a person reads: CSV, markdown tables, the stability matrix, charts (gnuplot)
+// and contact sheets.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "benchmarks/harness/suite.h"
+#include "mgsr/core/status.h"
+
+namespace mgsr::bench {
+
+struct RunRecord {
+  std::string scene, method;
+  std::string run_dir;  // mgsr_solve's --output
+  bool ok = false;
+  bool measured = false;  // metrics.json was read (also for runs failed on a threshold)
+  std::string failure;  // "", "NaN", "crash (signal 11)", "error: ...", "empty mesh", ...
+  double wall_seconds = 0;
+  // From metrics.json (NaN when absent).
+  double nc, cd, psnr, ssim, psnr_aligned, ssim_aligned;
+  double t_warmup, t_mutual, t_mesh, t_total, peak_mb;
+  double gaussians, surfels;
+  RunRecord();
+};
+
+struct ReportContext {
+  std::string title = "MGSR-CPU benchmark";
+  std::string command;  // how the report was made
+  std::string commit, date, machine;
+  int threads = 0;
+  double nc_threshold = 0.8;  // NC below this is a failed reconstruction
+  std::vector<SceneSpec> scenes;
+  std::vector<MethodSpec> methods;
+  std::string main_scene;
+};
+
+// Classifies a finished run from its exit and metrics.json: fills ok / failure and the numbers.
+void ReadRunResult(int exit_code, int signal, bool timed_out, double timeout_seconds,
+                   const std::string& log_tail, double nc_threshold, RunRecord* record);
+
+// Writes results.csv, README.md (tables, stability matrix, links), charts/*.png (when gnuplot
+// is available; the report says when it is not) and contact/<scene>.png into `dir`.
+Status WriteReport(const std::string& dir, const ReportContext& context,
+                   const std::vector<RunRecord>& runs);
+
+// Pareto front of points (cost x lower is better, quality y higher is better): indices of the
+// points no other point beats in both, sorted by x.
+std::vector<int> ParetoFront(const std::vector<double>& x, const std::vector<double>& y);
+
+}  // namespace mgsr::bench

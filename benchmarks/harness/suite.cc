@@ -1,0 +1,74 @@
+#include "benchmarks/harness/suite.h"
+
+namespace mgsr::bench {
+
+std::vector<SceneSpec> Scenes(bool quick) {
+  std::vector<SceneSpec> all = {
+      {"control", "diffuse object under constant light (nothing to decompose)",
+       {"--shape", "sphere", "--specular", "0", "--varying_light=false"}, 0, false},
+      {"main", "specular highlights under light and exposure that change per view (the main case)",
+       {"--shape", "torus"}, 0, true},
+      {"exposure", "strong exposure swings (+-2.5 stops) on top of changing light",
+       {"--shape", "sphere", "--exposure_stops", "2.5"}, 0, true},
+      {"mirror", "mirror-like reflection of the environment",
+       {"--shape", "rounded_box", "--mirror", "0.6"}, 0, true},
+      {"sparse", "sparse views: 12 training views",
+       {"--shape", "torus", "--test_every", "7"}, 14, true},
+      {"thin", "thin structures and concavities (a rod, dents)", {"--shape", "dented"}, 0, true},
+      {"noisy_poses", "noisy camera poses (0.5 degrees and 0.5% of the distance, rms)",
+       {"--shape", "torus", "--pose_noise_deg", "0.5", "--pose_noise_rel", "0.005"}, 0, true},
+      {"no_masks", "no masks: photos on a grey background, no alpha",
+       {"--shape", "torus", "--masks=false"}, 0, true},
+  };
+  if (!quick) return all;
+  return {all[0], all[1]};
+}
+
+std::vector<MethodSpec> Methods(bool quick) {
+  std::vector<MethodSpec> m = {
+      {"mgsr", "MGSR: both branches, auto-stop warm-up, alternate mutual stage", {}, Coverage::kAll},
+      {"2dgs", "the 2DGS branch alone (ablation B)", {"--method", "2dgs"}, Coverage::kAll},
+      {"3dgs", "plain 3DGS alone, no reflection; mesh from its expected depth",
+       {"--method", "3dgs"}, Coverage::kAll},
+      {"3dgs-ref", "the 3DGS branch with reflection alone (ablation A)", {"--method", "3dgs-ref"},
+       Coverage::kAll},
+  };
+  if (quick) return m;
+  const std::vector<MethodSpec> more = {
+      {"mgsr-exposure", "MGSR with per-view exposure compensation (--exposure diag)",
+       {"--exposure", "diag"}, Coverage::kVaryingLight},
+      {"K-bidirectional", "ablation K: bidirectional back-propagation", {"--bidirectional"},
+       Coverage::kMainScene},
+      {"L-no-autostop", "ablation L: fixed-length warm-up (no auto-stop)", {"--auto_stop=false"},
+       Coverage::kMainScene},
+      {"joint", "both branches every mutual iteration (the authors' code)",
+       {"--mutual_mode", "joint"}, Coverage::kMainScene},
+      {"C-w3d-0.7", "ablation C: w_2D 0.3, w_3D 0.7", {"--w_2d", "0.3", "--w_3d", "0.7"},
+       Coverage::kMainScene},
+      {"D-w2d-0.7", "ablation D: w_2D 0.7, w_3D 0.3", {"--w_2d", "0.7", "--w_3d", "0.3"},
+       Coverage::kMainScene},
+      {"F-wdepth-0.1", "ablation F: w_depth 0.1", {"--w_depth", "0.1"}, Coverage::kMainScene},
+      {"G-mutual-x0.25", "ablation G: a quarter of the mutual iterations",
+       {"--mutual_iterations", "375"}, Coverage::kMainScene},
+      {"H-mutual-x0.5", "ablation H: half the mutual iterations", {"--mutual_iterations", "750"},
+       Coverage::kMainScene},
+      {"J-mutual-x1.5", "ablation J: 1.5 times the mutual iterations",
+       {"--mutual_iterations", "2250"}, Coverage::kMainScene},
+  };
+  m.insert(m.end(), more.begin(), more.end());
+  return m;
+}
+
+bool Covers(const MethodSpec& method, const SceneSpec& scene, const std::string& main_scene) {
+  switch (method.coverage) {
+    case Coverage::kAll:
+      return true;
+    case Coverage::kMainScene:
+      return scene.name == main_scene;
+    case Coverage::kVaryingLight:
+      return scene.varying_light;
+  }
+  return false;
+}
+
+}  // namespace mgsr::bench

@@ -1,0 +1,43 @@
+// The benchmark suite: synthetic scenes that each stress one thing, and the methods and ablations
+// run on them, all as command-line arguments of mgsr_synth and mgsr_solve (one binary each, no
+// copies of the loop).
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace mgsr::bench {
+
+struct SceneSpec {
+  std::string name;
+  std::string stresses;                // one line for the report
+  std::vector<std::string> synth_args;  // mgsr_synth flags (size and views added by the runner)
+  int num_views = 0;                   // 0: the suite's default
+  bool varying_light = true;
+};
+
+// Which scenes a method runs on.
+enum class Coverage { kAll, kMainScene, kVaryingLight };
+
+struct MethodSpec {
+  std::string name;
+  std::string description;
+  std::vector<std::string> solve_args;  // mgsr_solve flags
+  Coverage coverage = Coverage::kAll;
+};
+
+struct SuiteOptions {
+  bool quick = false;
+  int image_size = 96;  // square images
+  int num_views = 40;
+  std::vector<std::string> extra_solve_args;  // appended to every run (e.g. fewer iterations)
+};
+
+// Scenes, in run order. The first "main" scene is the main case (specular, varying light).
+std::vector<SceneSpec> Scenes(bool quick);
+// The four methods of the comparison, then (full suite only) the ablations and the exposure
+// variant, which run on fewer scenes (see Coverage).
+std::vector<MethodSpec> Methods(bool quick);
+bool Covers(const MethodSpec& method, const SceneSpec& scene, const std::string& main_scene);
+
+}  // namespace mgsr::bench

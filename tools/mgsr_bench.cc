@@ -1,0 +1,228 @@
+// mgsr_bench: the benchmark harness. Generates the scene suite with mgsr_synth, runs every method
+// on every scene with mgsr_solve (one run at a time, each in its own process with a time limit),
+// and writes a report folder: results.csv, README.md (tables per scene and averaged, stability
+// matrix), charts/ (gnuplot) and contact/ sheets. Every number comes from the runs it made.
+#include <gflags/gflags.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "benchmarks/harness/report.h"
+#include "benchmarks/harness/suite.h"
+#include "mgsr/core/subprocess.h"
+#include "mgsr/core/timer.h"
+#include "mgsr/io/file_util.h"
+
+DEFINE_string(output, "", "Report folder (created): README.md, results.csv, charts/, contact/.");
+DEFINE_string(work, "", "Folder for the generated scenes/ and runs/ (default: the report folder).");
+DEFINE_bool(quick, false,
+            "The quick subset: 2 scenes (control, main) x the 4 methods, 64 px, 24 views.");
+DEFINE_string(scenes, "", "Comma-separated scene names to run (default: the whole suite).");
+DEFINE_string(methods, "", "Comma-separated method names to run (default: all of the suite).");
+DEFINE_int32(size, 0, "Image width and height (0: 96, or 64 with --quick).");
+DEFINE_int32(views, 0, "Views per scene (0: 40, or 24 with --quick).");
+DEFINE_string(solve_flags, "", "Extra flags for every mgsr_solve run (space-separated).");
+DEFINE_double(timeout, 1200, "Seconds a run may take before it is stopped and counted failed.");
+DEFINE_double(nc_threshold, 0.8, "A mesh with NC below this counts as a failed reconstruction.");
+DEFINE_string(title, "MGSR-CPU benchmark", "Title of the report.");
+
+namespace {
+
+namespace fs = std::filesystem;
+
+std::vector<std::string> Split(const std::string& s, char sep) {
+  std::vector<std::string> out;
+  std::string item;
+  std::istringstream in(s);
+  while (std::getline(in, item, sep)) {
+    if (!item.empty()) out.push_back(item);
+  }
+  return out;
+}
+
+bool Selected(const std::string& list, const std::string& name) {
+  if (list.empty()) return true;
+  for (const std::string& n : Split(list, ',')) {
+    if (n == name) return true;
+  }
+  return false;
+}
+
+std::string ToolDir() {
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? std::string(".") : self.parent_path().string();
+}
+
+// The output of a short command (its first line), "" when it fails.
+std::string FirstLineOf(const std::vector<std::string>& argv, const std::string& scratch) {
+  std::error_code ec;
+  fs::remove(scratch, ec);
+  const mgsr::ProgramResult r = mgsr::RunProgram(argv, {}, scratch);
+  std::string text;
+  if (r.exit_code != 0 || !mgsr::ReadFileToString(scratch, &text).ok()) return "";
+  fs::remove(scratch, ec);
+  return text.substr(0, text.find('\n'));
+}
+
+std::string Commit(const std::string& scratch) {
+  const std::string git = mgsr::FindProgram("git");
+  if (git.empty()) return "unknown";
+  const std::string head =
+      FirstLineOf({git, "-C", MGSR_SOURCE_DIR, "rev-parse", "--short", "HEAD"}, scratch);
+  if (head.empty()) return "unknown";
+  const std::string dirty =
+      FirstLineOf({git, "-C", MGSR_SOURCE_DIR, "status", "--porcelain", "--untracked-files=no"},
+                  scratch);
+  return head + (dirty.empty() ? "" : " (with uncommitted changes)");
+}
+
+std::string Machine() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line, model = "unknown CPU";
+  while (std::getline(in, line)) {
+    if (line.rfind("model name", 0) == 0) {
+      model = line.substr(line.find(':') + 2);
+      break;
+    }
+  }
+  return model + ", " + std::to_string(std::thread::hardware_concurrency()) + " cores";
+}
+
+std::string Now() {
+  const std::time_t t = std::time(nullptr);
+  char buf[64];
+  std::strftime(buf, sizeof(buf), "%Y-%m-%d %H:%M UTC", std::gmtime(&t));
+  return buf;
+}
+
+std::string Tail(const std::string& path, size_t bytes) {
+  std::string text;
+  if (!mgsr::ReadFileToString(path, &text).ok()) return "";
+  return text.size() > bytes ? text.substr(text.size() - bytes) : text;
+}
+
+int Fail(const std::string& message) {
+  std::fprintf(stderr, "error: %s\n", message.c_str());
+  return 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  gflags::SetUsageMessage("mgsr_bench --output DIR [--quick] [--scenes a,b] [--methods x,y]");
+  std::string command = "mgsr_bench";
+  for (int i = 1; i < argc; ++i) command += std::string(" ") + argv[i];
+  gflags::ParseCommandLineFlags(&argc, &argv, true);
+  if (FLAGS_output.empty()) return Fail("--output is required");
+  if (!(FLAGS_timeout > 0)) return Fail("--timeout must be > 0");
+  const std::string tools = ToolDir();
+  const std::string synth = tools + "/mgsr_synth", solve = tools + "/mgsr_solve";
+  if (mgsr::FindProgram(synth).empty() || mgsr::FindProgram(solve).empty())
+    return Fail(tools + ": mgsr_synth and mgsr_solve must be next to mgsr_bench");
+
+  namespace b = mgsr::bench;
+  b::ReportContext context;
+  context.title = FLAGS_title;
+  context.nc_threshold = FLAGS_nc_threshold;
+  context.main_scene = "main";
+  for (const b::SceneSpec& s : b::Scenes(FLAGS_quick)) {
+    if (Selected(FLAGS_scenes, s.name)) context.scenes.push_back(s);
+  }
+  for (const b::MethodSpec& m : b::Methods(FLAGS_quick)) {
+    if (Selected(FLAGS_methods, m.name)) context.methods.push_back(m);
+  }
+  if (context.scenes.empty()) return Fail("--scenes: no scene of the suite is selected");
+  if (context.methods.empty()) return Fail("--methods: no method of the suite is selected");
+  const int size = FLAGS_size > 0 ? FLAGS_size : (FLAGS_quick ? 64 : 96);
+  const int views = FLAGS_views > 0 ? FLAGS_views : (FLAGS_quick ? 24 : 40);
+  const std::vector<std::string> extra = Split(FLAGS_solve_flags, ' ');
+
+  const std::string out = FLAGS_output;
+  const std::string work = FLAGS_work.empty() ? out : FLAGS_work;
+  mgsr::Status s = mgsr::MakeDirectories(out);
+  if (s.ok()) s = mgsr::MakeDirectories(work);
+  if (!s.ok()) return Fail(s.message());
+  context.command = command;
+  const std::string scratch = mgsr::JoinPath(out, ".scratch.txt");
+  context.commit = Commit(scratch);
+  context.date = Now();
+  context.machine = Machine();
+  const char* omp = std::getenv("OMP_NUM_THREADS");
+  context.threads = omp != nullptr && std::atoi(omp) > 0 ? std::atoi(omp)
+                                                         : std::thread::hardware_concurrency();
+
+  int total_runs = 0;
+  for (const b::SceneSpec& sc : context.scenes) {
+    for (const b::MethodSpec& m : context.methods) total_runs += b::Covers(m, sc, "main");
+  }
+  std::printf("mgsr_bench: %zu scenes, %zu methods, %d runs, %d px, %d views\n",
+              context.scenes.size(), context.methods.size(), total_runs, size, views);
+  std::fflush(stdout);
+
+  std::vector<b::RunRecord> runs;
+  std::error_code ec;
+  int done = 0;
+  mgsr::Timer all;
+  for (const b::SceneSpec& sc : context.scenes) {
+    // Scenes are generated afresh: nothing from an earlier run is reused.
+    const std::string scene_dir = mgsr::JoinPath(work, "scenes/" + sc.name);
+    fs::remove_all(scene_dir, ec);
+    std::vector<std::string> args = {synth,      "--output", scene_dir,
+                                     "--width",  std::to_string(size), "--height",
+                                     std::to_string(size), "--num_views",
+                                     std::to_string(sc.num_views > 0 ? sc.num_views : views),
+                                     "--seed",   "7"};
+    args.insert(args.end(), sc.synth_args.begin(), sc.synth_args.end());
+    s = mgsr::MakeDirectories(mgsr::JoinPath(work, "runs/" + sc.name));
+    if (!s.ok()) return Fail(s.message());
+    const std::string synth_log = mgsr::JoinPath(work, "runs/" + sc.name + "/synth.log");
+    fs::remove(synth_log, ec);
+    const mgsr::ProgramResult made = mgsr::RunProgram(args, {}, synth_log);
+    if (made.exit_code != 0) return Fail("mgsr_synth failed for scene " + sc.name + "; see " + synth_log);
+
+    for (const b::MethodSpec& m : context.methods) {
+      if (!b::Covers(m, sc, "main")) continue;
+      b::RunRecord r;
+      r.scene = sc.name;
+      r.method = m.name;
+      r.run_dir = mgsr::JoinPath(work, "runs/" + sc.name + "/" + m.name);
+      fs::remove_all(r.run_dir, ec);
+      const std::string log = r.run_dir + ".log";
+      fs::remove(log, ec);
+      std::vector<std::string> cmd = {solve,         "--workspace", scene_dir,  "--output",
+                                      r.run_dir,     "--preset",    "fast",     "--eval_every",
+                                      "0",           "--log_every", "100000",   "--checkpoint_every",
+                                      "0"};
+      cmd.insert(cmd.end(), m.solve_args.begin(), m.solve_args.end());
+      cmd.insert(cmd.end(), extra.begin(), extra.end());
+      std::printf("[%d/%d] %s / %s ...", ++done, total_runs, sc.name.c_str(), m.name.c_str());
+      std::fflush(stdout);
+      mgsr::Timer timer;
+      const mgsr::ProgramResult pr = mgsr::RunProgram(cmd, {}, log, FLAGS_timeout);
+      r.wall_seconds = timer.ElapsedSeconds();
+      b::ReadRunResult(pr.exit_code, pr.signal, pr.timed_out, FLAGS_timeout, Tail(log, 4000),
+                       FLAGS_nc_threshold, &r);
+      if (r.ok) {
+        std::printf(" ok, %.0f s: NC x100 %.2f, PSNR %.2f (aligned %.2f)\n", r.wall_seconds,
+                    100 * r.nc, r.psnr, r.psnr_aligned);
+      } else {
+        std::printf(" FAILED (%s), %.0f s\n", r.failure.c_str(), r.wall_seconds);
+      }
+      std::fflush(stdout);
+      runs.push_back(std::move(r));
+    }
+  }
+  s = b::WriteReport(out, context, runs);
+  if (!s.ok()) return Fail(s.message());
+  int failed = 0;
+  for (const b::RunRecord& r : runs) failed += !r.ok;
+  std::printf("mgsr_bench: %zu runs (%d failed) in %.0f s; report: %s/README.md\n", runs.size(),
+              failed, all.ElapsedSeconds(), out.c_str());
+  return 0;
+}
