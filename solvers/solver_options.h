@@ -64,7 +64,8 @@ struct SolverOptions {
   // training view in front of every comparison with a photo, learned at its own rate with a weak
   // prior towards identity, re-fitted with Ceres (Huber) against the warmed-up render when the
   // mutual stage starts. Shared by both branches unless exposure_per_branch.
-  ExposureMode exposure = ExposureMode::kOff;
+  // Default affine: measured best on the changing-light scenes (README, exposure compensation).
+  ExposureMode exposure = ExposureMode::kAffine;
   double exposure_lr = 5e-3;
   double exposure_prior = 1e-3;        // on A - I
   double exposure_offset_prior = 1.0;  // on b: exposure is a gain; offsets only where needed

@@ -56,7 +56,7 @@ DEFINE_double(lambda_normal, 0.05, "Weight of the normal consistency and normal 
 DEFINE_double(
     mutual_transmitted_weight, 0.2,
     "2DGS mutual loss: weight of the render loss against the 3DGS transmitted image (lambda_6).");
-DEFINE_string(exposure, "off",
+DEFINE_string(exposure, "affine",
               "Per-view exposure compensation: off | diag (gain + offset per channel) | affine "
               "(3x3 colour matrix + offsets).");
 DEFINE_double(exposure_lr, 5e-3, "Learning rate of the per-view colour transforms.");

@@ -26,7 +26,7 @@ std::vector<SceneSpec> Scenes(bool quick) {
 
 std::vector<MethodSpec> Methods(bool quick) {
   std::vector<MethodSpec> m = {
-      {"mgsr", "MGSR: both branches, auto-stop warm-up, alternate mutual stage", {}, Coverage::kAll},
+      {"mgsr", "MGSR: both branches, auto-stop warm-up, alternate mutual stage, affine exposure compensation", {}, Coverage::kAll},
       {"2dgs", "the 2DGS branch alone (ablation B)", {"--method", "2dgs"}, Coverage::kAll},
       {"3dgs", "plain 3DGS alone, no reflection; mesh from its expected depth",
        {"--method", "3dgs"}, Coverage::kAll},
@@ -35,8 +35,8 @@ std::vector<MethodSpec> Methods(bool quick) {
   };
   if (quick) return m;
   const std::vector<MethodSpec> more = {
-      {"mgsr-exposure", "MGSR with per-view exposure compensation (--exposure diag)",
-       {"--exposure", "diag"}, Coverage::kVaryingLight},
+      {"mgsr-no-exposure", "MGSR without per-view exposure compensation (--exposure off)",
+       {"--exposure", "off"}, Coverage::kVaryingLight},
       {"K-bidirectional", "ablation K: bidirectional back-propagation", {"--bidirectional"},
        Coverage::kMainScene},
       {"L-no-autostop", "ablation L: fixed-length warm-up (no auto-stop)", {"--auto_stop=false"},

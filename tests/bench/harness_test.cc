@@ -62,7 +62,7 @@ TEST(HarnessTest, SuiteCoversTheStressCasesAndMethods) {
   }
   for (const char* m : {"mgsr", "2dgs", "3dgs", "3dgs-ref", "K-bidirectional", "L-no-autostop",
                         "joint", "C-w3d-0.7", "D-w2d-0.7", "F-wdepth-0.1", "G-mutual-x0.25",
-                        "mgsr-exposure"}) {
+                        "mgsr-no-exposure"}) {
     EXPECT_NE(std::find(methods.begin(), methods.end(), m), methods.end()) << m;
   }
   EXPECT_EQ(Scenes(true).size(), 2u);

@@ -132,7 +132,7 @@ TEST_F(CliTest, SolveRejectsBadOptions) {
 TEST_F(CliTest, MissingWorkspaceFlagAndFolder) {
   auto r = testing::RunCommand(kTools + "/mgsr_solve");
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_NE(r.output.find("--workspace is required"), std::string::npos);
+  EXPECT_NE(r.output.find("give either --workspace or --images"), std::string::npos);
   ExpectSolveFails("/nonexistent/scene", "/nonexistent/scene: scene folder does not exist");
 }
 
