@@ -205,8 +205,8 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
   }
   ExposureModel ex3, ex2;
   const int num_views = static_cast<int>(scene_.views.size());
-  if (!ex3.LoadState(e3, num_views, options_.exposure) ||
-      !ex2.LoadState(e2, num_views, options_.exposure)) {
+  if (!ex3.LoadState(e3, num_views, options_.exposure, train_) ||
+      !ex2.LoadState(e2, num_views, options_.exposure, train_)) {
     return Status::Error(path + ": corrupt checkpoint (exposure models)");
   }
   if (!r.AtEnd()) return Status::Error(path + ": trailing bytes (corrupt checkpoint)");

@@ -143,8 +143,8 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   }
   stats_3d_.Reset(gaussians_.size());
   stats_2d_.Reset(surfels_.size());
-  exposure_3d_.Reset(static_cast<int>(scene.views.size()), options.exposure);
-  exposure_2d_.Reset(static_cast<int>(scene.views.size()), options.exposure);
+  exposure_3d_.Reset(static_cast<int>(scene.views.size()), options.exposure, train_);
+  exposure_2d_.Reset(static_cast<int>(scene.views.size()), options.exposure, train_);
 }
 
 std::unique_ptr<LossTerm> MutualBoostedSolver::PhotoLoss(int view, Branch branch,
@@ -163,7 +163,8 @@ void MutualBoostedSolver::StepExposure(int view, Branch branch,
                                        const ExposureCompensatedLoss* wrapped) {
   if (wrapped == nullptr) return;
   ExposureFor(branch).Step(view, wrapped->parameter_gradient(), options_.exposure_lr,
-                           options_.exposure_prior, options_.exposure_offset_prior);
+                           options_.exposure_prior, options_.exposure_offset_prior,
+                           options_.exposure_mean_prior);
 }
 
 void MutualBoostedSolver::FitExposures() {

@@ -78,6 +78,8 @@ Status SolverOptions::Validate() const {
     return Status::Error("--exposure_lr must be finite and >= 0");
   if (!(exposure_prior >= 0) || !std::isfinite(exposure_prior))
     return Status::Error("--exposure_prior must be finite and >= 0");
+  if (!(exposure_mean_prior >= 0) || !std::isfinite(exposure_mean_prior))
+    return Status::Error("--exposure_mean_prior must be finite and >= 0");
   if (!(exposure_offset_prior >= 0) || !std::isfinite(exposure_offset_prior))
     return Status::Error("--exposure_offset_prior must be finite and >= 0");
   if (max_init_points < 1) return Status::Error("--max_init_points must be >= 1");

@@ -69,6 +69,7 @@ struct SolverOptions {
   double exposure_lr = 5e-3;
   double exposure_prior = 1e-3;        // on A - I
   double exposure_offset_prior = 1.0;  // on b: exposure is a gain; offsets only where needed
+  double exposure_mean_prior = 10.0;   // on the mean transform over views: fixes the gauge
   bool exposure_per_branch = false;
   bool exposure_fit_at_mutual = true;
   size_t max_init_points = 100000;

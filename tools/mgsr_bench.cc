@@ -21,11 +21,11 @@
 DEFINE_string(output, "", "Report folder (created): README.md, results.csv, charts/, contact/.");
 DEFINE_string(work, "", "Folder for the generated scenes/ and runs/ (default: the report folder).");
 DEFINE_bool(quick, false,
-            "The quick subset: 2 scenes (control, main) x the 4 methods, 64 px, 24 views.");
+            "The quick subset: 2 scenes (control, main) x the 4 methods, 48 px, 16 views.");
 DEFINE_string(scenes, "", "Comma-separated scene names to run (default: the whole suite).");
 DEFINE_string(methods, "", "Comma-separated method names to run (default: all of the suite).");
-DEFINE_int32(size, 0, "Image width and height (0: 96, or 64 with --quick).");
-DEFINE_int32(views, 0, "Views per scene (0: 40, or 24 with --quick).");
+DEFINE_int32(size, 0, "Image width and height (0: 64, or 48 with --quick).");
+DEFINE_int32(views, 0, "Views per scene (0: 32, or 16 with --quick).");
 DEFINE_string(solve_flags, "", "Extra flags for every mgsr_solve run (space-separated).");
 DEFINE_double(timeout, 1200, "Seconds a run may take before it is stopped and counted failed.");
 DEFINE_double(nc_threshold, 0.8, "A mesh with NC below this counts as a failed reconstruction.");
@@ -76,9 +76,8 @@ std::string Commit(const std::string& scratch) {
   const std::string head =
       FirstLineOf({git, "-C", MGSR_SOURCE_DIR, "rev-parse", "--short", "HEAD"}, scratch);
   if (head.empty()) return "unknown";
-  const std::string dirty =
-      FirstLineOf({git, "-C", MGSR_SOURCE_DIR, "status", "--porcelain", "--untracked-files=no"},
-                  scratch);
+  const std::string dirty = FirstLineOf(
+      {git, "-C", MGSR_SOURCE_DIR, "status", "--porcelain", "--untracked-files=no"}, scratch);
   return head + (dirty.empty() ? "" : " (with uncommitted changes)");
 }
 
@@ -139,8 +138,8 @@ int main(int argc, char** argv) {
   }
   if (context.scenes.empty()) return Fail("--scenes: no scene of the suite is selected");
   if (context.methods.empty()) return Fail("--methods: no method of the suite is selected");
-  const int size = FLAGS_size > 0 ? FLAGS_size : (FLAGS_quick ? 64 : 96);
-  const int views = FLAGS_views > 0 ? FLAGS_views : (FLAGS_quick ? 24 : 40);
+  const int size = FLAGS_size > 0 ? FLAGS_size : (FLAGS_quick ? 48 : 64);
+  const int views = FLAGS_views > 0 ? FLAGS_views : (FLAGS_quick ? 16 : 32);
   const std::vector<std::string> extra = Split(FLAGS_solve_flags, ' ');
 
   const std::string out = FLAGS_output;
@@ -154,8 +153,8 @@ int main(int argc, char** argv) {
   context.date = Now();
   context.machine = Machine();
   const char* omp = std::getenv("OMP_NUM_THREADS");
-  context.threads = omp != nullptr && std::atoi(omp) > 0 ? std::atoi(omp)
-                                                         : std::thread::hardware_concurrency();
+  context.threads =
+      omp != nullptr && std::atoi(omp) > 0 ? std::atoi(omp) : std::thread::hardware_concurrency();
 
   int total_runs = 0;
   for (const b::SceneSpec& sc : context.scenes) {
@@ -173,18 +172,25 @@ int main(int argc, char** argv) {
     // Scenes are generated afresh: nothing from an earlier run is reused.
     const std::string scene_dir = mgsr::JoinPath(work, "scenes/" + sc.name);
     fs::remove_all(scene_dir, ec);
-    std::vector<std::string> args = {synth,      "--output", scene_dir,
-                                     "--width",  std::to_string(size), "--height",
-                                     std::to_string(size), "--num_views",
+    std::vector<std::string> args = {synth,
+                                     "--output",
+                                     scene_dir,
+                                     "--width",
+                                     std::to_string(size),
+                                     "--height",
+                                     std::to_string(size),
+                                     "--num_views",
                                      std::to_string(sc.num_views > 0 ? sc.num_views : views),
-                                     "--seed",   "7"};
+                                     "--seed",
+                                     "7"};
     args.insert(args.end(), sc.synth_args.begin(), sc.synth_args.end());
     s = mgsr::MakeDirectories(mgsr::JoinPath(work, "runs/" + sc.name));
     if (!s.ok()) return Fail(s.message());
     const std::string synth_log = mgsr::JoinPath(work, "runs/" + sc.name + "/synth.log");
     fs::remove(synth_log, ec);
     const mgsr::ProgramResult made = mgsr::RunProgram(args, {}, synth_log);
-    if (made.exit_code != 0) return Fail("mgsr_synth failed for scene " + sc.name + "; see " + synth_log);
+    if (made.exit_code != 0)
+      return Fail("mgsr_synth failed for scene " + sc.name + "; see " + synth_log);
 
     for (const b::MethodSpec& m : context.methods) {
       if (!b::Covers(m, sc, "main")) continue;
@@ -195,9 +201,9 @@ int main(int argc, char** argv) {
       fs::remove_all(r.run_dir, ec);
       const std::string log = r.run_dir + ".log";
       fs::remove(log, ec);
-      std::vector<std::string> cmd = {solve,         "--workspace", scene_dir,  "--output",
-                                      r.run_dir,     "--preset",    "fast",     "--eval_every",
-                                      "0",           "--log_every", "100000",   "--checkpoint_every",
+      std::vector<std::string> cmd = {solve,     "--workspace", scene_dir, "--output",
+                                      r.run_dir, "--preset",    "fast",    "--eval_every",
+                                      "0",       "--log_every", "100000",  "--checkpoint_every",
                                       "0"};
       cmd.insert(cmd.end(), m.solve_args.begin(), m.solve_args.end());
       cmd.insert(cmd.end(), extra.begin(), extra.end());

@@ -62,6 +62,9 @@ DEFINE_string(exposure, "affine",
 DEFINE_double(exposure_lr, 5e-3, "Learning rate of the per-view colour transforms.");
 DEFINE_double(exposure_prior, 1e-3, "Weight of the prior pulling each colour matrix to identity.");
 DEFINE_double(exposure_offset_prior, 1.0, "Weight of the prior pulling each offset to zero.");
+DEFINE_double(exposure_mean_prior, 10.0,
+              "Weight of the prior pulling the mean transform over the views to identity (so "
+              "novel views render at the photos' average exposure).");
 DEFINE_bool(exposure_per_branch, false,
             "Separate colour transforms for the 2DGS and 3DGS branches (default: shared).");
 DEFINE_bool(exposure_fit, true,
@@ -277,6 +280,7 @@ int main(int argc, char** argv) {
   options.exposure_lr = FLAGS_exposure_lr;
   options.exposure_prior = FLAGS_exposure_prior;
   options.exposure_offset_prior = FLAGS_exposure_offset_prior;
+  options.exposure_mean_prior = FLAGS_exposure_mean_prior;
   options.exposure_per_branch = FLAGS_exposure_per_branch;
   options.exposure_fit_at_mutual = FLAGS_exposure_fit;
   if (FLAGS_log_every < 1) return Fail("--log_every must be >= 1");

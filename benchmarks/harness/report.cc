@@ -117,7 +117,8 @@ double TotalSeconds(const RunRecord& r) { return r.t_total; }
 double NcX100(const RunRecord& r) { return 100 * r.nc; }
 double AlignedPsnr(const RunRecord& r) { return r.psnr_aligned; }
 double Primitives(const RunRecord& r) {
-  return (std::isfinite(r.gaussians) ? r.gaussians : 0) + (std::isfinite(r.surfels) ? r.surfels : 0);
+  return (std::isfinite(r.gaussians) ? r.gaussians : 0) +
+         (std::isfinite(r.surfels) ? r.surfels : 0);
 }
 
 // Contact sheet of one scene: a row per method (label, then ground truth, composite, transmitted,
@@ -125,8 +126,8 @@ double Primitives(const RunRecord& r) {
 bool WriteContactSheet(const std::string& path, const std::string& scene,
                        const std::vector<std::string>& methods,
                        const std::vector<RunRecord>& runs) {
-  static const char* kColumns[] = {"gt", "composite", "transmitted", "reflected", "depth2d",
-                                   "normal2d"};
+  static const char* kColumns[] = {"gt",        "composite", "transmitted",
+                                   "reflected", "depth2d",   "normal2d"};
   std::vector<cv::Mat> rows;
   int tile = 0;
   std::string view;
@@ -152,7 +153,8 @@ bool WriteContactSheet(const std::string& path, const std::string& scene,
     std::vector<cv::Mat> tiles;
     for (const char* c : kColumns) {
       cv::Mat im;
-      if (run->measured) im = cv::imread(JoinPath(run->run_dir, "renders/" + view + "_" + c + ".png"));
+      if (run->measured)
+        im = cv::imread(JoinPath(run->run_dir, "renders/" + view + "_" + c + ".png"));
       if (im.empty()) {
         im = cv::Mat(std::max(tile, 64), std::max(tile, 64), CV_8UC3, cv::Scalar(90, 90, 90));
       }
@@ -264,9 +266,8 @@ std::vector<int> ParetoFront(const std::vector<double>& x, const std::vector<dou
   std::vector<int> order(x.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
   // By cost, then by quality (best first); keep a point when it beats every cheaper one.
-  std::sort(order.begin(), order.end(), [&](int a, int b) {
-    return x[a] != x[b] ? x[a] < x[b] : y[a] > y[b];
-  });
+  std::sort(order.begin(), order.end(),
+            [&](int a, int b) { return x[a] != x[b] ? x[a] < x[b] : y[a] > y[b]; });
   std::vector<int> front;
   double best = -std::numeric_limits<double>::infinity();
   for (int i : order) {
@@ -290,9 +291,9 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
   for (const RunRecord& r : runs) {
     csv << r.scene << "," << r.method << "," << (r.ok ? "ok" : "failed") << ","
         << CsvEscape(r.failure);
-    for (double v : {r.nc, r.cd, r.psnr, r.ssim, r.psnr_aligned, r.ssim_aligned, r.t_warmup,
-                     r.t_mutual, r.t_mesh, r.t_total, r.wall_seconds, r.peak_mb, r.gaussians,
-                     r.surfels}) {
+    for (double v :
+         {r.nc, r.cd, r.psnr, r.ssim, r.psnr_aligned, r.ssim_aligned, r.t_warmup, r.t_mutual,
+          r.t_mesh, r.t_total, r.wall_seconds, r.peak_mb, r.gaussians, r.surfels}) {
       csv << "," << (std::isfinite(v) ? Fixed(v, 6) : "");
     }
     csv << "\n";
@@ -307,11 +308,10 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
   bool have_gnuplot =
       WriteChart(charts, "time_vs_nc", "Time against mesh quality (one point per method and scene)",
                  "total time (s)", "NC x100", method_names, runs, TotalSeconds, NcX100);
-  have_gnuplot =
-      WriteChart(charts, "time_vs_psnr", "Time against test PSNR (exposure-aligned)",
-                 "total time (s)", "PSNR aligned (dB)", method_names, runs, TotalSeconds,
-                 AlignedPsnr) &&
-      have_gnuplot;
+  have_gnuplot = WriteChart(charts, "time_vs_psnr", "Time against test PSNR (exposure-aligned)",
+                            "total time (s)", "PSNR aligned (dB)", method_names, runs, TotalSeconds,
+                            AlignedPsnr) &&
+                 have_gnuplot;
   have_gnuplot = WriteChart(charts, "count_vs_psnr", "Model size against test PSNR (aligned)",
                             "primitives (Gaussians + surfels)", "PSNR aligned (dB)", method_names,
                             runs, Primitives, AlignedPsnr) &&
@@ -352,9 +352,9 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
   for (const MethodSpec& m : c.methods) {
     RunRecord mean;
     int n = 0;
-    double* fields[] = {&mean.nc,       &mean.cd,       &mean.psnr,   &mean.ssim,
+    double* fields[] = {&mean.nc,           &mean.cd,           &mean.psnr,     &mean.ssim,
                         &mean.psnr_aligned, &mean.ssim_aligned, &mean.t_warmup, &mean.t_mutual,
-                        &mean.t_mesh,   &mean.t_total,  &mean.peak_mb, &mean.gaussians,
+                        &mean.t_mesh,       &mean.t_total,      &mean.peak_mb,  &mean.gaussians,
                         &mean.surfels};
     for (double* f : fields) *f = 0;
     int failed = 0;
@@ -362,9 +362,9 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
       if (r.method != m.name) continue;
       failed += !r.ok;
       if (!r.measured) continue;
-      const double values[] = {r.nc,       r.cd,       r.psnr,   r.ssim,    r.psnr_aligned,
-                               r.ssim_aligned, r.t_warmup, r.t_mutual, r.t_mesh, r.t_total,
-                               r.peak_mb,  r.gaussians, r.surfels};
+      const double values[] = {r.nc,           r.cd,        r.psnr,     r.ssim,   r.psnr_aligned,
+                               r.ssim_aligned, r.t_warmup,  r.t_mutual, r.t_mesh, r.t_total,
+                               r.peak_mb,      r.gaussians, r.surfels};
       for (int k = 0; k < 13; ++k) *fields[k] += values[k];
       ++n;
     }
@@ -385,7 +385,8 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
     for (const SceneSpec& s : c.scenes) {
       std::string cell = " ";
       for (const RunRecord& r : runs) {
-        if (r.scene == s.name && r.method == m.name) cell = r.ok ? "ok" : "**failed**: " + r.failure;
+        if (r.scene == s.name && r.method == m.name)
+          cell = r.ok ? "ok" : "**failed**: " + r.failure;
       }
       md << " " << cell << " |";
     }

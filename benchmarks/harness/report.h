@@ -16,7 +16,7 @@ struct RunRecord {
   std::string run_dir;  // mgsr_solve's --output
   bool ok = false;
   bool measured = false;  // metrics.json was read (also for runs failed on a threshold)
-  std::string failure;  // "", "NaN", "crash (signal 11)", "error: ...", "empty mesh", ...
+  std::string failure;    // "", "NaN", "crash (signal 11)", "error: ...", "empty mesh", ...
   double wall_seconds = 0;
   // From metrics.json (NaN when absent).
   double nc, cd, psnr, ssim, psnr_aligned, ssim_aligned;

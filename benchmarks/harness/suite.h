@@ -10,9 +10,9 @@ namespace mgsr::bench {
 
 struct SceneSpec {
   std::string name;
-  std::string stresses;                // one line for the report
+  std::string stresses;                 // one line for the report
   std::vector<std::string> synth_args;  // mgsr_synth flags (size and views added by the runner)
-  int num_views = 0;                   // 0: the suite's default
+  int num_views = 0;                    // 0: the suite's default
   bool varying_light = true;
 };
 
@@ -24,13 +24,6 @@ struct MethodSpec {
   std::string description;
   std::vector<std::string> solve_args;  // mgsr_solve flags
   Coverage coverage = Coverage::kAll;
-};
-
-struct SuiteOptions {
-  bool quick = false;
-  int image_size = 96;  // square images
-  int num_views = 40;
-  std::vector<std::string> extra_solve_args;  // appended to every run (e.g. fewer iterations)
 };
 
 // Scenes, in run order. The first "main" scene is the main case (specular, varying light).

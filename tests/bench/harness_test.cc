@@ -56,13 +56,13 @@ TEST(HarnessTest, SuiteCoversTheStressCasesAndMethods) {
   std::vector<std::string> scenes, methods;
   for (const SceneSpec& s : Scenes(false)) scenes.push_back(s.name);
   for (const MethodSpec& m : Methods(false)) methods.push_back(m.name);
-  for (const char* s : {"control", "main", "exposure", "mirror", "sparse", "thin", "noisy_poses",
-                        "no_masks"}) {
+  for (const char* s :
+       {"control", "main", "exposure", "mirror", "sparse", "thin", "noisy_poses", "no_masks"}) {
     EXPECT_NE(std::find(scenes.begin(), scenes.end(), s), scenes.end()) << s;
   }
-  for (const char* m : {"mgsr", "2dgs", "3dgs", "3dgs-ref", "K-bidirectional", "L-no-autostop",
-                        "joint", "C-w3d-0.7", "D-w2d-0.7", "F-wdepth-0.1", "G-mutual-x0.25",
-                        "mgsr-no-exposure"}) {
+  for (const char* m :
+       {"mgsr", "2dgs", "3dgs", "3dgs-ref", "K-bidirectional", "L-no-autostop", "joint",
+        "C-w3d-0.7", "D-w2d-0.7", "F-wdepth-0.1", "G-mutual-x0.25", "mgsr-no-exposure"}) {
     EXPECT_NE(std::find(methods.begin(), methods.end(), m), methods.end()) << m;
   }
   EXPECT_EQ(Scenes(true).size(), 2u);

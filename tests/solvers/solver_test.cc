@@ -335,6 +335,32 @@ TEST(CheckpointTest, BadCheckpointsAreRefused) {
   EXPECT_TRUE(solver.LoadCheckpoint(dir + "/ok.ckpt").ok());
 }
 
+// The mean prior fixes the gauge: a gradient that pushes every view's gain down alike (the scene
+// could absorb it) moves the gains without it and barely with it; one view's own deviation stays.
+TEST(ExposureModelTest, MeanPriorHoldsTheAverageTransformAtIdentity) {
+  for (double mean_prior : {0.0, 10.0}) {
+    ExposureModel ex;
+    ex.Reset(5, ExposureMode::kDiagonal, {0, 1, 2, 3});  // view 4 is a test view
+    ColorTransform g{};
+    for (int step = 0; step < 200; ++step) {
+      for (int v = 0; v < 4; ++v) {
+        g[0] = v == 2 ? 0.5 : 0.1;  // view 2 is darker than the rest
+        ex.Step(v, g, 5e-3, 1e-3, 1.0, mean_prior);
+      }
+    }
+    double mean = 0;
+    for (int v = 0; v < 4; ++v) mean += ex.transform(v)[0] / 4;
+    if (mean_prior == 0) {
+      EXPECT_LT(mean, 0.5);
+    } else {
+      EXPECT_NEAR(mean, 1.0, 0.05);
+      EXPECT_LT(ex.transform(2)[0], ex.transform(0)[0] - 0.1);
+    }
+    EXPECT_EQ(ex.transform(4), IdentityColorTransform());
+    EXPECT_EQ(ex.transform(0)[1], 0.0);  // diagonal mode: off-diagonal held
+  }
+}
+
 // The Ceres fit alone: a photo that is the render under a known transform (per-channel gains with
 // or without offsets, or a full colour matrix), with 5% of its foreground replaced by highlights
 // the transform cannot explain.
