@@ -177,7 +177,8 @@ class ProgressLog : public mgsr::IterationCallback {
 };
 
 // What the outputs show: appearance from the 3DGS branch and geometry from the 2DGS branch, or
-// both from the one branch a single-branch method trains.
+// both from the one branch a single-branch method trains. Each trained branch is rendered once per
+// view; `surfel_color` keeps the 2DGS colour for `--mesh_color surfel`.
 struct Appearance {
   mgsr::Image color, tran, ref, weight;
   float background = 0;
@@ -185,42 +186,44 @@ struct Appearance {
 struct Geometry {
   mgsr::Image depth, median_depth, alpha, normal_world;
 };
+struct ViewRender {
+  Appearance appearance;
+  Geometry geometry;
+  mgsr::Image surfel_color;  // empty unless the 2DGS branch is trained
+};
 
-void RenderAppearance(mgsr::MutualBoostedSolver* solver, const mgsr::SolverOptions& o,
-                      const mgsr::Camera& camera, Appearance* out) {
-  if (o.train_3d) {
-    mgsr::GaussianRender g;
-    solver->RenderGaussians(camera, &g);
-    *out = {std::move(g.color), std::move(g.tran), std::move(g.ref), std::move(g.weight),
-            o.white_background_3d ? 1.0f : 0.0f};
-    return;
-  }
-  mgsr::SurfelRender sr;
-  solver->RenderSurfels(camera, &sr);
-  const int w = sr.color.width(), h = sr.color.height();
-  *out = {sr.color, sr.color, mgsr::Image(w, h, 3), mgsr::Image(w, h, 1),
-          o.white_background_2d ? 1.0f : 0.0f};
-}
-
-void RenderGeometry(mgsr::MutualBoostedSolver* solver, const mgsr::SolverOptions& o,
-                    const mgsr::Camera& camera, Geometry* out) {
+ViewRender RenderView(mgsr::MutualBoostedSolver* solver, const mgsr::SolverOptions& o,
+                      const mgsr::Camera& camera) {
+  ViewRender out;
   if (o.train_2d) {
     mgsr::SurfelRender sr;
     solver->RenderSurfels(camera, &sr);
-    *out = {std::move(sr.depth), std::move(sr.median_depth), std::move(sr.alpha),
-            std::move(sr.normal_world)};
-    return;
-  }
-  // 3DGS: expected depth (no median), normals from the depth.
-  mgsr::GaussianRender g;
-  solver->RenderGaussians(camera, &g);
-  mgsr::Image normal = mgsr::DepthToNormal(g.depth, camera);
-  for (size_t k = 0; k < g.alpha.size(); ++k) {
-    if (g.alpha.data()[k] < 0.5f) {
-      for (int c = 0; c < 3; ++c) normal.plane(c)[k] = 0;
+    const float bg = o.white_background_2d ? 1.0f : 0.0f;
+    if (!o.train_3d) {
+      const int w = sr.color.width(), h = sr.color.height();
+      out.appearance = {sr.color, sr.color, mgsr::Image(w, h, 3), mgsr::Image(w, h, 1), bg};
     }
+    out.surfel_color = std::move(sr.color);
+    out.geometry = {std::move(sr.depth), std::move(sr.median_depth), std::move(sr.alpha),
+                    std::move(sr.normal_world)};
   }
-  *out = {g.depth, g.depth, std::move(g.alpha), std::move(normal)};
+  if (o.train_3d) {
+    mgsr::GaussianRender g;
+    solver->RenderGaussians(camera, &g);
+    if (!o.train_2d) {
+      // 3DGS geometry: expected depth (no median), normals from the depth where it is opaque.
+      mgsr::Image normal = mgsr::DepthToNormal(g.depth, camera);
+      for (size_t k = 0; k < g.alpha.size(); ++k) {
+        if (g.alpha.data()[k] < 0.5f) {
+          for (int c = 0; c < 3; ++c) normal.plane(c)[k] = 0;
+        }
+      }
+      out.geometry = {g.depth, std::move(g.depth), std::move(g.alpha), std::move(normal)};
+    }
+    out.appearance = {std::move(g.color), std::move(g.tran), std::move(g.ref), std::move(g.weight),
+                      o.white_background_3d ? 1.0f : 0.0f};
+  }
+  return out;
 }
 
 mgsr::Image Colorize(const mgsr::Image& one, float lo, float hi) {
@@ -391,10 +394,9 @@ int main(int argc, char** argv) {
   nlohmann::json per_view = nlohmann::json::array();
   for (int i : test) {
     const mgsr::View& v = scene.views[i];
-    Appearance g;
-    Geometry sr;
-    RenderAppearance(&solver, options, v.camera, &g);
-    RenderGeometry(&solver, options, v.camera, &sr);
+    ViewRender rendered = RenderView(&solver, options, v.camera);
+    const Appearance& g = rendered.appearance;
+    const Geometry& sr = rendered.geometry;
     const mgsr::Image gt = mgsr::CompositeOnBackground(v, g.background);
     const double p = std::min(100.0, mgsr::Psnr(g.color, gt)), q = mgsr::Ssim(g.color, gt);
     psnr += p;
@@ -465,21 +467,17 @@ int main(int argc, char** argv) {
   std::vector<mgsr::DepthFrame> frames;
   for (int i : scene.TrainIndices()) {
     const mgsr::View& v = scene.views[i];
-    Geometry sr;
-    Appearance g;
-    RenderGeometry(&solver, options, v.camera, &sr);
-    RenderAppearance(&solver, options, v.camera, &g);
+    ViewRender rendered = RenderView(&solver, options, v.camera);
+    Geometry& sr = rendered.geometry;
     mgsr::DepthFrame f;
     f.camera = v.camera;
-    f.depth = FLAGS_mesh_depth == "median" ? sr.median_depth : sr.depth;
+    f.depth = std::move(FLAGS_mesh_depth == "median" ? sr.median_depth : sr.depth);
     if (FLAGS_mesh_color == "surfel" && options.train_2d) {
-      mgsr::SurfelRender c;
-      solver.RenderSurfels(v.camera, &c);
-      f.color = std::move(c.color);
+      f.color = std::move(rendered.surfel_color);
     } else {
-      f.color = std::move(g.tran);
+      f.color = std::move(rendered.appearance.tran);
     }
-    f.weight = sr.alpha;
+    f.weight = std::move(sr.alpha);
     if (!v.mask.empty()) {
       for (size_t k = 0; k < f.weight.size(); ++k)
         f.weight.data()[k] *= v.mask.data()[k] >= 0.5f ? 1.0f : 0.0f;
