@@ -146,8 +146,9 @@ TEST(GaussianRendererGradientTest, AllParametersAllOutputsMatchNumericDifferenti
         EXPECT_NEAR(a, n, tol) << outputs[which] << " d/d " << b.name << "[" << k << "]";
         checked += std::abs(n) > 1e-4 * max_abs;
       }
-      if (max_abs > 0)
+      if (max_abs > 0) {
         EXPECT_GT(checked, static_cast<int>(values.size()) / 4) << outputs[which] << " " << b.name;
+      }
       if (which == 0)
         std::printf("[ grad     ] color d/d %-11s %3d of %3zu derivatives checked (not tiny)\n",
                     b.name, checked, values.size());
