@@ -29,6 +29,9 @@ DEFINE_int32(views, 0, "Views per scene (0: 32, or 16 with --quick).");
 DEFINE_string(solve_flags, "", "Extra flags for every mgsr_solve run (space-separated).");
 DEFINE_double(timeout, 1200, "Seconds a run may take before it is stopped and counted failed.");
 DEFINE_double(nc_threshold, 0.8, "A mesh with NC below this counts as a failed reconstruction.");
+DEFINE_bool(report_only, false,
+            "Rebuild README.md, charts and contact sheets from --output's results.csv and "
+            "context.json (and the renders under --work) without running anything.");
 DEFINE_string(title, "MGSR-CPU benchmark", "Title of the report.");
 
 namespace {
@@ -148,6 +151,19 @@ int main(int argc, char** argv) {
   if (s.ok()) s = mgsr::MakeDirectories(work);
   if (!s.ok()) return Fail(s.message());
   context.command = command;
+  if (FLAGS_report_only) {
+    b::ReportContext saved = context;
+    s = b::ReadReportContext(mgsr::JoinPath(out, "context.json"), &saved);
+    std::vector<b::RunRecord> runs;
+    if (s.ok()) s = b::ReadResultsCsv(mgsr::JoinPath(out, "results.csv"), work, &runs);
+    if (!s.ok()) return Fail(s.message());
+    saved.rebuilt = Now();
+    s = b::WriteReport(out, saved, runs);
+    if (!s.ok()) return Fail(s.message());
+    std::printf("mgsr_bench: report rebuilt from %zu runs: %s/README.md\n", runs.size(),
+                out.c_str());
+    return 0;
+  }
   const std::string scratch = mgsr::JoinPath(out, ".scratch.txt");
   context.commit = Commit(scratch);
   context.date = Now();

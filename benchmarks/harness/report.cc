@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -187,6 +188,100 @@ bool WriteContactSheet(const std::string& path, const std::string& scene,
   return cv::imwrite(path, sheet);
 }
 
+
+const RunRecord* FindRun(const std::vector<RunRecord>& runs, const std::string& scene,
+                         const std::string& method) {
+  for (const RunRecord& r : runs) {
+    if (r.scene == scene && r.method == method && r.measured) return &r;
+  }
+  return nullptr;
+}
+
+std::string Signed(double v, int digits) {
+  if (!std::isfinite(v)) return "-";
+  return (v > 0 ? "+" : "") + Fixed(v, digits);
+}
+
+// The main case in one table: MGSR against the single-branch methods, the differences as
+// "MGSR minus method" (NC and PSNR: positive is MGSR better; CD: negative is MGSR better).
+void WriteMainCase(const ReportContext& c, const std::vector<RunRecord>& runs,
+                   std::ostringstream& md) {
+  const RunRecord* mgsr = FindRun(runs, c.main_scene, "mgsr");
+  if (mgsr == nullptr) return;
+  md << "\n## Main case (" << c.main_scene
+     << "): MGSR against the single-branch methods\n\n"
+        "Differences are MGSR minus the method: positive NC and PSNR, negative CD and time favour "
+        "MGSR.\n\n"
+        "| method | NC x100 | MGSR - it | CD x1000 | MGSR - it | PSNR | MGSR - it | PSNR aligned | "
+        "MGSR - it | total s | MGSR - it | status |\n"
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n";
+  for (const char* name : {"mgsr", "2dgs", "3dgs", "3dgs-ref"}) {
+    const RunRecord* r = FindRun(runs, c.main_scene, name);
+    if (r == nullptr) continue;
+    md << "| " << name << " | " << Fixed(100 * r->nc, 2) << " | "
+       << Signed(100 * (mgsr->nc - r->nc), 2) << " | " << Fixed(1000 * r->cd, 2) << " | "
+       << Signed(1000 * (mgsr->cd - r->cd), 2) << " | " << Fixed(r->psnr, 2) << " | "
+       << Signed(mgsr->psnr - r->psnr, 2) << " | " << Fixed(r->psnr_aligned, 2) << " | "
+       << Signed(mgsr->psnr_aligned - r->psnr_aligned, 2) << " | " << Fixed(r->t_total, 0)
+       << " | " << Signed(mgsr->t_total - r->t_total, 0) << " | "
+       << (r->ok ? "ok" : "**failed**: " + r->failure) << " |\n";
+  }
+}
+
+// Exposure compensation on the varying-light scenes: the default (affine) against --exposure off.
+void WriteExposureComparison(const ReportContext& c, const std::vector<RunRecord>& runs,
+                             std::ostringstream& md) {
+  std::ostringstream rows;
+  for (const SceneSpec& s : c.scenes) {
+    const RunRecord* on = FindRun(runs, s.name, "mgsr");
+    const RunRecord* off = FindRun(runs, s.name, "mgsr-no-exposure");
+    if (on == nullptr || off == nullptr) continue;
+    rows << "| " << s.name << " | " << Fixed(100 * off->nc, 2) << " | " << Fixed(100 * on->nc, 2)
+         << " | " << Fixed(1000 * off->cd, 2) << " | " << Fixed(1000 * on->cd, 2) << " | "
+         << Fixed(off->psnr, 2) << " | " << Fixed(on->psnr, 2) << " | "
+         << Fixed(off->psnr_aligned, 2) << " | " << Fixed(on->psnr_aligned, 2) << " | "
+         << Fixed(off->t_total, 0) << " | " << Fixed(on->t_total, 0) << " |\n";
+  }
+  if (rows.str().empty()) return;
+  md << "\n## Exposure compensation on the varying-light scenes\n\n"
+        "`mgsr` (per-view affine colour transform, the default) against `mgsr-no-exposure` "
+        "(`--exposure off`), each pair on the same scene.\n\n"
+        "| scene | NC off | NC on | CD off | CD on | PSNR off | PSNR on | aligned off | "
+        "aligned on | s off | s on |\n"
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n"
+     << rows.str();
+}
+
+// Splits one CSV line (quoted fields with doubled quotes, as CsvEscape writes them).
+std::vector<std::string> SplitCsvLine(const std::string& line) {
+  std::vector<std::string> out(1);
+  bool quoted = false;
+  for (size_t i = 0; i < line.size(); ++i) {
+    const char ch = line[i];
+    if (quoted) {
+      if (ch == '"' && i + 1 < line.size() && line[i + 1] == '"') {
+        out.back() += '"';
+        ++i;
+      } else if (ch == '"') {
+        quoted = false;
+      } else {
+        out.back() += ch;
+      }
+    } else if (ch == '"') {
+      quoted = true;
+    } else if (ch == ',') {
+      out.emplace_back();
+    } else {
+      out.back() += ch;
+    }
+  }
+  return out;
+}
+
+constexpr char kCsvHeader[] =
+    "scene,method,status,failure,nc,cd,psnr,ssim,psnr_aligned,ssim_aligned,warmup_s,mutual_s,"
+    "mesh_s,total_s,wall_s,peak_mb,gaussians,surfels";
+
 }  // namespace
 
 RunRecord::RunRecord()
@@ -262,6 +357,67 @@ void ReadRunResult(int exit_code, int signal, bool timed_out, double timeout_sec
   }
 }
 
+Status ReadResultsCsv(const std::string& path, const std::string& work,
+                      std::vector<RunRecord>* runs) {
+  std::string text;
+  MGSR_RETURN_IF_ERROR(ReadFileToString(path, &text));
+  std::istringstream in(text);
+  std::string line;
+  if (!std::getline(in, line) || line != kCsvHeader)
+    return Status::Error(path + ": not a results.csv of this harness (header differs)");
+  runs->clear();
+  int line_number = 1;
+  while (std::getline(in, line)) {
+    ++line_number;
+    if (line.empty()) continue;
+    const std::vector<std::string> f = SplitCsvLine(line);
+    if (f.size() != 18)
+      return Status::Error(path + ": line " + std::to_string(line_number) + " has " +
+                           std::to_string(f.size()) + " fields, expected 18");
+    RunRecord r;
+    r.scene = f[0];
+    r.method = f[1];
+    r.ok = f[2] == "ok";
+    r.failure = f[3];
+    r.run_dir = JoinPath(work, "runs/" + r.scene + "/" + r.method);
+    double* fields[] = {&r.nc,       &r.cd,           &r.psnr,         &r.ssim,    &r.psnr_aligned,
+                        &r.ssim_aligned, &r.t_warmup, &r.t_mutual,     &r.t_mesh,  &r.t_total,
+                        &r.wall_seconds, &r.peak_mb,  &r.gaussians,    &r.surfels};
+    for (int k = 0; k < 14; ++k) {
+      const std::string& v = f[4 + k];
+      if (v.empty()) continue;
+      char* end = nullptr;
+      *fields[k] = std::strtod(v.c_str(), &end);
+      if (end == v.c_str() || *end != '\0')
+        return Status::Error(path + ": line " + std::to_string(line_number) + ": '" + v +
+                             "' is not a number");
+      if (k != 10) r.measured = true;  // wall time is known for every run
+    }
+    runs->push_back(std::move(r));
+  }
+  return Status::Ok();
+}
+
+Status ReadReportContext(const std::string& path, ReportContext* c) {
+  std::string text;
+  MGSR_RETURN_IF_ERROR(ReadFileToString(path, &text));
+  const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+  if (j.is_discarded() || !j.is_object()) return Status::Error(path + ": not a JSON object");
+  try {
+    c->title = j.at("title").get<std::string>();
+    c->command = j.at("command").get<std::string>();
+    c->commit = j.at("commit").get<std::string>();
+    c->date = j.at("date").get<std::string>();
+    c->machine = j.at("machine").get<std::string>();
+    c->threads = j.at("threads").get<int>();
+    c->nc_threshold = j.at("nc_threshold").get<double>();
+    c->main_scene = j.at("main_scene").get<std::string>();
+  } catch (const nlohmann::json::exception& e) {
+    return Status::Error(path + ": " + e.what());
+  }
+  return Status::Ok();
+}
+
 std::vector<int> ParetoFront(const std::vector<double>& x, const std::vector<double>& y) {
   std::vector<int> order(x.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
@@ -286,8 +442,7 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
 
   // results.csv
   std::ostringstream csv;
-  csv << "scene,method,status,failure,nc,cd,psnr,ssim,psnr_aligned,ssim_aligned,warmup_s,"
-         "mutual_s,mesh_s,total_s,wall_s,peak_mb,gaussians,surfels\n";
+  csv << kCsvHeader << "\n";
   for (const RunRecord& r : runs) {
     csv << r.scene << "," << r.method << "," << (r.ok ? "ok" : "failed") << ","
         << CsvEscape(r.failure);
@@ -299,6 +454,12 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
     csv << "\n";
   }
   MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(JoinPath(dir, "results.csv"), csv.str()));
+  const nlohmann::json context = {{"title", c.title},     {"command", c.command},
+                                  {"commit", c.commit},   {"date", c.date},
+                                  {"machine", c.machine}, {"threads", c.threads},
+                                  {"nc_threshold", c.nc_threshold}, {"main_scene", c.main_scene}};
+  MGSR_RETURN_IF_ERROR(
+      WriteStringToFileAtomic(JoinPath(dir, "context.json"), context.dump(2) + "\n"));
 
   std::vector<std::string> method_names;
   for (const MethodSpec& m : c.methods) method_names.push_back(m.name);
@@ -323,7 +484,11 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
      << "Made by `" << c.command << "` on " << c.date << ", commit `" << c.commit << "`.\n"
      << "Machine: " << c.machine << "; " << c.threads << " threads. Every number here comes from "
      << "this run (each run's `metrics.json` under `runs/` of the work folder); nothing is reused "
-     << "from earlier runs.\n\n"
+     << "from earlier runs.\n\n";
+  if (!c.rebuilt.empty())
+    md << "The tables and charts were rebuilt from this run's results.csv on " << c.rebuilt
+       << " (`mgsr_bench --report_only`); no run was repeated.\n\n";
+  md
      << "NC and CD compare the TSDF mesh with the scene's exact mesh (NC x100, CD x1000, as in "
      << "the paper); PSNR/SSIM are on held-out views, raw and exposure-aligned (an affine colour "
      << "fit per test image on the mask, since test views are lit differently). Times are "
@@ -374,6 +539,9 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
     mean.failure = std::to_string(failed) + " failed";
     md << TableRow(m.name + " (" + std::to_string(n) + ")", mean) << "\n";
   }
+
+  WriteMainCase(c, runs, md);
+  WriteExposureComparison(c, runs, md);
 
   md << "\n## Stability matrix\n\n| method |";
   for (const SceneSpec& s : c.scenes) md << " " << s.name << " |";

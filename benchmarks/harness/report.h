@@ -34,6 +34,7 @@ struct ReportContext {
   std::vector<SceneSpec> scenes;
   std::vector<MethodSpec> methods;
   std::string main_scene;
+  std::string rebuilt;  // when the report was rebuilt from results.csv (--report_only), else ""
 };
 
 // Classifies a finished run from its exit and metrics.json: fills ok / failure and the numbers.
@@ -44,6 +45,16 @@ void ReadRunResult(int exit_code, int signal, bool timed_out, double timeout_sec
 // is available; the report says when it is not) and contact/<scene>.png into `dir`.
 Status WriteReport(const std::string& dir, const ReportContext& context,
                    const std::vector<RunRecord>& runs);
+
+// Reads the runs back from a report's results.csv (as WriteReport wrote it); run_dir is
+// `work`/runs/<scene>/<method>, where mgsr_bench put the run. A run counts as measured when any of
+// its numbers is present.
+Status ReadResultsCsv(const std::string& path, const std::string& work,
+                      std::vector<RunRecord>* runs);
+
+// The report's context (title, command, commit, date, machine, threads, threshold, main scene)
+// as WriteReport stores it in context.json; scenes and methods are left to the caller.
+Status ReadReportContext(const std::string& path, ReportContext* context);
 
 // Pareto front of points (cost x lower is better, quality y higher is better): indices of the
 // points no other point beats in both, sorted by x.

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <sstream>
 
@@ -50,6 +51,96 @@ TEST(HarnessTest, ClassifiesFailures) {
   EXPECT_TRUE(r.ok) << r.failure;
   EXPECT_DOUBLE_EQ(r.t_total, 12.5);
   EXPECT_DOUBLE_EQ(r.gaussians, 100);
+}
+
+// A report written from records reads back to the same records, and its comparison sections
+// state MGSR's differences against the single-branch methods and exposure on against off.
+TEST(HarnessTest, ResultsCsvRoundTripsAndComparisonsAreWritten) {
+  const std::string dir = testing::ScratchDir();
+  ReportContext c;
+  c.command = "mgsr_bench --test";
+  c.commit = "abc1234";
+  c.date = "2026-01-01 00:00 UTC";
+  c.machine = "test CPU, 2 cores";
+  c.threads = 2;
+  c.main_scene = "main";
+  c.scenes = {{"main", "specular, varying light", {}, 0, true}};
+  c.methods = {{"mgsr", "both", {}, Coverage::kAll},
+               {"2dgs", "2DGS alone", {}, Coverage::kAll},
+               {"3dgs", "3DGS alone", {}, Coverage::kAll},
+               {"mgsr-no-exposure", "off", {}, Coverage::kVaryingLight}};
+  auto record = [&](const std::string& method, double nc, double psnr, bool ok) {
+    RunRecord r;
+    r.scene = "main";
+    r.method = method;
+    r.run_dir = JoinPath(dir, "runs/main/" + method);
+    r.ok = ok;
+    r.failure = ok ? "" : "error: a, \"quoted\" failure";
+    r.measured = true;
+    r.nc = nc;
+    r.cd = 0.02;
+    r.psnr = psnr;
+    r.ssim = 0.9;
+    r.psnr_aligned = psnr + 3;
+    r.ssim_aligned = 0.95;
+    r.t_total = 100;
+    r.wall_seconds = 101.5;
+    r.gaussians = 1000;
+    return r;
+  };
+  std::vector<RunRecord> runs = {record("mgsr", 0.95, 24.5, true), record("2dgs", 0.93, 20, true),
+                                 record("3dgs", 0.85, 25.25, false),
+                                 record("mgsr-no-exposure", 0.94, 23, true)};
+  RunRecord crashed;  // no numbers at all
+  crashed.scene = "main";
+  crashed.method = "3dgs-ref";
+  crashed.failure = "crash (signal 11)";
+  crashed.wall_seconds = 3;
+  runs.push_back(crashed);
+  ASSERT_TRUE(WriteReport(dir, c, runs).ok());
+
+  std::vector<RunRecord> back;
+  ASSERT_TRUE(ReadResultsCsv(JoinPath(dir, "results.csv"), dir, &back).ok());
+  ASSERT_EQ(back.size(), runs.size());
+  for (size_t i = 0; i < runs.size(); ++i) {
+    EXPECT_EQ(back[i].method, runs[i].method);
+    EXPECT_EQ(back[i].ok, runs[i].ok);
+    EXPECT_EQ(back[i].failure, runs[i].failure);
+    EXPECT_EQ(back[i].measured, runs[i].measured) << runs[i].method;
+    EXPECT_EQ(back[i].run_dir, JoinPath(dir, "runs/main/" + runs[i].method));
+    EXPECT_DOUBLE_EQ(back[i].wall_seconds, runs[i].wall_seconds);
+    if (runs[i].measured) {
+      EXPECT_DOUBLE_EQ(back[i].nc, runs[i].nc);
+      EXPECT_DOUBLE_EQ(back[i].psnr_aligned, runs[i].psnr_aligned);
+    } else {
+      EXPECT_TRUE(std::isnan(back[i].nc));
+    }
+  }
+  ReportContext saved;
+  ASSERT_TRUE(ReadReportContext(JoinPath(dir, "context.json"), &saved).ok());
+  EXPECT_EQ(saved.commit, "abc1234");
+  EXPECT_EQ(saved.command, c.command);
+  EXPECT_EQ(saved.threads, 2);
+
+  std::string md;
+  ASSERT_TRUE(ReadFileToString(JoinPath(dir, "README.md"), &md).ok());
+  // MGSR minus 2dgs on NC: 95 - 93 = +2.00; minus 3dgs on PSNR: 24.5 - 25.25 = -0.75.
+  EXPECT_NE(md.find("## Main case (main)"), std::string::npos) << md;
+  EXPECT_NE(md.find("| 2dgs | 93.00 | +2.00 |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| 25.25 | -0.75 |"), std::string::npos) << md;
+  EXPECT_NE(md.find("## Exposure compensation on the varying-light scenes"), std::string::npos);
+  EXPECT_NE(md.find("| main | 94.00 | 95.00 |"), std::string::npos) << md;
+
+  // Bad input: a CSV that is not the harness's, and a truncated row.
+  ASSERT_TRUE(WriteStringToFileAtomic(JoinPath(dir, "bad.csv"), "a,b\n").ok());
+  EXPECT_FALSE(ReadResultsCsv(JoinPath(dir, "bad.csv"), dir, &back).ok());
+  std::string csv;
+  ASSERT_TRUE(ReadFileToString(JoinPath(dir, "results.csv"), &csv).ok());
+  ASSERT_TRUE(
+      WriteStringToFileAtomic(JoinPath(dir, "cut.csv"), csv.substr(0, csv.size() - 20)).ok());
+  const Status cut = ReadResultsCsv(JoinPath(dir, "cut.csv"), dir, &back);
+  EXPECT_FALSE(cut.ok());
+  EXPECT_NE(cut.message().find("cut.csv: line 6"), std::string::npos) << cut.message();
 }
 
 TEST(HarnessTest, SuiteCoversTheStressCasesAndMethods) {
@@ -105,6 +196,21 @@ TEST(HarnessTest, QuickRunWritesAReportThatParses) {
   }
   EXPECT_TRUE(FileExists(out + "/contact/main.png"));
   EXPECT_TRUE(FileExists(out + "/runs/main/mgsr/metrics.json"));
+  EXPECT_NE(md.find("## Main case (main)"), std::string::npos);
+
+  // --report_only rebuilds the same tables from results.csv without running anything.
+  const auto rebuilt = testing::RunCommand(std::string(MGSR_TOOLS_DIR) +
+                                           "/mgsr_bench --quick --report_only --output " + out);
+  ASSERT_EQ(rebuilt.exit_code, 0) << rebuilt.output;
+  std::string md2;
+  ASSERT_TRUE(ReadFileToString(out + "/README.md", &md2).ok());
+  EXPECT_NE(md2.find("rebuilt from this run's results.csv"), std::string::npos);
+  const size_t from = md.find("## Results per scene"), to = md.find("## Charts");
+  EXPECT_EQ(md2.substr(md2.find("## Results per scene"), to - from), md.substr(from, to - from));
+  const auto missing = testing::RunCommand(std::string(MGSR_TOOLS_DIR) +
+                                           "/mgsr_bench --report_only --output " + out + "/none");
+  EXPECT_NE(missing.exit_code, 0);
+  EXPECT_NE(missing.output.find("context.json"), std::string::npos) << missing.output;
   if (!FindProgram("gnuplot").empty()) {
     for (const char* chart : {"time_vs_nc", "time_vs_psnr", "count_vs_psnr"})
       EXPECT_TRUE(FileExists(out + "/charts/" + chart + ".png")) << chart;
