@@ -148,10 +148,15 @@ int Fail(const std::string& message) {
 // Progress lines and log.csv rows.
 class ProgressLog : public mgsr::IterationCallback {
  public:
-  ProgressLog(const std::string& csv_path, int every, int expected_total, bool append)
+  // A progress line follows each step of the last branch of a round (the 3DGS branch, or the 2DGS
+  // branch when it trains alone); an untrained branch shows as "-".
+  ProgressLog(const std::string& csv_path, int every, int expected_total, bool append,
+              bool train_2d, bool train_3d)
       : csv_(csv_path, append ? std::ios::app : std::ios::trunc),
         every_(every),
-        expected_(expected_total) {
+        expected_(expected_total),
+        train_2d_(train_2d),
+        train_3d_(train_3d) {
     if (!append) csv_ << "stage,iteration,branch,loss,gaussians,surfels,seconds\n";
   }
   void operator()(const mgsr::IterationInfo& i) override {
@@ -161,18 +166,29 @@ class ProgressLog : public mgsr::IterationCallback {
          << i.num_gaussians << "," << i.num_surfels << "," << i.seconds << "\n";
     (is2d ? loss_2d_ : loss_3d_) = i.loss;
     ++steps_;
-    if (i.iteration % every_ == 0 && !is2d) {
+    if (i.iteration % every_ == 0 && is2d != train_3d_) {
       const double eta = steps_ > 0 ? i.seconds / steps_ * std::max(0, expected_ - steps_) : 0;
-      std::printf(
-          "[%s %5d] loss 2DGS %.4f 3DGS %.4f | surfels %zu Gaussians %zu | %.0f s, ~%.0f s left\n",
-          stage, i.iteration, loss_2d_, loss_3d_, i.num_surfels, i.num_gaussians, i.seconds, eta);
+      const std::string loss_2d = train_2d_ ? Format("%.4f", loss_2d_) : "-";
+      const std::string loss_3d = train_3d_ ? Format("%.4f", loss_3d_) : "-";
+      const std::string surfels = train_2d_ ? std::to_string(i.num_surfels) : "-";
+      const std::string gaussians = train_3d_ ? std::to_string(i.num_gaussians) : "-";
+      std::printf("[%s %5d] loss 2DGS %s 3DGS %s | surfels %s Gaussians %s | %.0f s, ~%.0f s left\n",
+                  stage, i.iteration, loss_2d.c_str(), loss_3d.c_str(), surfels.c_str(),
+                  gaussians.c_str(), i.seconds, eta);
       std::fflush(stdout);
     }
   }
 
  private:
   std::ofstream csv_;
+  static std::string Format(const char* format, double v) {
+    char buffer[32];
+    std::snprintf(buffer, sizeof(buffer), format, v);
+    return buffer;
+  }
+
   int every_, expected_, steps_ = 0;
+  bool train_2d_, train_3d_;
   double loss_2d_ = 0, loss_3d_ = 0;
 };
 
@@ -351,10 +367,11 @@ int main(int argc, char** argv) {
     if (!s.ok()) return Fail(s.message());
     std::printf("resuming from %s\n", ckpt.c_str());
   }
+  const int trained_branches = (options.train_2d ? 1 : 0) + (options.train_3d ? 1 : 0);
   ProgressLog log(mgsr::JoinPath(FLAGS_output, "log.csv"), FLAGS_log_every,
-                  2 * options.warmup_max_iterations +
+                  trained_branches * options.warmup_max_iterations +
                       (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations,
-                  FLAGS_resume);
+                  FLAGS_resume, options.train_2d, options.train_3d);
   solver.AddCallback(&log);
   TestEvaluation evaluation(&solver, scene, FLAGS_eval_every);
   solver.AddCallback(&evaluation);
@@ -378,9 +395,10 @@ int main(int argc, char** argv) {
   g_solver = nullptr;
   std::printf("%s\n", summary.BriefReport().c_str());
 
-  // Models.
-  s = mgsr::WriteSurfelPly(mgsr::JoinPath(FLAGS_output, "point_cloud_2d.ply"), solver.surfels());
-  if (s.ok())
+  // Models: only the branches this method trains (an untrained branch is its initialisation).
+  if (options.train_2d)
+    s = mgsr::WriteSurfelPly(mgsr::JoinPath(FLAGS_output, "point_cloud_2d.ply"), solver.surfels());
+  if (s.ok() && options.train_3d)
     s = mgsr::WriteGaussianPly(mgsr::JoinPath(FLAGS_output, "point_cloud_3d.ply"),
                                solver.gaussians());
   if (!s.ok()) return Fail(s.message());

@@ -89,6 +89,22 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
   EXPECT_NE(bad.output.find("metrics.json: cannot open"), std::string::npos) << bad.output;
 }
 
+TEST_F(CliTest, SingleBranchMethodReportsAndWritesOnlyItsBranch) {
+  const std::string out = Copy() + "/out";
+  const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " +
+                                     out + " --method 2dgs --warmup_max_iterations 30 "
+                                     "--warmup_min_iterations 0 --mutual_iterations 10 "
+                                     "--log_every 20");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  // Progress lines follow the 2DGS steps; the untrained 3DGS branch shows as "-".
+  EXPECT_NE(r.output.find("loss 2DGS 0."), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("3DGS - | surfels"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("Gaussians - |"), std::string::npos) << r.output;
+  EXPECT_TRUE(FileExists(out + "/point_cloud_2d.ply"));
+  EXPECT_FALSE(FileExists(out + "/point_cloud_3d.ply"));
+  EXPECT_TRUE(FileExists(out + "/mesh.ply"));
+}
+
 TEST_F(CliTest, SolveResumesFromItsCheckpointToTheSameResult) {
   const std::string dir = Copy();
   const std::string common = kTools + "/mgsr_solve --workspace " + base_ +
