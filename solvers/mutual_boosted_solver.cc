@@ -431,6 +431,10 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
     const int view = NextView();
     const bool joint = o.mutual_mode == "joint";
     const bool step_2d = joint || it % 2 == 1, step_3d = joint || it % 2 == 0;
+    // The count the branch schedules (density control, opacity reset, learning rates) see. In
+    // alternate mode the 2DGS branch steps on odd counts only, so it takes the count of the round
+    // it opens: events on even counts then reach both branches, in the same round.
+    const int schedule_it = joint ? it : it + it % 2;
     if (step_2d) {
       GaussianRender g;
       RenderGaussians(scene_.views[view].camera, &g);
@@ -447,7 +451,7 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
       // Bidirectional: the 2DGS image the loss compares with C_tran, before the 2DGS step.
       SurfelRender s2;
       if (o.bidirectional) RenderSurfels(scene_.views[view].camera, &s2);
-      sum.final_loss_2d = StepSurfels(view, Stage::kMutual, it, &target);
+      sum.final_loss_2d = StepSurfels(view, Stage::kMutual, schedule_it, &target);
       if (o.bidirectional) {
         // d L_2D / d C_tran: the render loss is symmetric in its two images, so it is the gradient
         // of the same loss with the roles swapped (the 2DGS render as the target). Pixels forced to
@@ -478,7 +482,7 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
       // Bidirectional: the 3DGS depth the loss used, before the 3DGS step.
       GaussianRender g3;
       if (o.bidirectional) RenderGaussians(scene_.views[view].camera, &g3);
-      sum.final_loss_3d = StepGaussians(view, Stage::kMutual, it, &s.depth);
+      sum.final_loss_3d = StepGaussians(view, Stage::kMutual, schedule_it, &s.depth);
       if (o.bidirectional) {
         // d L_Z / d Z2D for L_Z = mean((D / max D - Z / max Z)^2), maxima held constant. The surfel
         // renderer still holds the forward state of `s` (the 3DGS step does not use it).

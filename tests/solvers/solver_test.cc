@@ -201,6 +201,41 @@ TEST(MutualBoostedSolverTest, AlternateAndJointCallOrder) {
   }
 }
 
+// In alternate mode each branch steps every other iteration; density control and opacity resets
+// fall on even counts, and must still reach the branch that steps on odd ones (the 2DGS branch).
+TEST(MutualBoostedSolverTest, DensityControlReachesBothBranchesInEitherMode) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  for (const char* mode : {"alternate", "joint"}) {
+    SCOPED_TRACE(mode);
+    SolverOptions o = TinyOptions();
+    o.warmup_max_iterations = 4;
+    o.mutual_iterations = 9;
+    o.mutual_mode = mode;
+    o.schedule_2d = {2, 100, 4, 1000, 0.05f};
+    o.schedule_3d = {2, 100, 4, 1000, 0.005f};
+    o.densify_grad_threshold = 0;  // every visible primitive is cloned or split
+    MutualBoostedSolver solver(o, scene);
+    Recorder rec;
+    solver.AddCallback(&rec);
+    SolveSummary summary;
+    ASSERT_TRUE(solver.Solve(&summary).ok());
+    size_t first_2d = 0, last_2d = 0, first_3d = 0, last_3d = 0;
+    for (const IterationInfo& i : rec.calls) {
+      if (i.stage != Stage::kMutual) continue;
+      if (i.branch == Branch::kSurfels2D) {
+        if (first_2d == 0) first_2d = i.num_surfels;
+        last_2d = i.num_surfels;
+      } else {
+        if (first_3d == 0) first_3d = i.num_gaussians;
+        last_3d = i.num_gaussians;
+      }
+    }
+    // Densification at 4 and 8 in both branches' schedules (from 2, every 4).
+    EXPECT_GT(last_2d, first_2d);
+    EXPECT_GT(last_3d, first_3d);
+  }
+}
+
 // The harness's methods: one branch alone leaves the other untouched and skips the mutual stage;
 // plain 3DGS keeps its reflected layer at zero.
 TEST(MutualBoostedSolverTest, SingleBranchMethods) {
