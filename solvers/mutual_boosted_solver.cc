@@ -115,9 +115,8 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   train_ = scene.TrainIndices();
   for (const View& v : scene.views) {
     ViewTargets t;
-    t.gt_2d = CompositeOnBackground(v, options.white_background_2d ? 1.0f : 0.0f);
-    t.gt_3d = CompositeOnBackground(v, options.white_background_3d ? 1.0f : 0.0f);
-    t.gt_white = CompositeOnBackground(v, 1.0f);
+    t.gt_2d = CompositeOnBackground(v, options.background_2d);
+    t.gt_3d = CompositeOnBackground(v, options.background_3d);
     targets_.push_back(std::move(t));
   }
   // Initial points: a seeded subset when there are more than the options allow.
@@ -210,7 +209,7 @@ GaussianRenderOptions MutualBoostedSolver::GaussianOptions(const Camera& camera)
   GaussianRenderOptions o;
   o.camera = camera;
   o.sh_degree = sh_degree_;
-  const float bg = options_.white_background_3d ? 1.0f : 0.0f;
+  const float bg = options_.background_3d;
   o.background[0] = o.background[1] = o.background[2] = bg;
   return o;
 }
@@ -219,7 +218,7 @@ SurfelRenderOptions MutualBoostedSolver::SurfelOptions(const Camera& camera) con
   SurfelRenderOptions o;
   o.camera = camera;
   o.sh_degree = sh_degree_;
-  const float bg = options_.white_background_2d ? 1.0f : 0.0f;
+  const float bg = options_.background_2d;
   o.background[0] = o.background[1] = o.background[2] = bg;
   return o;
 }
@@ -254,7 +253,7 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
     p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kImage), ln,
               Branch::kSurfels2D);
   } else {
-    t.image = &targets_[view].gt_white;
+    t.image = &targets_[view].gt_2d;
     t.transmitted = transmitted;
     const double w = o.w_2d;
     if (o.exposure == ExposureMode::kOff) {
@@ -438,13 +437,13 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
     if (step_2d) {
       GaussianRender g;
       RenderGaussians(scene_.views[view].camera, &g);
-      // Transmitted target, white where the mask is background (reference 1.5).
+      // Transmitted target, the 2DGS background (white) where the mask is background (ref. 1.5).
       Image target = std::move(g.tran);
       const Image& mask = scene_.views[view].mask;
       if (!mask.empty()) {
         for (int c = 0; c < 3; ++c) {
           for (size_t i = 0; i < target.plane_size(); ++i) {
-            if (mask.plane(0)[i] == 0.0f) target.plane(c)[i] = 1.0f;
+            if (mask.plane(0)[i] == 0.0f) target.plane(c)[i] = o.background_2d;
           }
         }
       }

@@ -84,7 +84,7 @@ class MutualBoostedSolver {
 
  private:
   struct ViewTargets {
-    Image gt_2d, gt_3d, gt_white;  // ground truth on each branch's background, and on white
+    Image gt_2d, gt_3d;  // ground truth on each branch's background
   };
   double StepSurfels(int view, Stage stage, int iteration, const Image* transmitted_target);
   double StepGaussians(int view, Stage stage, int iteration, const Image* surfel_depth);

@@ -58,8 +58,11 @@ struct SolverOptions {
   double feature_lr = 2.5e-3, opacity_lr = 0.05, scaling_lr = 5e-3, rotation_lr = 1e-3;
   // SH degree grows by one every `sh_interval` warm-up iterations up to `sh_degree`.
   int sh_degree = 3, sh_interval = 1000;
-  // Backgrounds: 2DGS white, 3DGS black (reference 1.12, OmniObject3D setting).
-  bool white_background_2d = true, white_background_3d = false;
+  // Grey level each branch renders on and composites its masked photos on: 2DGS white, 3DGS black
+  // (reference 1.12, OmniObject3D setting). Photos without masks keep their own backdrop, so for
+  // them both are set to the backdrop's level (solvers/backdrop.h) and empty space needs no
+  // primitives.
+  float background_2d = 1.0f, background_3d = 0.0f;
   // Per-view exposure compensation (mgsr/loss/exposure_compensation.h): an affine colour model per
   // training view in front of every comparison with a photo, learned at its own rate with a weak
   // prior towards identity, re-fitted with Ceres (Huber) against the warmed-up render when the

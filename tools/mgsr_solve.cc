@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <csignal>
+#include <cstdlib>
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -20,6 +21,7 @@
 #include "mgsr/io/scene.h"
 #include "mgsr/loss/normal_consistency_loss.h"
 #include "mgsr/mesh/tsdf_fusion.h"
+#include "solvers/backdrop.h"
 #include "solvers/mutual_boosted_solver.h"
 #include "tools/colmap_flags.h"
 
@@ -69,6 +71,10 @@ DEFINE_bool(exposure_per_branch, false,
             "Separate colour transforms for the 2DGS and 3DGS branches (default: shared).");
 DEFINE_bool(exposure_fit, true,
             "Re-fit every view's transform with Ceres (Huber) when the mutual stage starts.");
+DEFINE_string(background, "auto",
+              "Grey level the branches render on: auto (masked photos: 2DGS white, 3DGS black as in "
+              "the reference; photos without masks: their backdrop's grey when it is uniform), "
+              "reference, or a level in [0, 1] for both branches.");
 DEFINE_int32(auto_stop_window, -1, "Auto-stop window in iterations (-1: preset).");
 DEFINE_double(auto_stop_range, 0.01,
               "Auto-stop when max - min of the window's losses falls below this.");
@@ -214,7 +220,7 @@ ViewRender RenderView(mgsr::MutualBoostedSolver* solver, const mgsr::SolverOptio
   if (o.train_2d) {
     mgsr::SurfelRender sr;
     solver->RenderSurfels(camera, &sr);
-    const float bg = o.white_background_2d ? 1.0f : 0.0f;
+    const float bg = o.background_2d;
     if (!o.train_3d) {
       const int w = sr.color.width(), h = sr.color.height();
       out.appearance = {sr.color, sr.color, mgsr::Image(w, h, 3), mgsr::Image(w, h, 1), bg};
@@ -237,7 +243,7 @@ ViewRender RenderView(mgsr::MutualBoostedSolver* solver, const mgsr::SolverOptio
       out.geometry = {g.depth, std::move(g.depth), std::move(g.alpha), std::move(normal)};
     }
     out.appearance = {std::move(g.color), std::move(g.tran), std::move(g.ref), std::move(g.weight),
-                      o.white_background_3d ? 1.0f : 0.0f};
+                      o.background_3d};
   }
   return out;
 }
@@ -247,6 +253,34 @@ mgsr::Image Colorize(const mgsr::Image& one, float lo, float hi) {
   for (size_t i = 0; i < one.size(); ++i)
     out.data()[i] = hi > lo ? (one.data()[i] - lo) / (hi - lo) : 0.0f;
   return out;
+}
+
+// Sets both branches' backgrounds from --background; `note` says what was chosen and why.
+mgsr::Status ChooseBackground(const std::string& flag, const mgsr::Scene& scene,
+                              mgsr::SolverOptions* o, std::string* note) {
+  if (flag == "reference") {
+    *note = "reference (2DGS white, 3DGS black)";
+    return mgsr::Status::Ok();
+  }
+  if (flag == "auto") {
+    const mgsr::Backdrop b = mgsr::EstimateBackdrop(scene);
+    if (!b.uniform) {
+      *note = "reference (2DGS white, 3DGS black): " + b.reason;
+      return mgsr::Status::Ok();
+    }
+    o->background_2d = o->background_3d = b.level;
+    *note = "the photos' uniform backdrop, grey " + std::to_string(b.level) + " (both branches)";
+    return mgsr::Status::Ok();
+  }
+  char* end = nullptr;
+  const double level = std::strtod(flag.c_str(), &end);
+  if (end == flag.c_str() || *end != '\0' || !(level >= 0 && level <= 1)) {
+    return mgsr::Status::Error("--background must be auto, reference or a grey level in [0, 1], "
+                               "not '" + flag + "'");
+  }
+  o->background_2d = o->background_3d = static_cast<float>(level);
+  *note = "grey " + flag + " (both branches, --background)";
+  return mgsr::Status::Ok();
 }
 
 }  // namespace
@@ -355,6 +389,11 @@ int main(int argc, char** argv) {
               FLAGS_workspace.c_str(), scene.source.c_str(), scene.TrainIndices().size(),
               scene.TestIndices().size(), cam0.width, cam0.height, scene.points.size(),
               scene.has_masks() ? "yes" : "no (gamma = 1, mesh not masked)");
+
+  std::string background_note;
+  s = ChooseBackground(FLAGS_background, scene, &options, &background_note);
+  if (!s.ok()) return Fail(s.message());
+  std::printf("background: %s\n", background_note.c_str());
 
   mgsr::MutualBoostedSolver solver(options, scene);
   const std::string ckpt_dir = mgsr::JoinPath(FLAGS_output, "checkpoints");
@@ -544,6 +583,9 @@ int main(int argc, char** argv) {
                               {"vertices", mesh.vertices.size()},
                               {"triangles", mesh.triangles.size()}}}};
   if (!colmap_metrics.is_null()) metrics["colmap"] = colmap_metrics;
+  metrics["background"] = {{"2d", options.background_2d},
+                           {"3d", options.background_3d},
+                           {"choice", background_note}};
   metrics["exposure"] = {{"mode", mgsr::ExposureModeName(options.exposure)},
                          {"per_branch", options.exposure_per_branch},
                          {"fit_seconds", summary.exposure_fit_seconds}};

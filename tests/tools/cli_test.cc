@@ -143,6 +143,41 @@ TEST_F(CliTest, SolveRejectsBadOptions) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("--mutual_mode must be alternate or joint"), std::string::npos)
       << r.output;
+  for (const char* bad : {"1.5", "grey", "0.5x"}) {
+    r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                            " --output /tmp/x --background " + bad);
+    EXPECT_EQ(r.exit_code, 1) << bad;
+    EXPECT_NE(r.output.find("--background must be auto, reference or a grey level in [0, 1], not '" +
+                            std::string(bad) + "'"),
+              std::string::npos)
+        << r.output;
+  }
+}
+
+// Photos without masks on a uniform grey: --background auto renders both branches on that grey;
+// with masks it keeps the reference's white/black.
+TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
+  const std::string dir = testing::ScratchDir();
+  fs::remove_all(dir);
+  auto r = testing::RunCommand(kTools + "/mgsr_synth --output " + dir +
+                               " --num_views 10 --width 32 --height 32 --num_points 100 "
+                               "--masks=false");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string few = " --warmup_max_iterations 10 --warmup_min_iterations 0 "
+                          "--mutual_iterations 4 --log_every 20 --eval_every 0";
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
+                          "/out" + few);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("background: the photos' uniform backdrop, grey 0.6"), std::string::npos)
+      << r.output;
+  std::string metrics;
+  ASSERT_TRUE(ReadFileToString(dir + "/out/metrics.json", &metrics).ok());
+  EXPECT_NE(metrics.find("the photos' uniform backdrop"), std::string::npos) << metrics;
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
+                          "/out_masked" + few);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("background: reference (2DGS white, 3DGS black): "), std::string::npos)
+      << r.output;
 }
 
 TEST_F(CliTest, MissingWorkspaceFlagAndFolder) {
