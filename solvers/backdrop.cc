@@ -8,10 +8,11 @@
 namespace mgsr {
 namespace {
 
-float Median(std::vector<float>* v) {
-  auto mid = v->begin() + v->size() / 2;
-  std::nth_element(v->begin(), mid, v->end());
-  return *mid;
+// The q-quantile (0 <= q < 1) of a non-empty sample; reorders it.
+float Quantile(std::vector<float>* v, double q) {
+  auto at = v->begin() + static_cast<size_t>(v->size() * q);
+  std::nth_element(v->begin(), at, v->end());
+  return *at;
 }
 
 }  // namespace
@@ -42,16 +43,14 @@ Backdrop EstimateBackdrop(const Scene& scene, const BackdropOptions& options) {
     return out;
   }
   float median[3];
-  for (int c = 0; c < 3; ++c) median[c] = Median(&samples[c]);
+  for (int c = 0; c < 3; ++c) median[c] = Quantile(&samples[c], 0.5);
   const float level = (median[0] + median[1] + median[2]) / 3;
   std::vector<float> deviation;
   deviation.reserve(samples[0].size() * 3);
   for (int c = 0; c < 3; ++c) {
     for (float s : samples[c]) deviation.push_back(std::abs(s - median[c]));
   }
-  auto p80 = deviation.begin() + deviation.size() * 4 / 5;
-  std::nth_element(deviation.begin(), p80, deviation.end());
-  out.spread = *p80;
+  out.spread = Quantile(&deviation, 0.8);
   float tint = 0;
   for (float m : median) tint = std::max(tint, std::abs(m - level));
   std::ostringstream why;

@@ -83,6 +83,8 @@ Status SolverOptions::Validate() const {
   if (!(exposure_offset_prior >= 0) || !std::isfinite(exposure_offset_prior))
     return Status::Error("--exposure_offset_prior must be finite and >= 0");
   if (max_init_points < 1) return Status::Error("--max_init_points must be >= 1");
+  if (!(background_2d >= 0 && background_2d <= 1) || !(background_3d >= 0 && background_3d <= 1))
+    return Status::Error("background levels must be in [0, 1]");
   return Status::Ok();
 }
 

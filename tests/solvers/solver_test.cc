@@ -278,6 +278,9 @@ TEST(MutualBoostedSolverTest, InvalidOptionsAreRejected) {
   const Status s = solver.Solve(&summary);
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("--mutual_mode must be alternate or joint"), std::string::npos);
+  o = TinyOptions();
+  o.background_3d = std::nanf("");
+  EXPECT_EQ(o.Validate().message(), "background levels must be in [0, 1]");
 }
 
 }  // namespace
