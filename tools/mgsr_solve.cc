@@ -255,32 +255,37 @@ mgsr::Image Colorize(const mgsr::Image& one, float lo, float hi) {
   return out;
 }
 
-// Sets both branches' backgrounds from --background; `note` says what was chosen and why.
-mgsr::Status ChooseBackground(const std::string& flag, const mgsr::Scene& scene,
-                              mgsr::SolverOptions* o, std::string* note) {
-  if (flag == "reference") {
-    *note = "reference (2DGS white, 3DGS black)";
-    return mgsr::Status::Ok();
-  }
-  if (flag == "auto") {
-    const mgsr::Backdrop b = mgsr::EstimateBackdrop(scene);
-    if (!b.uniform) {
-      *note = "reference (2DGS white, 3DGS black): " + b.reason;
-      return mgsr::Status::Ok();
-    }
-    o->background_2d = o->background_3d = b.level;
-    *note = "the photos' uniform backdrop, grey " + std::to_string(b.level) + " (both branches)";
-    return mgsr::Status::Ok();
-  }
+// --background is "auto", "reference" or a grey level in [0, 1] (returned in `level`, else -1).
+// Checked with the other options, before any scene is loaded or colmap runs.
+mgsr::Status ParseBackground(const std::string& flag, double* level) {
+  *level = -1;
+  if (flag == "auto" || flag == "reference") return mgsr::Status::Ok();
   char* end = nullptr;
-  const double level = std::strtod(flag.c_str(), &end);
-  if (end == flag.c_str() || *end != '\0' || !(level >= 0 && level <= 1)) {
+  const double v = std::strtod(flag.c_str(), &end);
+  if (end == flag.c_str() || *end != '\0' || !(v >= 0 && v <= 1)) {
     return mgsr::Status::Error("--background must be auto, reference or a grey level in [0, 1], "
                                "not '" + flag + "'");
   }
-  o->background_2d = o->background_3d = static_cast<float>(level);
-  *note = "grey " + flag + " (both branches, --background)";
+  *level = v;
   return mgsr::Status::Ok();
+}
+
+// Sets both branches' backgrounds from a parsed --background; returns what was chosen and why.
+std::string ChooseBackground(const std::string& flag, double level, const mgsr::Scene& scene,
+                             mgsr::SolverOptions* o) {
+  if (level >= 0) {
+    o->background_2d = o->background_3d = static_cast<float>(level);
+    return "grey " + flag + " (both branches, --background)";
+  }
+  if (flag == "auto") {
+    const mgsr::Backdrop b = mgsr::EstimateBackdrop(scene);
+    if (b.uniform) {
+      o->background_2d = o->background_3d = b.level;
+      return "the photos' uniform backdrop, grey " + std::to_string(b.level) + " (both branches)";
+    }
+    return "reference (2DGS white, 3DGS black): " + b.reason;
+  }
+  return "reference (2DGS white, 3DGS black)";
 }
 
 }  // namespace
@@ -344,6 +349,11 @@ int main(int argc, char** argv) {
   if (!(FLAGS_voxel_size >= 0)) return Fail("--voxel_size must be >= 0");
   if (FLAGS_checkpoint_every < 0) return Fail("--checkpoint_every must be >= 0");
   if (FLAGS_eval_every < 0) return Fail("--eval_every must be >= 0");
+  double background_level = -1;
+  {
+    const mgsr::Status b = ParseBackground(FLAGS_background, &background_level);
+    if (!b.ok()) return Fail(b.message());
+  }
   const mgsr::Status valid = options.Validate();
   if (!valid.ok()) return Fail(valid.message());
 
@@ -390,9 +400,8 @@ int main(int argc, char** argv) {
               scene.TestIndices().size(), cam0.width, cam0.height, scene.points.size(),
               scene.has_masks() ? "yes" : "no (gamma = 1, mesh not masked)");
 
-  std::string background_note;
-  s = ChooseBackground(FLAGS_background, scene, &options, &background_note);
-  if (!s.ok()) return Fail(s.message());
+  const std::string background_note =
+      ChooseBackground(FLAGS_background, background_level, scene, &options);
   std::printf("background: %s\n", background_note.c_str());
 
   mgsr::MutualBoostedSolver solver(options, scene);
