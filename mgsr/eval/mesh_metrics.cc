@@ -8,6 +8,7 @@
 #include <numeric>
 
 #include "mgsr/core/rng.h"
+#include "mgsr/eval/closest_point.h"
 
 namespace mgsr {
 namespace {
@@ -26,35 +27,90 @@ using KdTree =
     nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, PointCloudAdaptor>,
                                         PointCloudAdaptor, 3, size_t>;
 
-struct OneWay {
-  double mean_distance = 0;
-  double normal_dot = 0;  // mean |n . n_nn|
-  double within = 0;      // share of points closer than the threshold
+// For every `from` sample: the distance to the target surface, |n . n_target|, and the vector
+// from the sample to its closest target point with the target's normal there (for the sign).
+struct Matches {
+  std::vector<double> distance, dot;
+  std::vector<Eigen::Vector3d> offset;         // closest target point - sample
+  std::vector<Eigen::Vector3d> target_normal;  // zero when unknown
+  bool normals = false;                        // |n . n_target| is meaningful
 };
 
-// From every `from` sample to its nearest `to` sample.
-OneWay Directed(const SurfaceSamples& from, const SurfaceSamples& to, double threshold) {
-  PointCloudAdaptor adaptor{to.points};
+// The target is a mesh's triangles (exact closest point) or, when it has none, its points.
+Matches Match(const SurfaceSamples& from, const TriangleMesh& target) {
+  const int n = static_cast<int>(from.points.size());
+  Matches m;
+  m.distance.resize(n);
+  m.dot.assign(n, 0.0);
+  m.offset.resize(n);
+  m.target_normal.assign(n, Eigen::Vector3d::Zero());
+  if (!target.triangles.empty()) {
+    const TriangleClosestPoint index(target);
+    m.normals = !from.normals.empty();
+#pragma omp parallel for schedule(dynamic, 64)
+    for (int i = 0; i < n; ++i) {
+      const ClosestPoint c = index.Query(from.points[i]);
+      m.distance[i] = c.distance;
+      m.offset[i] = c.point - from.points[i];
+      m.target_normal[i] = index.FaceNormal(c.triangle);
+      if (m.normals) m.dot[i] = std::abs(from.normals[i].dot(m.target_normal[i]));
+    }
+    return m;
+  }
+  const std::vector<Eigen::Vector3d>& pts = target.vertices;
+  const bool target_normals = target.vertex_normals.size() == pts.size();
+  PointCloudAdaptor adaptor{pts};
   KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   tree.buildIndex();
-  const bool normals = !from.normals.empty() && !to.normals.empty();
-  const int n = static_cast<int>(from.points.size());
-  double dist_sum = 0, dot_sum = 0, within = 0;
-#pragma omp parallel for reduction(+ : dist_sum, dot_sum, within) schedule(static)
+  m.normals = !from.normals.empty() && target_normals;
+#pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     size_t index = 0;
     double d2 = 0;
     tree.knnSearch(from.points[i].data(), 1, &index, &d2);
-    const double d = std::sqrt(d2);
-    dist_sum += d;
-    within += d < threshold ? 1.0 : 0.0;
-    if (normals) dot_sum += std::abs(from.normals[i].dot(to.normals[index]));
+    m.distance[i] = std::sqrt(d2);
+    m.offset[i] = pts[index] - from.points[i];
+    if (target_normals) m.target_normal[i] = target.vertex_normals[index].normalized();
+    if (m.normals) m.dot[i] = std::abs(from.normals[i].dot(m.target_normal[i]));
   }
-  OneWay r;
-  r.mean_distance = dist_sum / n;
-  r.normal_dot = normals ? dot_sum / n : 0.0;
-  r.within = within / n;
-  return r;
+  return m;
+}
+
+double Mean(const std::vector<double>& v) {
+  double sum = 0;
+  for (double x : v) sum += x;
+  return v.empty() ? 0.0 : sum / v.size();
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  const size_t half = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + half, v.end());
+  if (v.size() % 2 == 1) return v[half];
+  return 0.5 * (v[half] + *std::max_element(v.begin(), v.begin() + half));
+}
+
+double ShareBelow(const std::vector<double>& v, double threshold) {
+  size_t count = 0;
+  for (double x : v) count += x < threshold;
+  return v.empty() ? 0.0 : static_cast<double>(count) / v.size();
+}
+
+FScore ScoreAt(const Matches& to_gt, const Matches& to_pred, double threshold, double footprints) {
+  FScore f;
+  f.threshold = threshold;
+  f.footprints = footprints;
+  f.precision = ShareBelow(to_gt.distance, threshold);
+  f.recall = ShareBelow(to_pred.distance, threshold);
+  f.fscore = f.precision + f.recall > 0 ? 2 * f.precision * f.recall / (f.precision + f.recall)
+                                        : 0.0;
+  return f;
+}
+
+// |d| signed by the side of the ground truth's surface the predicted point is on. `outward` is
+// the vector from the ground-truth point to the predicted point.
+double Signed(double distance, const Eigen::Vector3d& outward, const Eigen::Vector3d& normal) {
+  return outward.dot(normal) < 0 ? -distance : distance;
 }
 
 }  // namespace
@@ -110,28 +166,52 @@ SurfaceSamples SampleSurface(const TriangleMesh& mesh, int count, uint64_t seed)
 MeshMetrics EvaluateMesh(const TriangleMesh& predicted, const TriangleMesh& ground_truth,
                          const MeshMetricsOptions& options) {
   MeshMetrics m;
+  m.pixel_footprint = options.pixel_footprint;
   const SurfaceSamples pred = SampleSurface(predicted, options.num_samples, options.seed);
-  const SurfaceSamples gt = SampleSurface(ground_truth, options.num_samples, options.seed + 1);
+  const TriangleMesh& gt_source =
+      options.completeness_points != nullptr ? *options.completeness_points : ground_truth;
+  const SurfaceSamples gt = SampleSurface(gt_source, options.num_samples, options.seed + 1);
   if (pred.points.empty()) {
     m.failure =
         predicted.vertices.empty() ? "predicted mesh is empty" : "predicted mesh has no area";
     return m;
   }
-  if (gt.points.empty()) {
+  if (gt.points.empty() || SampleSurface(ground_truth, 1, options.seed).points.empty()) {
     m.failure = "ground-truth mesh is empty or has no area";
     return m;
   }
-  const OneWay to_gt = Directed(pred, gt, options.fscore_threshold);
-  const OneWay to_pred = Directed(gt, pred, options.fscore_threshold);
+  const Matches to_gt = Match(pred, ground_truth);
+  const Matches to_pred = Match(gt, predicted);
   m.ok = true;
-  m.accuracy = to_gt.mean_distance;
-  m.completeness = to_pred.mean_distance;
+  m.accuracy = Mean(to_gt.distance);
+  m.completeness = Mean(to_pred.distance);
   m.chamfer = 0.5 * (m.accuracy + m.completeness);
-  m.normal_consistency = 0.5 * (to_gt.normal_dot + to_pred.normal_dot);
-  m.precision = to_gt.within;
-  m.recall = to_pred.within;
-  m.fscore =
-      m.precision + m.recall > 0 ? 2 * m.precision * m.recall / (m.precision + m.recall) : 0.0;
+  m.normal_consistency =
+      0.5 * ((to_gt.normals ? Mean(to_gt.dot) : 0.0) + (to_pred.normals ? Mean(to_pred.dot) : 0.0));
+  const FScore headline = ScoreAt(to_gt, to_pred, options.fscore_threshold, 0);
+  m.precision = headline.precision;
+  m.recall = headline.recall;
+  m.fscore = headline.fscore;
+  for (double t : options.fscore_thresholds) m.fscores.push_back(ScoreAt(to_gt, to_pred, t, 0));
+  if (options.pixel_footprint > 0) {
+    for (double k : options.fscore_footprints)
+      m.fscores.push_back(ScoreAt(to_gt, to_pred, k * options.pixel_footprint, k));
+  }
+  // Signed offsets: from the predicted samples (the ground truth's normal at the closest point)
+  // and from the ground-truth samples (their own normal).
+  std::vector<double> signed_pred, signed_gt;
+  for (size_t i = 0; i < pred.points.size(); ++i) {
+    if (to_gt.target_normal[i].squaredNorm() == 0) continue;
+    signed_pred.push_back(Signed(to_gt.distance[i], -to_gt.offset[i], to_gt.target_normal[i]));
+  }
+  if (!gt.normals.empty()) {
+    for (size_t i = 0; i < gt.points.size(); ++i)
+      signed_gt.push_back(Signed(to_pred.distance[i], to_pred.offset[i], gt.normals[i]));
+  }
+  m.signed_offset_median = Median(signed_pred);
+  m.signed_offset_mean = Mean(signed_pred);
+  m.fraction_inside = ShareBelow(signed_pred, 0.0);
+  m.signed_offset_median_gt = Median(signed_gt);
   return m;
 }
 
