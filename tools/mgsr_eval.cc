@@ -15,7 +15,9 @@
 #include "mgsr/core/timer.h"
 #include "mgsr/eval/exposure_alignment.h"
 #include "mgsr/eval/image_metrics.h"
+#include "mgsr/eval/ground_truth.h"
 #include "mgsr/eval/mesh_metrics.h"
+#include "mgsr/eval/metrics_json.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
 #include "mgsr/io/ply.h"
@@ -25,6 +27,12 @@ DEFINE_string(gt, "", "Ground-truth mesh or point cloud (PLY).");
 DEFINE_int32(samples, 10000, "Points sampled on each surface.");
 DEFINE_double(fscore_threshold, 0.01, "Distance threshold of the F-score, in scene units.");
 DEFINE_uint64(seed, 0, "Sampling seed.");
+DEFINE_double(pixel_footprint, 0,
+              "Scene units one training pixel covers at the object: adds F-scores at 0.5, 1 and 2 "
+              "footprints and the offset in pixels (--run: from metrics.json).");
+DEFINE_string(gt_visible, "",
+              "Optional ground-truth points to measure completeness from (e.g. "
+              "gt_points_visible.ply).");
 DEFINE_string(renders, "", "Folder of rendered images.");
 DEFINE_string(gt_images, "", "Folder of ground-truth images with the same file names.");
 DEFINE_string(background, "black",
@@ -55,38 +63,49 @@ mgsr::Image ToRgb(const mgsr::Image& im, float background) {
   return out;
 }
 
-int EvaluateMeshes(nlohmann::json* report) {
-  mgsr::TriangleMesh pred, gt;
-  mgsr::Status s = mgsr::ReadTriangleMesh(FLAGS_mesh, &pred);
-  if (!s.ok()) return Fail(s.message());
-  s = mgsr::ReadTriangleMesh(FLAGS_gt, &gt);
-  if (!s.ok()) return Fail(s.message());
+void PrintMeshHeader() {
+  std::printf("%-22s %8s %9s %9s %9s %10s %10s %8s %8s\n", "mesh", "NC x100", "CD x1000",
+              "acc x1000", "comp x1000", "offset", "offset px", "inside", "F-score");
+}
+
+void PrintMeshRow(const std::string& label, const mgsr::MeshMetrics& m) {
+  const double px = m.pixel_footprint > 0 ? m.signed_offset_median / m.pixel_footprint : NAN;
+  std::printf("%-22s %8.2f %9.3f %9.3f %10.3f %+10.5f %+10.2f %7.1f%% %8.4f%s\n", label.c_str(),
+              100 * m.normal_consistency, 1000 * m.chamfer, 1000 * m.accuracy,
+              1000 * m.completeness, m.signed_offset_median, px, 100 * m.fraction_inside, m.fscore,
+              m.ok ? "" : ("  (" + m.failure + ")").c_str());
+}
+
+mgsr::MeshMetricsOptions MeshOptionsFromFlags() {
   mgsr::MeshMetricsOptions o;
   o.num_samples = FLAGS_samples;
   o.seed = FLAGS_seed;
   o.fscore_threshold = FLAGS_fscore_threshold;
+  o.pixel_footprint = FLAGS_pixel_footprint;
+  return o;
+}
+
+int EvaluateMeshes(nlohmann::json* report) {
+  mgsr::TriangleMesh pred, gt, visible;
+  mgsr::Status s = mgsr::ReadTriangleMesh(FLAGS_mesh, &pred);
+  if (!s.ok()) return Fail(s.message());
+  s = mgsr::ReadTriangleMesh(FLAGS_gt, &gt);
+  if (!s.ok()) return Fail(s.message());
+  mgsr::MeshMetricsOptions o = MeshOptionsFromFlags();
+  if (!FLAGS_gt_visible.empty()) {
+    s = mgsr::ReadTriangleMesh(FLAGS_gt_visible, &visible);
+    if (!s.ok()) return Fail(s.message());
+    o.completeness_points = &visible;
+  }
   const mgsr::MeshMetrics m = mgsr::EvaluateMesh(pred, gt, o);
-  std::printf("%-12s %10s %10s %10s %10s %10s %10s\n", "mesh", "NC x100", "CD x1000", "acc x1000",
-              "comp x1000", "F-score", "status");
-  std::printf("%-12s %10.2f %10.3f %10.3f %10.3f %10.4f %10s\n", mgsr::FileStem(FLAGS_mesh).c_str(),
-              100 * m.normal_consistency, 1000 * m.chamfer, 1000 * m.accuracy,
-              1000 * m.completeness, m.fscore, m.ok ? "ok" : m.failure.c_str());
-  auto finite_or_null = [](double v) {
-    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
-  };
-  (*report)["mesh"] = {{"predicted", FLAGS_mesh},
-                       {"ground_truth", FLAGS_gt},
-                       {"ok", m.ok},
-                       {"failure", m.failure},
-                       {"samples", FLAGS_samples},
-                       {"nc", m.normal_consistency},
-                       {"cd", finite_or_null(m.chamfer)},
-                       {"accuracy", finite_or_null(m.accuracy)},
-                       {"completeness", finite_or_null(m.completeness)},
-                       {"precision", m.precision},
-                       {"recall", m.recall},
-                       {"fscore", m.fscore},
-                       {"fscore_threshold", FLAGS_fscore_threshold}};
+  PrintMeshHeader();
+  PrintMeshRow(mgsr::FileStem(FLAGS_mesh), m);
+  nlohmann::json j = mgsr::MeshMetricsToJson(m);
+  j["predicted"] = FLAGS_mesh;
+  j["ground_truth"] = FLAGS_gt;
+  j["samples"] = FLAGS_samples;
+  j["fscore_threshold"] = FLAGS_fscore_threshold;
+  (*report)["mesh"] = j;
   return 0;
 }
 
@@ -163,20 +182,26 @@ int EvaluateRun(nlohmann::json* report) {
   } catch (const nlohmann::json::exception& e) {
     return Fail(metrics_path + ": invalid JSON: " + e.what());
   }
-  std::string gt_path = FLAGS_gt;
-  if (gt_path.empty() && run.contains("scene") && run["scene"].is_string()) {
-    gt_path = mgsr::JoinPath(run["scene"].get<std::string>(), "gt/mesh.ply");
+  mgsr::GroundTruthGeometry gt;
+  if (!FLAGS_gt.empty()) {
+    s = mgsr::ReadTriangleMesh(FLAGS_gt, &gt.mesh);
+    if (!s.ok()) return Fail(s.message());
+    gt.mesh_path = FLAGS_gt;
+  } else if (run.contains("scene") && run["scene"].is_string()) {
+    s = mgsr::FindGroundTruth(run["scene"].get<std::string>(), &gt);
+    if (!s.ok()) return Fail(s.message());
   }
-  mgsr::TriangleMesh pred, gt;
+  if (!gt.found()) return Fail(FLAGS_run + ": its scene has no ground-truth mesh (pass --gt)");
+  mgsr::TriangleMesh pred;
   s = mgsr::ReadTriangleMesh(mgsr::JoinPath(FLAGS_run, "mesh.ply"), &pred);
   if (!s.ok()) return Fail(s.message());
-  s = mgsr::ReadTriangleMesh(gt_path, &gt);
-  if (!s.ok()) return Fail(s.message() + " (pass --gt)");
-  mgsr::MeshMetricsOptions o;
-  o.num_samples = FLAGS_samples;
-  o.seed = FLAGS_seed;
-  o.fscore_threshold = FLAGS_fscore_threshold;
-  const mgsr::MeshMetrics m = mgsr::EvaluateMesh(pred, gt, o);
+  mgsr::MeshMetricsOptions o = MeshOptionsFromFlags();
+  if (o.pixel_footprint <= 0 && run.contains("mesh"))
+    o.pixel_footprint = run["mesh"].value("pixel_footprint", 0.0);
+  if (!gt.visible_path.empty()) o.completeness_points = &gt.visible_points;
+  const mgsr::MeshMetrics m = mgsr::EvaluateMesh(pred, gt.mesh, o);
+  // The ceiling as the run measured it (same cameras and fusion), when it did.
+  const bool has_ceiling = run.contains("mesh") && run["mesh"].contains("ceiling");
   const double psnr = run["test"].value("psnr", 0.0), ssim = run["test"].value("ssim", 0.0);
   const double psnr_al = run["test"].value("psnr_aligned", 0.0);
   const double seconds = run["seconds"].value("total", 0.0);
@@ -185,16 +210,27 @@ int EvaluateRun(nlohmann::json* report) {
   std::printf("%-24s %8.2f %9.3f %8.2f %8.4f %11.2f %9.1f%s\n", mgsr::FileStem(FLAGS_run).c_str(),
               100 * m.normal_consistency, 1000 * m.chamfer, psnr, ssim, psnr_al, seconds,
               m.ok ? "" : ("  (" + m.failure + ")").c_str());
+  std::printf("\n");
+  PrintMeshHeader();
+  PrintMeshRow("mesh", m);
+  if (has_ceiling) {
+    const nlohmann::json& c = run["mesh"]["ceiling"];
+    std::printf("%-22s %8.2f %9.3f   (exact depth, same cameras and fusion, from metrics.json)\n",
+                "ceiling", 100 * c.value("nc", 0.0), 1000 * c.value("cd", 0.0));
+  }
+  nlohmann::json mesh_json = mgsr::MeshMetricsToJson(m);
   (*report)["run"] = {
       {"folder", FLAGS_run},
-      {"ground_truth", gt_path},
+      {"ground_truth", gt.mesh_path},
       {"nc", m.normal_consistency},
       {"cd", std::isfinite(m.chamfer) ? nlohmann::json(m.chamfer) : nlohmann::json()},
       {"fscore", m.fscore},
+      {"mesh", mesh_json},
       {"psnr", psnr},
       {"ssim", ssim},
       {"psnr_aligned", psnr_al},
       {"seconds", seconds}};
+  if (has_ceiling) (*report)["run"]["ceiling"] = run["mesh"]["ceiling"];
   return 0;
 }
 

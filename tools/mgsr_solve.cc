@@ -8,21 +8,25 @@
 #include <cstdlib>
 #include <cstdio>
 #include <fstream>
+#include <memory>
 #include <nlohmann/json.hpp>
 
 #include "mgsr/core/timer.h"
 #include "mgsr/eval/exposure_alignment.h"
 #include "mgsr/eval/image_metrics.h"
 #include "mgsr/eval/mesh_metrics.h"
+#include "mgsr/eval/metrics_json.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
 #include "mgsr/io/model_ply.h"
 #include "mgsr/io/ply.h"
 #include "mgsr/io/scene.h"
-#include "mgsr/loss/normal_consistency_loss.h"
-#include "mgsr/mesh/tsdf_fusion.h"
+#include "mgsr/eval/ground_truth.h"
+#include "mgsr/synth/ray_caster.h"
 #include "solvers/backdrop.h"
 #include "solvers/mutual_boosted_solver.h"
+#include "solvers/surface_extraction.h"
+#include "solvers/trained_views.h"
 #include "tools/colmap_flags.h"
 
 DEFINE_string(workspace, "",
@@ -84,7 +88,12 @@ DEFINE_string(mesh_depth, "expected",
               "Depth fused into the mesh: expected (MGSR) | median (2DGS).");
 DEFINE_string(mesh_color, "transmitted",
               "Mesh colours: transmitted (3DGS, reflection-free) | surfel (2DGS render).");
-DEFINE_double(voxel_size, 0, "TSDF voxel (0: the pixel footprint at the object).");
+DEFINE_double(voxel_size, 0,
+              "TSDF voxel (0: the pixel footprint at the object / --mesh_resolution_scale).");
+DEFINE_int32(mesh_resolution_scale, 1,
+             "Render the depth for fusion at this many times the training resolution (the voxel "
+             "follows the finer footprint).");
+DEFINE_double(tsdf_truncation, 4, "TSDF truncation band in training pixel footprints.");
 DEFINE_int32(checkpoint_every, 500,
              "Write OUTPUT/checkpoints/latest.ckpt every N iterations (0: only on Ctrl-C).");
 DEFINE_bool(resume, false,
@@ -151,6 +160,102 @@ int Fail(const std::string& message) {
   return 1;
 }
 
+std::string DepthLine(const char* label, const mgsr::DepthErrorStats& d) {
+  char line[200];
+  std::snprintf(line, sizeof(line),
+                "%s median %+.4f (%+.2f px), mean %+.4f, %.1f%% of pixels beyond 1 px", label,
+                d.median, d.median_footprints, d.mean, 100 * d.share_beyond_footprint);
+  return line;
+}
+
+// Signed depth error of the 2DGS branch on the training views when the warm-up ends (at the first
+// mutual 2DGS step), against the ground truth. Written beside the checkpoint so a resumed run still
+// reports it.
+class DepthAfterWarmup : public mgsr::IterationCallback {
+ public:
+  DepthAfterWarmup(mgsr::MutualBoostedSolver* solver, const mgsr::SolverOptions& options,
+                   const mgsr::Scene& scene, const mgsr::RayCaster* ground_truth, std::string path)
+      : solver_(solver), options_(options), scene_(scene), gt_(ground_truth), path_(std::move(path)) {}
+  void operator()(const mgsr::IterationInfo& i) override {
+    if (gt_ == nullptr || done_ || i.stage != mgsr::Stage::kMutual ||
+        i.branch != mgsr::Branch::kSurfels2D || i.iteration != 1)
+      return;
+    done_ = true;
+    const mgsr::SurfaceDepthReport r = mgsr::MeasureSurfaceDepth(solver_, options_, scene_, *gt_);
+    std::printf("%s\n%s\n", DepthLine("depth after warm-up (train views): expected", r.expected).c_str(),
+                DepthLine("                                    median  ", r.median).c_str());
+    const nlohmann::json j = {{"expected", mgsr::DepthErrorToJson(r.expected)},
+                              {"median", mgsr::DepthErrorToJson(r.median)}};
+    const mgsr::Status s = mgsr::WriteStringToFileAtomic(path_, j.dump(2) + "\n");
+    if (!s.ok()) std::fprintf(stderr, "warning: %s\n", s.message().c_str());
+  }
+  const std::string& path() const { return path_; }
+
+ private:
+  mgsr::MutualBoostedSolver* solver_;
+  const mgsr::SolverOptions& options_;
+  const mgsr::Scene& scene_;
+  const mgsr::RayCaster* gt_;
+  std::string path_;
+  bool done_ = false;
+};
+
+// Everything the ground truth lets us say about the geometry: the mesh's exact metrics beside the
+// exact-depth ceiling of the same cameras and fusion (and of the training resolution when fusing
+// finer), and the signed depth error after the warm-up and at the end.
+mgsr::Status ReportGeometry(mgsr::MutualBoostedSolver* solver, const mgsr::SolverOptions& options,
+                            const mgsr::Scene& scene, const mgsr::GroundTruthGeometry& gt,
+                            const mgsr::SurfaceOptions& surface, const mgsr::TriangleMesh* mesh,
+                            const std::string& warmup_depth_path, nlohmann::json* metrics) {
+  const double footprint = mgsr::TrainingFootprint(scene);
+  mgsr::MeshMetricsOptions mo;
+  mo.pixel_footprint = footprint;
+  if (!gt.visible_path.empty()) mo.completeness_points = &gt.visible_points;
+  nlohmann::json& out = (*metrics)["mesh"];
+  out["ground_truth"] = gt.mesh_path;
+  if (!gt.visible_path.empty()) out["completeness_points"] = gt.visible_path;
+  auto line = [&](const char* label, const mgsr::MeshMetrics& m) {
+    std::printf("%s NC x100 %.2f, CD x1000 %.3f, signed offset %+.4f (%+.2f px, %.0f%% inside), "
+                "F-score at 1 px %.3f\n",
+                label, 100 * m.normal_consistency, 1000 * m.chamfer, m.signed_offset_median,
+                m.signed_offset_median / footprint, 100 * m.fraction_inside,
+                m.fscores.size() > 4 ? m.fscores[4].fscore : 0.0);
+  };
+  if (mesh != nullptr) {
+    const mgsr::MeshMetrics m = mgsr::EvaluateMesh(*mesh, gt.mesh, mo);
+    out.update(mgsr::MeshMetricsToJson(m));
+    line("mesh vs ground truth:   ", m);
+  }
+  mgsr::TriangleMesh ceiling;
+  MGSR_RETURN_IF_ERROR(mgsr::ExactDepthCeiling(gt.mesh, scene, surface, &ceiling));
+  const mgsr::MeshMetrics c = mgsr::EvaluateMesh(ceiling, gt.mesh, mo);
+  out["ceiling"] = mgsr::MeshMetricsToJson(c);
+  line("exact-depth ceiling:    ", c);
+  if (surface.resolution_scale != 1) {
+    mgsr::SurfaceOptions one = surface;
+    one.resolution_scale = 1;
+    MGSR_RETURN_IF_ERROR(mgsr::ExactDepthCeiling(gt.mesh, scene, one, &ceiling));
+    const mgsr::MeshMetrics c1 = mgsr::EvaluateMesh(ceiling, gt.mesh, mo);
+    out["ceiling_1x"] = mgsr::MeshMetricsToJson(c1);
+    line("ceiling at 1x:          ", c1);
+  }
+  const mgsr::RayCaster caster(gt.mesh);
+  const mgsr::SurfaceDepthReport d = mgsr::MeasureSurfaceDepth(solver, options, scene, caster);
+  (*metrics)["depth"]["end"] = {{"expected", mgsr::DepthErrorToJson(d.expected)},
+                                {"median", mgsr::DepthErrorToJson(d.median)}};
+  std::printf("%s\n%s\n", DepthLine("depth at the end (train views): expected", d.expected).c_str(),
+              DepthLine("                                median  ", d.median).c_str());
+  std::string text;
+  if (mgsr::ReadFileToString(warmup_depth_path, &text).ok()) {
+    try {
+      (*metrics)["depth"]["after_warmup"] = nlohmann::json::parse(text);
+    } catch (const nlohmann::json::exception&) {
+      // A damaged side file only loses this figure.
+    }
+  }
+  return mgsr::Status::Ok();
+}
+
 // Progress lines and log.csv rows.
 class ProgressLog : public mgsr::IterationCallback {
  public:
@@ -197,56 +302,6 @@ class ProgressLog : public mgsr::IterationCallback {
   bool train_2d_, train_3d_;
   double loss_2d_ = 0, loss_3d_ = 0;
 };
-
-// What the outputs show: appearance from the 3DGS branch and geometry from the 2DGS branch, or
-// both from the one branch a single-branch method trains. Each trained branch is rendered once per
-// view; `surfel_color` keeps the 2DGS colour for `--mesh_color surfel`.
-struct Appearance {
-  mgsr::Image color, tran, ref, weight;
-  float background = 0;
-};
-struct Geometry {
-  mgsr::Image depth, median_depth, alpha, normal_world;
-};
-struct ViewRender {
-  Appearance appearance;
-  Geometry geometry;
-  mgsr::Image surfel_color;  // empty unless the 2DGS branch is trained
-};
-
-ViewRender RenderView(mgsr::MutualBoostedSolver* solver, const mgsr::SolverOptions& o,
-                      const mgsr::Camera& camera) {
-  ViewRender out;
-  if (o.train_2d) {
-    mgsr::SurfelRender sr;
-    solver->RenderSurfels(camera, &sr);
-    const float bg = o.background_2d;
-    if (!o.train_3d) {
-      const int w = sr.color.width(), h = sr.color.height();
-      out.appearance = {sr.color, sr.color, mgsr::Image(w, h, 3), mgsr::Image(w, h, 1), bg};
-    }
-    out.surfel_color = std::move(sr.color);
-    out.geometry = {std::move(sr.depth), std::move(sr.median_depth), std::move(sr.alpha),
-                    std::move(sr.normal_world)};
-  }
-  if (o.train_3d) {
-    mgsr::GaussianRender g;
-    solver->RenderGaussians(camera, &g);
-    if (!o.train_2d) {
-      // 3DGS geometry: expected depth (no median), normals from the depth where it is opaque.
-      mgsr::Image normal = mgsr::DepthToNormal(g.depth, camera);
-      for (size_t k = 0; k < g.alpha.size(); ++k) {
-        if (g.alpha.data()[k] < 0.5f) {
-          for (int c = 0; c < 3; ++c) normal.plane(c)[k] = 0;
-        }
-      }
-      out.geometry = {g.depth, std::move(g.depth), std::move(g.alpha), std::move(normal)};
-    }
-    out.appearance = {std::move(g.color), std::move(g.tran), std::move(g.ref), std::move(g.weight),
-                      o.background_3d};
-  }
-  return out;
-}
 
 mgsr::Image Colorize(const mgsr::Image& one, float lo, float hi) {
   mgsr::Image out(one.width(), one.height(), 1);
@@ -347,6 +402,9 @@ int main(int argc, char** argv) {
   if (FLAGS_mesh_color != "transmitted" && FLAGS_mesh_color != "surfel")
     return Fail("--mesh_color must be transmitted or surfel");
   if (!(FLAGS_voxel_size >= 0)) return Fail("--voxel_size must be >= 0");
+  if (FLAGS_mesh_resolution_scale < 1 || FLAGS_mesh_resolution_scale > 8)
+    return Fail("--mesh_resolution_scale must be between 1 and 8");
+  if (!(FLAGS_tsdf_truncation > 0)) return Fail("--tsdf_truncation must be > 0");
   if (FLAGS_checkpoint_every < 0) return Fail("--checkpoint_every must be >= 0");
   if (FLAGS_eval_every < 0) return Fail("--eval_every must be >= 0");
   double background_level = -1;
@@ -425,6 +483,14 @@ int main(int argc, char** argv) {
   solver.AddCallback(&evaluation);
   PeriodicStop periodic(&solver, FLAGS_checkpoint_every);
   solver.AddCallback(&periodic);
+  mgsr::GroundTruthGeometry ground_truth;
+  s = mgsr::FindGroundTruth(scene.root, &ground_truth);
+  if (!s.ok()) std::fprintf(stderr, "warning: ground truth not used: %s\n", s.message().c_str());
+  std::unique_ptr<mgsr::RayCaster> gt_caster;
+  if (ground_truth.found()) gt_caster = std::make_unique<mgsr::RayCaster>(ground_truth.mesh);
+  DepthAfterWarmup depth_after_warmup(&solver, options, scene, gt_caster.get(),
+                                      mgsr::JoinPath(ckpt_dir, "depth_after_warmup.json"));
+  solver.AddCallback(&depth_after_warmup);
   g_solver = &solver;
   std::signal(SIGINT, OnSigint);
   mgsr::SolveSummary summary;
@@ -460,9 +526,9 @@ int main(int argc, char** argv) {
   nlohmann::json per_view = nlohmann::json::array();
   for (int i : test) {
     const mgsr::View& v = scene.views[i];
-    ViewRender rendered = RenderView(&solver, options, v.camera);
-    const Appearance& g = rendered.appearance;
-    const Geometry& sr = rendered.geometry;
+    mgsr::ViewRender rendered = mgsr::RenderView(&solver, options, v.camera);
+    const mgsr::Appearance& g = rendered.appearance;
+    const mgsr::Geometry& sr = rendered.geometry;
     const mgsr::Image gt = mgsr::CompositeOnBackground(v, g.background);
     const double p = std::min(100.0, mgsr::Psnr(g.color, gt)), q = mgsr::Ssim(g.color, gt);
     psnr += p;
@@ -526,35 +592,19 @@ int main(int argc, char** argv) {
     ssim_aligned /= test.size();
   }
 
-  // Mesh: TSDF fusion of the 2DGS expected depth over the training views, foreground and alpha >=
-  // 0.5, coloured by the 3DGS transmitted (reflection-free) render (single-branch methods: that
-  // branch's depth and colour).
+  // Mesh: TSDF fusion of the geometry branch's depth over the training views (rendered at
+  // --mesh_resolution_scale times their resolution), foreground and alpha >= 0.5, coloured by the
+  // 3DGS transmitted (reflection-free) render (single-branch methods: that branch's depth and
+  // colour).
   mgsr::Timer mesh_timer;
-  std::vector<mgsr::DepthFrame> frames;
-  for (int i : scene.TrainIndices()) {
-    const mgsr::View& v = scene.views[i];
-    ViewRender rendered = RenderView(&solver, options, v.camera);
-    Geometry& sr = rendered.geometry;
-    mgsr::DepthFrame f;
-    f.camera = v.camera;
-    f.depth = std::move(FLAGS_mesh_depth == "median" ? sr.median_depth : sr.depth);
-    if (FLAGS_mesh_color == "surfel" && options.train_2d) {
-      f.color = std::move(rendered.surfel_color);
-    } else {
-      f.color = std::move(rendered.appearance.tran);
-    }
-    f.weight = std::move(sr.alpha);
-    if (!v.mask.empty()) {
-      for (size_t k = 0; k < f.weight.size(); ++k)
-        f.weight.data()[k] *= v.mask.data()[k] >= 0.5f ? 1.0f : 0.0f;
-    }
-    frames.push_back(std::move(f));
-  }
+  mgsr::SurfaceOptions surface;
+  surface.resolution_scale = FLAGS_mesh_resolution_scale;
+  surface.median_depth = FLAGS_mesh_depth == "median";
+  surface.surfel_color = FLAGS_mesh_color == "surfel";
+  surface.voxel_size = FLAGS_voxel_size;
+  surface.truncation_voxels = FLAGS_tsdf_truncation;
   mgsr::TriangleMesh mesh;
-  mgsr::TsdfOptions tsdf;
-  tsdf.keep_largest_component = true;
-  tsdf.voxel_size = FLAGS_voxel_size;
-  s = mgsr::FuseDepthMaps(frames, tsdf, &mesh);
+  s = mgsr::ExtractSurface(&solver, options, scene, surface, &mesh);
   const std::string mesh_path = mgsr::JoinPath(FLAGS_output, "mesh.ply");
   if (s.ok()) s = mgsr::WriteTriangleMesh(mesh_path, mesh);
   if (!s.ok()) std::fprintf(stderr, "warning: no mesh: %s\n", s.message().c_str());
@@ -590,7 +640,10 @@ int main(int argc, char** argv) {
                             {"mesh",
                              {{"path", s.ok() ? mesh_path : ""},
                               {"vertices", mesh.vertices.size()},
-                              {"triangles", mesh.triangles.size()}}}};
+                              {"triangles", mesh.triangles.size()},
+                              {"resolution_scale", surface.resolution_scale},
+                              {"voxel_size", mgsr::SurfaceTsdfOptions(scene, surface).voxel_size},
+                              {"pixel_footprint", mgsr::TrainingFootprint(scene)}}}};
   if (!colmap_metrics.is_null()) metrics["colmap"] = colmap_metrics;
   metrics["background"] = {{"2d", options.background_2d},
                            {"3d", options.background_3d},
@@ -614,13 +667,11 @@ int main(int argc, char** argv) {
     metrics["test"]["depth_abs_error"] = depth_err / depth_views;
     metrics["test"]["depth_abs_error_over_extent"] = depth_err / depth_views / scene.extent;
   }
-  mgsr::TriangleMesh gt_mesh;
-  if (s.ok() && mgsr::ReadTriangleMesh(mgsr::JoinPath(scene.root, "gt/mesh.ply"), &gt_mesh).ok()) {
-    const mgsr::MeshMetrics m = mgsr::EvaluateMesh(mesh, gt_mesh, mgsr::MeshMetricsOptions());
-    metrics["mesh"]["nc"] = m.normal_consistency;
-    metrics["mesh"]["cd"] = std::isfinite(m.chamfer) ? nlohmann::json(m.chamfer) : nlohmann::json();
-    std::printf("mesh vs ground truth: NC x100 %.2f, CD x1000 %.2f\n", 100 * m.normal_consistency,
-                1000 * m.chamfer);
+  if (ground_truth.found()) {
+    const mgsr::Status reported =
+        ReportGeometry(&solver, options, scene, ground_truth, surface, s.ok() ? &mesh : nullptr,
+                       depth_after_warmup.path(), &metrics);
+    if (!reported.ok()) std::fprintf(stderr, "warning: %s\n", reported.message().c_str());
   }
   s = mgsr::WriteStringToFileAtomic(mgsr::JoinPath(FLAGS_output, "metrics.json"),
                                     metrics.dump(2) + "\n");

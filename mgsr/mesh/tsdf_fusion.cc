@@ -7,94 +7,131 @@
 #include <open3d/geometry/TriangleMesh.h>
 #include <open3d/pipelines/integration/ScalableTSDFVolume.h>
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 
 namespace mgsr {
 
-double AutoVoxelSize(const std::vector<DepthFrame>& frames, const Eigen::Vector3d& center) {
+double AutoVoxelSize(const std::vector<Camera>& cameras, const Eigen::Vector3d& center) {
   std::vector<double> footprints;
-  for (const DepthFrame& f : frames) {
-    footprints.push_back((f.camera.Center() - center).norm() / std::max(f.camera.fx, f.camera.fy));
-  }
+  for (const Camera& c : cameras)
+    footprints.push_back((c.Center() - center).norm() / std::max(c.fx, c.fy));
   if (footprints.empty()) return 0.01;
   std::nth_element(footprints.begin(), footprints.begin() + footprints.size() / 2,
                    footprints.end());
   return footprints[footprints.size() / 2];
 }
 
-Status FuseDepthMaps(const std::vector<DepthFrame>& frames, const TsdfOptions& options,
-                     TriangleMesh* mesh) {
-  if (frames.empty()) return Status::Error("TSDF fusion: no depth maps");
-  double depth_max = options.depth_max;
+double AutoVoxelSize(const std::vector<DepthFrame>& frames, const Eigen::Vector3d& center) {
+  std::vector<Camera> cameras;
+  for (const DepthFrame& f : frames) cameras.push_back(f.camera);
+  return AutoVoxelSize(cameras, center);
+}
+
+Eigen::Vector3d LookAtCenter(const std::vector<Camera>& cameras) {
+  // Minimise sum_i |(I - d_i d_i^T)(x - c_i)|^2 over x.
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b = Eigen::Vector3d::Zero(), mean = Eigen::Vector3d::Zero();
+  for (const Camera& c : cameras) {
+    const Eigen::Vector3d d = c.R.row(2).transpose().normalized();  // optical axis in the world
+    const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - d * d.transpose();
+    A += P;
+    b += P * c.Center();
+    mean += c.Center();
+  }
+  if (cameras.empty()) return Eigen::Vector3d::Zero();
+  mean /= static_cast<double>(cameras.size());
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(A);
+  if (!(eig.eigenvalues().minCoeff() > 1e-6 * std::max(1.0, eig.eigenvalues().maxCoeff())))
+    return mean;
+  return A.ldlt().solve(b);
+}
+
+double ResolveVoxelSize(const std::vector<DepthFrame>& frames, const TsdfOptions& options) {
+  if (options.voxel_size > 0) return options.voxel_size;
+  // Centre of the observed points: the average of the back-projected centre pixels is cheap and
+  // robust.
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();
+  int n = 0;
   for (const DepthFrame& f : frames) {
     if (f.depth.channels() != 1 || f.depth.width() != f.camera.width ||
-        f.depth.height() != f.camera.height) {
-      return Status::Error("TSDF fusion: depth map does not match its camera");
+        f.depth.height() != f.camera.height)
+      continue;
+    const float z = f.depth.at(0, f.camera.height / 2, f.camera.width / 2);
+    if (z > 0 && std::isfinite(z)) {
+      center += f.camera.CameraToWorld(
+          f.camera.PixelToRay(f.camera.width / 2.0, f.camera.height / 2.0) * z);
+      ++n;
     }
-    if (options.depth_max <= 0) {
-      for (size_t i = 0; i < f.depth.size(); ++i) {
-        if (std::isfinite(f.depth.data()[i]))
-          depth_max = std::max<double>(depth_max, f.depth.data()[i]);
+  }
+  return AutoVoxelSize(frames, n > 0 ? Eigen::Vector3d(center / n) : Eigen::Vector3d::Zero());
+}
+
+struct TsdfIntegrator::Volume {
+  Volume(double voxel, double truncation)
+      : tsdf(voxel, truncation, open3d::pipelines::integration::TSDFVolumeColorType::RGB8) {}
+  open3d::pipelines::integration::ScalableTSDFVolume tsdf;
+};
+
+TsdfIntegrator::TsdfIntegrator(const TsdfOptions& options)
+    : options_(options),
+      volume_(std::make_unique<Volume>(options.voxel_size,
+                                       options.truncation_voxels * options.voxel_size)) {}
+
+TsdfIntegrator::~TsdfIntegrator() = default;
+
+Status TsdfIntegrator::Integrate(const DepthFrame& f) {
+  if (!(options_.voxel_size > 0)) return Status::Error("TSDF fusion: the voxel size is not set");
+  const int w = f.camera.width, h = f.camera.height;
+  if (f.depth.channels() != 1 || f.depth.width() != w || f.depth.height() != h)
+    return Status::Error("TSDF fusion: depth map does not match its camera");
+  open3d::geometry::Image depth, color;
+  depth.Prepare(w, h, 1, 4);
+  color.Prepare(w, h, 3, 1);
+  const bool has_color = f.color.channels() == 3 && f.color.width() == w && f.color.height() == h;
+  const bool has_weight =
+      f.weight.channels() == 1 && f.weight.width() == w && f.weight.height() == h;
+  double frame_max = 0;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      float z = f.depth.at(0, y, x);
+      if (!std::isfinite(z) || z <= 0 ||
+          (has_weight && f.weight.at(0, y, x) < options_.weight_threshold))
+        z = 0;
+      frame_max = std::max<double>(frame_max, z);
+      *depth.PointerAt<float>(x, y) = z;
+      for (int c = 0; c < 3; ++c) {
+        const float v = has_color ? f.color.at(c, y, x) : 0.7f;
+        *color.PointerAt<uint8_t>(x, y, c) =
+            static_cast<uint8_t>(std::lround(std::clamp(v, 0.0f, 1.0f) * 255));
       }
     }
   }
-  if (!(depth_max > 0)) return Status::Error("TSDF fusion: every depth map is empty");
-  double voxel = options.voxel_size;
-  if (voxel <= 0) {
-    // Centre of the observed points: average of the back-projected centre pixels is cheap and
-    // robust.
-    Eigen::Vector3d center = Eigen::Vector3d::Zero();
-    int n = 0;
-    for (const DepthFrame& f : frames) {
-      const float z = f.depth.at(0, f.camera.height / 2, f.camera.width / 2);
-      if (z > 0 && std::isfinite(z)) {
-        center += f.camera.CameraToWorld(
-            f.camera.PixelToRay(f.camera.width / 2.0, f.camera.height / 2.0) * z);
-        ++n;
-      }
-    }
-    voxel = AutoVoxelSize(frames, n > 0 ? Eigen::Vector3d(center / n) : Eigen::Vector3d::Zero());
-  }
-  open3d::pipelines::integration::ScalableTSDFVolume volume(
-      voxel, options.truncation_voxels * voxel,
-      open3d::pipelines::integration::TSDFVolumeColorType::RGB8);
+  if (frame_max <= 0) return Status::Ok();  // nothing to fuse from this view
+  any_depth_ = true;
+  const double depth_max = options_.depth_max > 0 ? options_.depth_max : frame_max * 1.01;
+  auto rgbd = open3d::geometry::RGBDImage::CreateFromColorAndDepth(color, depth, 1.0, depth_max,
+                                                                   false);
+  // Open3D puts pixel centres at integer coordinates; COLMAP at half-integers.
+  const open3d::camera::PinholeCameraIntrinsic intrinsic(w, h, f.camera.fx, f.camera.fy,
+                                                         f.camera.cx - 0.5, f.camera.cy - 0.5);
   // Open3D 0.16's integrate is far slower with two OpenMP threads than with one on this machine
   // (DESIGN.md section 2): run it single-threaded.
   const int threads = omp_get_max_threads();
   omp_set_num_threads(1);
-  for (const DepthFrame& f : frames) {
-    const int w = f.camera.width, h = f.camera.height;
-    open3d::geometry::Image depth, color;
-    depth.Prepare(w, h, 1, 4);
-    color.Prepare(w, h, 3, 1);
-    const bool has_color = f.color.channels() == 3 && f.color.width() == w && f.color.height() == h;
-    const bool has_weight =
-        f.weight.channels() == 1 && f.weight.width() == w && f.weight.height() == h;
-    for (int y = 0; y < h; ++y) {
-      for (int x = 0; x < w; ++x) {
-        float z = f.depth.at(0, y, x);
-        if (!std::isfinite(z) || z <= 0 ||
-            (has_weight && f.weight.at(0, y, x) < options.weight_threshold))
-          z = 0;
-        *depth.PointerAt<float>(x, y) = z;
-        for (int c = 0; c < 3; ++c) {
-          const float v = has_color ? f.color.at(c, y, x) : 0.7f;
-          *color.PointerAt<uint8_t>(x, y, c) =
-              static_cast<uint8_t>(std::lround(std::clamp(v, 0.0f, 1.0f) * 255));
-        }
-      }
-    }
-    auto rgbd = open3d::geometry::RGBDImage::CreateFromColorAndDepth(color, depth, 1.0,
-                                                                     depth_max * 1.01, false);
-    // Open3D puts pixel centres at integer coordinates; COLMAP at half-integers.
-    const open3d::camera::PinholeCameraIntrinsic intrinsic(w, h, f.camera.fx, f.camera.fy,
-                                                           f.camera.cx - 0.5, f.camera.cy - 0.5);
-    volume.Integrate(*rgbd, intrinsic, f.camera.WorldToCameraMatrix());
-  }
-  auto result = volume.ExtractTriangleMesh();
+  volume_->tsdf.Integrate(*rgbd, intrinsic, f.camera.WorldToCameraMatrix());
   omp_set_num_threads(threads);
-  if (options.keep_largest_component && !result->triangles_.empty()) {
+  return Status::Ok();
+}
+
+Status TsdfIntegrator::Extract(TriangleMesh* mesh) {
+  if (!any_depth_) return Status::Error("TSDF fusion: every depth map is empty");
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  auto result = volume_->tsdf.ExtractTriangleMesh();
+  omp_set_num_threads(threads);
+  if (options_.keep_largest_component && !result->triangles_.empty()) {
     std::vector<int> cluster;
     std::vector<size_t> sizes;
     std::vector<double> areas;
@@ -113,6 +150,22 @@ Status FuseDepthMaps(const std::vector<DepthFrame>& frames, const TsdfOptions& o
   mesh->vertex_normals = result->vertex_normals_;
   for (const auto& c : result->vertex_colors_) mesh->vertex_colors.push_back(c.cast<float>());
   return Status::Ok();
+}
+
+Status FuseDepthMaps(const std::vector<DepthFrame>& frames, const TsdfOptions& options,
+                     TriangleMesh* mesh) {
+  if (frames.empty()) return Status::Error("TSDF fusion: no depth maps");
+  for (const DepthFrame& f : frames) {
+    if (f.depth.channels() != 1 || f.depth.width() != f.camera.width ||
+        f.depth.height() != f.camera.height) {
+      return Status::Error("TSDF fusion: depth map does not match its camera");
+    }
+  }
+  TsdfOptions resolved = options;
+  resolved.voxel_size = ResolveVoxelSize(frames, options);
+  TsdfIntegrator integrator(resolved);
+  for (const DepthFrame& f : frames) MGSR_RETURN_IF_ERROR(integrator.Integrate(f));
+  return integrator.Extract(mesh);
 }
 
 }  // namespace mgsr

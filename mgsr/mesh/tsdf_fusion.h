@@ -2,6 +2,7 @@
 // Open3D's ScalableTSDFVolume from Debian's libopen3d-dev.
 #pragma once
 
+#include <memory>
 #include <vector>
 
 #include "mgsr/core/camera.h"
@@ -30,7 +31,34 @@ struct TsdfOptions {
 
 // The median over views of (distance from the camera to `center`) / focal length: one voxel per
 // pixel footprint at the object, finer than which fusion only adds depth-pixel steps.
+double AutoVoxelSize(const std::vector<Camera>& cameras, const Eigen::Vector3d& center);
 double AutoVoxelSize(const std::vector<DepthFrame>& frames, const Eigen::Vector3d& center);
+
+// The point nearest (least squares) to every camera's optical axis: what an object capture looks
+// at. The mean of the camera centres when the axes are (nearly) parallel.
+Eigen::Vector3d LookAtCenter(const std::vector<Camera>& cameras);
+
+// The voxel FuseDepthMaps uses: options.voxel_size, or (when 0) AutoVoxelSize around the centre
+// of what the frames' centre pixels see. Resolve it once to fuse several sets of frames (a
+// reconstruction and its exact-depth ceiling) on one grid.
+double ResolveVoxelSize(const std::vector<DepthFrame>& frames, const TsdfOptions& options);
+
+// Fuses frames one at a time, so that large (e.g. super-resolved) depth maps need not all be held
+// in memory. The voxel must be given (options.voxel_size > 0).
+class TsdfIntegrator {
+ public:
+  explicit TsdfIntegrator(const TsdfOptions& options);
+  ~TsdfIntegrator();
+  Status Integrate(const DepthFrame& frame);
+  // The mesh of everything integrated so far; an error when no depth was integrated.
+  Status Extract(TriangleMesh* mesh);
+
+ private:
+  struct Volume;
+  TsdfOptions options_;
+  std::unique_ptr<Volume> volume_;
+  bool any_depth_ = false;
+};
 
 Status FuseDepthMaps(const std::vector<DepthFrame>& frames, const TsdfOptions& options,
                      TriangleMesh* mesh);

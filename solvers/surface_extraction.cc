@@ -1,0 +1,117 @@
+#include "solvers/surface_extraction.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "mgsr/mesh/exact_depth_ceiling.h"
+#include "mgsr/synth/ray_caster.h"
+#include "solvers/trained_views.h"
+
+namespace mgsr {
+namespace {
+
+std::vector<Camera> TrainingCameras(const Scene& scene) {
+  std::vector<Camera> cameras;
+  for (int i : scene.TrainIndices()) cameras.push_back(scene.views[i].camera);
+  return cameras;
+}
+
+// A 0/1 mask at the camera's resolution: bilinear over the view's mask (pixel centres at
+// half-integers), then thresholded at 0.5, so the silhouette stays smooth at finer scales.
+Image ResampleMask(const Image& mask, int width, int height) {
+  Image out(width, height, 1, 0.0f);
+  const double sx = static_cast<double>(mask.width()) / width;
+  const double sy = static_cast<double>(mask.height()) / height;
+  for (int y = 0; y < height; ++y) {
+    const double fy = std::clamp((y + 0.5) * sy - 0.5, 0.0, mask.height() - 1.0);
+    const int y0 = static_cast<int>(fy), y1 = std::min(y0 + 1, mask.height() - 1);
+    const double wy = fy - y0;
+    for (int x = 0; x < width; ++x) {
+      const double fx = std::clamp((x + 0.5) * sx - 0.5, 0.0, mask.width() - 1.0);
+      const int x0 = static_cast<int>(fx), x1 = std::min(x0 + 1, mask.width() - 1);
+      const double wx = fx - x0;
+      const double v = (1 - wy) * ((1 - wx) * mask.at(0, y0, x0) + wx * mask.at(0, y0, x1)) +
+                       wy * ((1 - wx) * mask.at(0, y1, x0) + wx * mask.at(0, y1, x1));
+      out.at(0, y, x) = v >= 0.5 ? 1.0f : 0.0f;
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+double TrainingFootprint(const Scene& scene) {
+  const std::vector<Camera> cameras = TrainingCameras(scene);
+  return AutoVoxelSize(cameras, LookAtCenter(cameras));
+}
+
+std::vector<Camera> FusionCameras(const Scene& scene, int resolution_scale) {
+  std::vector<Camera> cameras = TrainingCameras(scene);
+  for (Camera& c : cameras)
+    c = c.Resized(c.width * resolution_scale, c.height * resolution_scale);
+  return cameras;
+}
+
+TsdfOptions SurfaceTsdfOptions(const Scene& scene, const SurfaceOptions& options) {
+  TsdfOptions t;
+  const double footprint = TrainingFootprint(scene);
+  const int k = std::max(1, options.resolution_scale);
+  t.voxel_size = options.voxel_size > 0 ? options.voxel_size : footprint / k;
+  // The band must cover the depth's own error, which does not shrink with the render resolution:
+  // keep it in training footprints.
+  t.truncation_voxels = options.truncation_voxels * footprint / t.voxel_size;
+  t.keep_largest_component = options.keep_largest_component;
+  return t;
+}
+
+Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_options,
+                      const Scene& scene, const SurfaceOptions& options, TriangleMesh* mesh) {
+  if (options.resolution_scale < 1) return Status::Error("mesh resolution scale must be >= 1");
+  const std::vector<int> train = scene.TrainIndices();
+  const std::vector<Camera> cameras = FusionCameras(scene, options.resolution_scale);
+  TsdfIntegrator integrator(SurfaceTsdfOptions(scene, options));
+  for (size_t i = 0; i < train.size(); ++i) {
+    const View& v = scene.views[train[i]];
+    const Camera& camera = cameras[i];
+    ViewRender rendered = RenderView(solver, solver_options, camera, options.surfel_color);
+    Geometry& g = rendered.geometry;
+    DepthFrame f;
+    f.camera = camera;
+    f.depth = std::move(options.median_depth ? g.median_depth : g.depth);
+    f.color = options.surfel_color && solver_options.train_2d ? std::move(rendered.surfel_color)
+                                                              : std::move(rendered.appearance.tran);
+    f.weight = std::move(g.alpha);
+    if (!v.mask.empty()) {
+      const Image mask = options.resolution_scale == 1
+                             ? v.mask
+                             : ResampleMask(v.mask, camera.width, camera.height);
+      for (size_t k = 0; k < f.weight.size(); ++k)
+        f.weight.data()[k] *= mask.data()[k] >= 0.5f ? 1.0f : 0.0f;
+    }
+    MGSR_RETURN_IF_ERROR(integrator.Integrate(f));
+  }
+  return integrator.Extract(mesh);
+}
+
+Status ExactDepthCeiling(const TriangleMesh& ground_truth, const Scene& scene,
+                         const SurfaceOptions& options, TriangleMesh* mesh) {
+  return FuseExactDepth(ground_truth, FusionCameras(scene, std::max(1, options.resolution_scale)),
+                        SurfaceTsdfOptions(scene, options), mesh);
+}
+
+SurfaceDepthReport MeasureSurfaceDepth(MutualBoostedSolver* solver,
+                                       const SolverOptions& solver_options, const Scene& scene,
+                                       const RayCaster& ground_truth) {
+  DepthErrorAccumulator expected, median;
+  for (int i : scene.TrainIndices()) {
+    const View& v = scene.views[i];
+    const ViewRender r = RenderView(solver, solver_options, v.camera, true);
+    const Image truth = RenderExactDepth(ground_truth, v.camera);
+    const Image* mask = v.mask.empty() ? nullptr : &v.mask;
+    expected.Add(r.geometry.depth, truth, mask, v.camera);
+    median.Add(r.geometry.median_depth, truth, mask, v.camera);
+  }
+  return {expected.Finish(), median.Finish()};
+}
+
+}  // namespace mgsr

@@ -1,0 +1,58 @@
+// The mesh of a trained solver (reference 5; DESIGN.md section 6): the geometry branch's depth for
+// every training view, rendered at `resolution_scale` times the training resolution (the models
+// are continuous, so a finer depth map is a better sample of the same surface) and fused into a
+// TSDF whose voxel matches the finer pixel footprint. Also the exact-depth ceiling of the same
+// cameras and settings, and signed depth diagnostics against a ground-truth mesh.
+#pragma once
+
+#include "mgsr/core/status.h"
+#include "mgsr/core/triangle_mesh.h"
+#include "mgsr/eval/depth_error.h"
+#include "mgsr/io/scene.h"
+#include "mgsr/mesh/tsdf_fusion.h"
+#include "solvers/mutual_boosted_solver.h"
+#include "solvers/solver_options.h"
+
+namespace mgsr {
+
+class RayCaster;
+
+struct SurfaceOptions {
+  int resolution_scale = 1;      // render depth for fusion at this many times the resolution
+  bool median_depth = false;     // fuse the 2DGS median depth instead of the expected depth
+  bool surfel_color = false;     // colour the mesh by the 2DGS render (default: 3DGS transmitted)
+  double voxel_size = 0;         // 0: the pixel footprint at the object / resolution_scale
+  double truncation_voxels = 4;  // at resolution_scale 1; kept in scene units at finer scales
+  bool keep_largest_component = true;
+};
+
+// The scene units one training pixel covers at the object (median over the training cameras,
+// at the point their optical axes meet).
+double TrainingFootprint(const Scene& scene);
+
+// The fusion settings for `scene`: the voxel resolved (footprint / scale unless given) and the
+// truncation band kept at truncation_voxels training footprints.
+TsdfOptions SurfaceTsdfOptions(const Scene& scene, const SurfaceOptions& options);
+
+// The training cameras at the fusion resolution.
+std::vector<Camera> FusionCameras(const Scene& scene, int resolution_scale);
+
+// Renders and fuses the trained geometry of every training view; depth is kept where the render's
+// alpha times the view's mask (if any) is at least 0.5.
+Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_options,
+                      const Scene& scene, const SurfaceOptions& options, TriangleMesh* mesh);
+
+// The same fusion of the ground truth's exact depth: what this fusion can achieve at best.
+Status ExactDepthCeiling(const TriangleMesh& ground_truth, const Scene& scene,
+                         const SurfaceOptions& options, TriangleMesh* mesh);
+
+// Signed depth error of the geometry branch's expected and median depth on the training views
+// (inside the masks), against the exact depth of `ground_truth`.
+struct SurfaceDepthReport {
+  DepthErrorStats expected, median;
+};
+SurfaceDepthReport MeasureSurfaceDepth(MutualBoostedSolver* solver,
+                                       const SolverOptions& solver_options, const Scene& scene,
+                                       const RayCaster& ground_truth);
+
+}  // namespace mgsr
