@@ -508,6 +508,12 @@ int main(int argc, char** argv) {
   }
   g_solver = nullptr;
   std::printf("%s\n", summary.BriefReport().c_str());
+  if (FLAGS_checkpoint_every > 0) {
+    // The finished state: --resume then skips training and only rebuilds the outputs (e.g. a mesh
+    // with other fusion settings).
+    s = solver.SaveCheckpoint(ckpt);
+    if (!s.ok()) return Fail(s.message());
+  }
 
   // Models: only the branches this method trains (an untrained branch is its initialisation).
   if (options.train_2d)

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -21,13 +22,18 @@ namespace {
 namespace fs = std::filesystem;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-double Get(const nlohmann::json& j, std::initializer_list<const char*> path) {
+const nlohmann::json* Find(const nlohmann::json& j, std::initializer_list<const char*> path) {
   const nlohmann::json* node = &j;
   for (const char* key : path) {
-    if (!node->is_object() || !node->contains(key)) return kNaN;
+    if (!node->is_object() || !node->contains(key)) return nullptr;
     node = &(*node)[key];
   }
-  return node->is_number() ? node->get<double>() : kNaN;
+  return node;
+}
+
+double Get(const nlohmann::json& j, std::initializer_list<const char*> path) {
+  const nlohmann::json* node = Find(j, path);
+  return node != nullptr && node->is_number() ? node->get<double>() : kNaN;
 }
 
 std::string Fixed(double v, int digits) {
@@ -37,6 +43,13 @@ std::string Fixed(double v, int digits) {
   s.precision(digits);
   s << v;
   return s.str();
+}
+
+// Enough digits that a report rebuilt from results.csv rounds exactly like the original.
+std::string Precise(double v) {
+  char buffer[40];
+  std::snprintf(buffer, sizeof(buffer), "%.17g", v);
+  return buffer;
 }
 
 std::string CsvEscape(const std::string& s) {
@@ -51,7 +64,9 @@ std::string TableRow(const std::string& label, const RunRecord& r) {
   std::ostringstream s;
   s << "| " << label << " | " << Fixed(100 * r.nc, 2) << " | " << Fixed(1000 * r.cd, 2) << " | "
     << Fixed(r.psnr, 2) << " | " << Fixed(r.ssim, 4) << " | " << Fixed(r.psnr_aligned, 2) << " | "
-    << Fixed(r.ssim_aligned, 4) << " | " << Fixed(r.t_warmup, 0) << " | " << Fixed(r.t_mutual, 0)
+    << Fixed(r.ssim_aligned, 4) << " | " << Fixed(r.offset_px, 2) << " | " << Fixed(r.fscore_1px, 3)
+    << " | " << Fixed(100 * r.ceiling_nc, 2) << " | " << Fixed(1000 * r.ceiling_cd, 2) << " | "
+    << Fixed(r.t_warmup, 0) << " | " << Fixed(r.t_mutual, 0)
     << " | " << Fixed(r.t_mesh, 1) << " | " << Fixed(r.t_total, 0) << " | " << Fixed(r.peak_mb, 0)
     << " | " << Fixed(r.gaussians, 0) << " | " << Fixed(r.surfels, 0) << " | "
     << (r.ok ? "ok" : "**failed**: " + r.failure) << " |";
@@ -59,10 +74,11 @@ std::string TableRow(const std::string& label, const RunRecord& r) {
 }
 
 const char* kTableHeader =
-    "| method | NC x100 | CD x1000 | PSNR | SSIM | PSNR aligned | SSIM aligned | warm-up s | "
-    "mutual s | mesh s | total s | peak MB | Gaussians | surfels | status |\n"
+    "| method | NC x100 | CD x1000 | PSNR | SSIM | PSNR aligned | SSIM aligned | offset px | "
+    "F 1px | ceiling NC | ceiling CD | warm-up s | mutual s | mesh s | total s | peak MB | "
+    "Gaussians | surfels | status |\n"
     "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | "
-    "---: | --- |\n";
+    "---: | ---: | ---: | ---: | ---: | --- |\n";
 
 // Charts with gnuplot: one point per run, a colour per method, the Pareto front as a dashed step
 // line. Returns false when gnuplot is not installed.
@@ -280,7 +296,7 @@ std::vector<std::string> SplitCsvLine(const std::string& line) {
 
 constexpr char kCsvHeader[] =
     "scene,method,status,failure,nc,cd,psnr,ssim,psnr_aligned,ssim_aligned,warmup_s,mutual_s,"
-    "mesh_s,total_s,wall_s,peak_mb,gaussians,surfels";
+    "mesh_s,total_s,wall_s,peak_mb,gaussians,surfels,offset_px,fscore_1px,ceiling_nc,ceiling_cd";
 
 }  // namespace
 
@@ -291,6 +307,10 @@ RunRecord::RunRecord()
       ssim(kNaN),
       psnr_aligned(kNaN),
       ssim_aligned(kNaN),
+      offset_px(kNaN),
+      fscore_1px(kNaN),
+      ceiling_nc(kNaN),
+      ceiling_cd(kNaN),
       t_warmup(kNaN),
       t_mutual(kNaN),
       t_mesh(kNaN),
@@ -336,6 +356,14 @@ void ReadRunResult(int exit_code, int signal, bool timed_out, double timeout_sec
   r->ssim = Get(m, {"test", "ssim"});
   r->psnr_aligned = Get(m, {"test", "psnr_aligned"});
   r->ssim_aligned = Get(m, {"test", "ssim_aligned"});
+  r->offset_px = Get(m, {"mesh", "signed_offset_median_px"});
+  r->ceiling_nc = Get(m, {"mesh", "ceiling", "nc"});
+  r->ceiling_cd = Get(m, {"mesh", "ceiling", "cd"});
+  if (const nlohmann::json* f = Find(m, {"mesh", "fscores"}); f != nullptr && f->is_array()) {
+    for (const nlohmann::json& e : *f) {
+      if (e.is_object() && e.value("footprints", 0.0) == 1.0) r->fscore_1px = e.value("fscore", kNaN);
+    }
+  }
   r->t_warmup = Get(m, {"seconds", "warmup"});
   r->t_mutual = Get(m, {"seconds", "mutual"});
   r->t_mesh = Get(m, {"seconds", "mesh"});
@@ -371,9 +399,9 @@ Status ReadResultsCsv(const std::string& path, const std::string& work,
     ++line_number;
     if (line.empty()) continue;
     const std::vector<std::string> f = SplitCsvLine(line);
-    if (f.size() != 18)
+    if (f.size() != 22)
       return Status::Error(path + ": line " + std::to_string(line_number) + " has " +
-                           std::to_string(f.size()) + " fields, expected 18");
+                           std::to_string(f.size()) + " fields, expected 22");
     RunRecord r;
     r.scene = f[0];
     r.method = f[1];
@@ -382,8 +410,9 @@ Status ReadResultsCsv(const std::string& path, const std::string& work,
     r.run_dir = JoinPath(work, "runs/" + r.scene + "/" + r.method);
     double* fields[] = {&r.nc,       &r.cd,           &r.psnr,         &r.ssim,    &r.psnr_aligned,
                         &r.ssim_aligned, &r.t_warmup, &r.t_mutual,     &r.t_mesh,  &r.t_total,
-                        &r.wall_seconds, &r.peak_mb,  &r.gaussians,    &r.surfels};
-    for (int k = 0; k < 14; ++k) {
+                        &r.wall_seconds, &r.peak_mb,  &r.gaussians,    &r.surfels,
+                        &r.offset_px,    &r.fscore_1px, &r.ceiling_nc, &r.ceiling_cd};
+    for (int k = 0; k < 18; ++k) {
       const std::string& v = f[4 + k];
       if (v.empty()) continue;
       char* end = nullptr;
@@ -448,8 +477,9 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
         << CsvEscape(r.failure);
     for (double v :
          {r.nc, r.cd, r.psnr, r.ssim, r.psnr_aligned, r.ssim_aligned, r.t_warmup, r.t_mutual,
-          r.t_mesh, r.t_total, r.wall_seconds, r.peak_mb, r.gaussians, r.surfels}) {
-      csv << "," << (std::isfinite(v) ? Fixed(v, 6) : "");
+          r.t_mesh, r.t_total, r.wall_seconds, r.peak_mb, r.gaussians, r.surfels, r.offset_px,
+          r.fscore_1px, r.ceiling_nc, r.ceiling_cd}) {
+      csv << "," << (std::isfinite(v) ? Precise(v) : "");
     }
     csv << "\n";
   }

@@ -20,6 +20,9 @@ struct RunRecord {
   double wall_seconds = 0;
   // From metrics.json (NaN when absent).
   double nc, cd, psnr, ssim, psnr_aligned, ssim_aligned;
+  // Exact geometry (point to triangle): the median signed offset in training pixel footprints
+  // (negative: inside), the F-score at one footprint, and the exact-depth ceiling's NC and CD.
+  double offset_px, fscore_1px, ceiling_nc, ceiling_cd;
   double t_warmup, t_mutual, t_mesh, t_total, peak_mb;
   double gaussians, surfels;
   RunRecord();
