@@ -205,7 +205,7 @@ class DepthAfterWarmup : public mgsr::IterationCallback {
 // finer), and the signed depth error after the warm-up and at the end.
 mgsr::Status ReportGeometry(mgsr::MutualBoostedSolver* solver, const mgsr::SolverOptions& options,
                             const mgsr::Scene& scene, const mgsr::GroundTruthGeometry& gt,
-                            const mgsr::SurfaceOptions& surface, const mgsr::TriangleMesh* mesh,
+                            const mgsr::RayCaster& gt_caster, const mgsr::SurfaceOptions& surface, const mgsr::TriangleMesh* mesh,
                             const std::string& warmup_depth_path, nlohmann::json* metrics) {
   const double footprint = mgsr::TrainingFootprint(scene);
   mgsr::MeshMetricsOptions mo;
@@ -219,7 +219,7 @@ mgsr::Status ReportGeometry(mgsr::MutualBoostedSolver* solver, const mgsr::Solve
                 "F-score at 1 px %.3f\n",
                 label, 100 * m.normal_consistency, 1000 * m.chamfer, m.signed_offset_median,
                 m.signed_offset_median / footprint, 100 * m.fraction_inside,
-                m.fscores.size() > 4 ? m.fscores[4].fscore : 0.0);
+                m.FScoreAtFootprints(1.0));
   };
   if (mesh != nullptr) {
     const mgsr::MeshMetrics m = mgsr::EvaluateMesh(*mesh, gt.mesh, mo);
@@ -239,8 +239,7 @@ mgsr::Status ReportGeometry(mgsr::MutualBoostedSolver* solver, const mgsr::Solve
     out["ceiling_1x"] = mgsr::MeshMetricsToJson(c1);
     line("ceiling at 1x:          ", c1);
   }
-  const mgsr::RayCaster caster(gt.mesh);
-  const mgsr::SurfaceDepthReport d = mgsr::MeasureSurfaceDepth(solver, options, scene, caster);
+  const mgsr::SurfaceDepthReport d = mgsr::MeasureSurfaceDepth(solver, options, scene, gt_caster);
   (*metrics)["depth"]["end"] = {{"expected", mgsr::DepthErrorToJson(d.expected)},
                                 {"median", mgsr::DepthErrorToJson(d.median)}};
   std::printf("%s\n%s\n", DepthLine("depth at the end (train views): expected", d.expected).c_str(),
@@ -675,7 +674,8 @@ int main(int argc, char** argv) {
   }
   if (ground_truth.found()) {
     const mgsr::Status reported =
-        ReportGeometry(&solver, options, scene, ground_truth, surface, s.ok() ? &mesh : nullptr,
+        ReportGeometry(&solver, options, scene, ground_truth, *gt_caster, surface,
+                       s.ok() ? &mesh : nullptr,
                        depth_after_warmup.path(), &metrics);
     if (!reported.ok()) std::fprintf(stderr, "warning: %s\n", reported.message().c_str());
   }

@@ -71,6 +71,12 @@ struct MeshMetrics {
   double signed_offset_median_gt = 0;
   double pixel_footprint = 0;  // as given in the options
   std::vector<FScore> fscores;
+  // The F-score at `footprints` pixel footprints (0 when it was not measured).
+  double FScoreAtFootprints(double footprints) const {
+    for (const FScore& f : fscores)
+      if (f.footprints == footprints) return f.fscore;
+    return 0.0;
+  }
 };
 
 MeshMetrics EvaluateMesh(const TriangleMesh& predicted, const TriangleMesh& ground_truth,

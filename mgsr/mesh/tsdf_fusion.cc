@@ -48,26 +48,6 @@ Eigen::Vector3d LookAtCenter(const std::vector<Camera>& cameras) {
   return A.ldlt().solve(b);
 }
 
-double ResolveVoxelSize(const std::vector<DepthFrame>& frames, const TsdfOptions& options) {
-  if (options.voxel_size > 0) return options.voxel_size;
-  // Centre of the observed points: the average of the back-projected centre pixels is cheap and
-  // robust.
-  Eigen::Vector3d center = Eigen::Vector3d::Zero();
-  int n = 0;
-  for (const DepthFrame& f : frames) {
-    if (f.depth.channels() != 1 || f.depth.width() != f.camera.width ||
-        f.depth.height() != f.camera.height)
-      continue;
-    const float z = f.depth.at(0, f.camera.height / 2, f.camera.width / 2);
-    if (z > 0 && std::isfinite(z)) {
-      center += f.camera.CameraToWorld(
-          f.camera.PixelToRay(f.camera.width / 2.0, f.camera.height / 2.0) * z);
-      ++n;
-    }
-  }
-  return AutoVoxelSize(frames, n > 0 ? Eigen::Vector3d(center / n) : Eigen::Vector3d::Zero());
-}
-
 struct TsdfIntegrator::Volume {
   Volume(double voxel, double truncation)
       : tsdf(voxel, truncation, open3d::pipelines::integration::TSDFVolumeColorType::RGB8) {}
@@ -151,6 +131,32 @@ Status TsdfIntegrator::Extract(TriangleMesh* mesh) {
   for (const auto& c : result->vertex_colors_) mesh->vertex_colors.push_back(c.cast<float>());
   return Status::Ok();
 }
+
+namespace {
+
+// The voxel FuseDepthMaps uses: options.voxel_size, or (when 0) AutoVoxelSize around the centre of
+// what the frames' centre pixels see.
+double ResolveVoxelSize(const std::vector<DepthFrame>& frames, const TsdfOptions& options) {
+  if (options.voxel_size > 0) return options.voxel_size;
+  // Centre of the observed points: the average of the back-projected centre pixels is cheap and
+  // robust.
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();
+  int n = 0;
+  for (const DepthFrame& f : frames) {
+    if (f.depth.channels() != 1 || f.depth.width() != f.camera.width ||
+        f.depth.height() != f.camera.height)
+      continue;
+    const float z = f.depth.at(0, f.camera.height / 2, f.camera.width / 2);
+    if (z > 0 && std::isfinite(z)) {
+      center += f.camera.CameraToWorld(
+          f.camera.PixelToRay(f.camera.width / 2.0, f.camera.height / 2.0) * z);
+      ++n;
+    }
+  }
+  return AutoVoxelSize(frames, n > 0 ? Eigen::Vector3d(center / n) : Eigen::Vector3d::Zero());
+}
+
+}  // namespace
 
 Status FuseDepthMaps(const std::vector<DepthFrame>& frames, const TsdfOptions& options,
                      TriangleMesh* mesh) {

@@ -38,11 +38,6 @@ double AutoVoxelSize(const std::vector<DepthFrame>& frames, const Eigen::Vector3
 // at. The mean of the camera centres when the axes are (nearly) parallel.
 Eigen::Vector3d LookAtCenter(const std::vector<Camera>& cameras);
 
-// The voxel FuseDepthMaps uses: options.voxel_size, or (when 0) AutoVoxelSize around the centre
-// of what the frames' centre pixels see. Resolve it once to fuse several sets of frames (a
-// reconstruction and its exact-depth ceiling) on one grid.
-double ResolveVoxelSize(const std::vector<DepthFrame>& frames, const TsdfOptions& options);
-
 // Fuses frames one at a time, so that large (e.g. super-resolved) depth maps need not all be held
 // in memory. The voxel must be given (options.voxel_size > 0).
 class TsdfIntegrator {
@@ -60,6 +55,8 @@ class TsdfIntegrator {
   bool any_depth_ = false;
 };
 
+// All frames at once. With options.voxel_size 0 the voxel is AutoVoxelSize around the centre of
+// what the frames' centre pixels see.
 Status FuseDepthMaps(const std::vector<DepthFrame>& frames, const TsdfOptions& options,
                      TriangleMesh* mesh);
 
