@@ -220,6 +220,8 @@ SurfelRenderOptions MutualBoostedSolver::SurfelOptions(const Camera& camera) con
   o.sh_degree = sh_degree_;
   const float bg = options_.background_2d;
   o.background[0] = o.background[1] = o.background[2] = bg;
+  o.low_pass = options_.surfel_area_preserving_low_pass ? SurfelLowPass::kAreaPreserving
+                                                        : SurfelLowPass::kReference;
   return o;
 }
 
@@ -252,6 +254,8 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
     p.AddTerm(std::make_unique<NormalConsistencyLoss>(), ln, Branch::kSurfels2D);
     p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kImage), ln,
               Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<DistortionLoss>(),
+              it > o.distortion_from_iteration ? o.lambda_distortion : 0.0, Branch::kSurfels2D);
   } else {
     t.image = &targets_[view].gt_2d;
     t.transmitted = transmitted;
@@ -273,6 +277,7 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
               w * o.lambda_normal, Branch::kSurfels2D);
     p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kTransmitted),
               w * o.depth_tv_mutual_2d, Branch::kSurfels2D);
+    p.AddTerm(std::make_unique<DistortionLoss>(), w * o.lambda_distortion, Branch::kSurfels2D);
   }
   RenderBuffers in;
   in.camera = &v.camera;

@@ -22,6 +22,7 @@ bool SolverOptions::FromPreset(const std::string& name, SolverOptions* o) {
   o->warmup_max_iterations = Scaled(o->warmup_max_iterations, f);
   o->mutual_iterations = Scaled(o->mutual_iterations, f);
   o->normal_from_iteration = Scaled(o->normal_from_iteration, f);
+  o->distortion_from_iteration = Scaled(o->distortion_from_iteration, f);
   o->position_lr_max_steps = Scaled(o->position_lr_max_steps, f);
   o->sh_interval = Scaled(o->sh_interval, f);
   o->auto_stop_window = 50;
@@ -70,7 +71,7 @@ Status SolverOptions::Validate() const {
   if (!(auto_stop_range >= 0)) return Status::Error("--auto_stop_range must be >= 0");
   if (sh_degree < 0 || sh_degree > 3) return Status::Error("--sh_degree must be in [0, 3]");
   if (sh_interval < 1) return Status::Error("--sh_interval must be >= 1");
-  for (double w : {w_2d, w_3d, w_depth, lambda_normal}) {
+  for (double w : {w_2d, w_3d, w_depth, lambda_normal, lambda_distortion}) {
     if (!(w >= 0) || !std::isfinite(w))
       return Status::Error("loss weights must be finite and >= 0");
   }

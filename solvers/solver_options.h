@@ -40,6 +40,9 @@ struct SolverOptions {
   double lambda_l1 = 0.8;            // render loss: lambda L1 + (1 - lambda) D-SSIM
   double lambda_normal = 0.05;       // normal consistency and normal TV
   int normal_from_iteration = 7000;  // warm-up: normal terms off before this
+  // 2DGS depth distortion (reference 3.4). MGSR leaves it at 0; 2DGS uses 1000 from 3000 on.
+  double lambda_distortion = 0.0;
+  int distortion_from_iteration = 3000;
   double depth_tv_warmup_2d = 1.0;
   double depth_tv_mutual_2d = 0.05;
   double transmitted_tv_3d = 0.1;
@@ -63,6 +66,9 @@ struct SolverOptions {
   // them both are set to the backdrop's level (solvers/backdrop.h) and empty space needs no
   // primitives.
   float background_2d = 1.0f, background_3d = 0.0f;
+  // The 2DGS screen low-pass floor (mgsr/render/rasterize_surfels.h): the reference's
+  // full-opacity one, or area-preserving (edge-on and sub-pixel surfels do not dilate silhouettes).
+  bool surfel_area_preserving_low_pass = false;
   // Per-view exposure compensation (mgsr/loss/exposure_compensation.h): an affine colour model per
   // training view in front of every comparison with a photo, learned at its own rate with a weak
   // prior towards identity, re-fitted with Ceres (Huber) against the warmed-up render when the

@@ -46,6 +46,9 @@ DEFINE_int32(test_every, 8,
              "Without a split file, every Nth image (by name) is held out (0: none).");
 DEFINE_uint64(seed, 0, "Seed for every random choice.");
 DEFINE_string(mutual_mode, "alternate", "alternate (the paper) | joint (the authors' code).");
+DEFINE_string(surfel_low_pass, "reference",
+              "2DGS screen low-pass floor: reference (2DGS: full opacity) | area (its opacity "
+              "scaled by the surfel's projected area: no silhouette dilation).");
 DEFINE_int32(warmup_max_iterations, -1, "Cap of warm-up iterations per branch (-1: preset).");
 DEFINE_int32(warmup_min_iterations, -1, "Auto-stop only after this iteration (-1: preset).");
 DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");
@@ -59,6 +62,8 @@ DEFINE_double(w_3d, 0.5, "Weight of the 3DGS loss in the mutual stage.");
 DEFINE_double(w_depth, 0.01, "Weight of the mutual depth loss.");
 DEFINE_double(lambda_l1, 0.8, "Render loss: lambda L1 + (1 - lambda) D-SSIM.");
 DEFINE_double(lambda_normal, 0.05, "Weight of the normal consistency and normal TV terms.");
+DEFINE_double(lambda_distortion, -1,
+              "Weight of the 2DGS depth-distortion term (-1: the default of SolverOptions).");
 DEFINE_double(
     mutual_transmitted_weight, 0.2,
     "2DGS mutual loss: weight of the render loss against the 3DGS transmitted image (lambda_6).");
@@ -366,6 +371,9 @@ int main(int argc, char** argv) {
   if (!mgsr::SolverOptions::FromPreset(FLAGS_preset, &options))
     return Fail("unknown --preset '" + FLAGS_preset + "' (fast or paper)");
   options.mutual_mode = FLAGS_mutual_mode;
+  if (FLAGS_surfel_low_pass != "area" && FLAGS_surfel_low_pass != "reference")
+    return Fail("--surfel_low_pass must be area or reference");
+  options.surfel_area_preserving_low_pass = FLAGS_surfel_low_pass == "area";
   if (FLAGS_warmup_max_iterations >= 0) options.warmup_max_iterations = FLAGS_warmup_max_iterations;
   if (FLAGS_warmup_min_iterations >= 0) options.warmup_min_iterations = FLAGS_warmup_min_iterations;
   if (FLAGS_mutual_iterations >= 0) options.mutual_iterations = FLAGS_mutual_iterations;
@@ -380,6 +388,11 @@ int main(int argc, char** argv) {
   options.w_depth = FLAGS_w_depth;
   options.lambda_l1 = FLAGS_lambda_l1;
   options.lambda_normal = FLAGS_lambda_normal;
+  if (FLAGS_lambda_distortion >= 0) {
+    options.lambda_distortion = FLAGS_lambda_distortion;
+  } else if (FLAGS_lambda_distortion != -1) {
+    return Fail("--lambda_distortion must be >= 0 (or -1 for the default)");
+  }
   options.mutual_transmitted_weight = FLAGS_mutual_transmitted_weight;
   options.mutual_image_weight = 1.0 - FLAGS_mutual_transmitted_weight;
   if (FLAGS_auto_stop_window >= 0) options.auto_stop_window = FLAGS_auto_stop_window;
@@ -619,6 +632,7 @@ int main(int argc, char** argv) {
                             {"preset", FLAGS_preset},
                             {"method", FLAGS_method},
                             {"mutual_mode", options.mutual_mode},
+                            {"surfel_low_pass", FLAGS_surfel_low_pass},
                             {"seconds",
                              {{"load", load_seconds},
                               {"warmup", summary.warmup_seconds},

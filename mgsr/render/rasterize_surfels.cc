@@ -81,8 +81,33 @@ void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, std::vect
   }
 }
 
+// The low-pass floor's offset c of rho2d (see rasterize_surfels.h): e^{-c/2} = min(1, 2 |det J|)
+// with det J = det M / T_w2^3. `dc` receives d c / d M (row-major over the stored rows, which
+// differ from M by row operations that keep its determinant) where c > 0 and not clamped.
+constexpr float kMinFilterArea = 1e-6f;  // below: the filter adds nothing visible (c is capped)
+inline float LowPassOffset(const float tu[3], const float tv[3], const float tw[3], float dc[9]) {
+  const float cof[9] = {tv[1] * tw[2] - tv[2] * tw[1], tv[2] * tw[0] - tv[0] * tw[2],
+                        tv[0] * tw[1] - tv[1] * tw[0], tw[1] * tu[2] - tw[2] * tu[1],
+                        tw[2] * tu[0] - tw[0] * tu[2], tw[0] * tu[1] - tw[1] * tu[0],
+                        tu[1] * tv[2] - tu[2] * tv[1], tu[2] * tv[0] - tu[0] * tv[2],
+                        tu[0] * tv[1] - tu[1] * tv[0]};
+  const float det = tu[0] * cof[0] + tu[1] * cof[1] + tu[2] * cof[2];
+  const float z = tw[2];
+  const float area = kSurfelFilterInvSquare * std::abs(det) / (z * z * z);
+  if (dc != nullptr) std::fill(dc, dc + 9, 0.0f);
+  if (!(area < 1.0f)) return 0.0f;
+  if (!(area > kMinFilterArea)) return -2.0f * std::log(kMinFilterArea);
+  if (dc != nullptr) {
+    // c = -2 ln|det| + 6 ln z + const; d ln|det| / d M = cof / det.
+    for (int q = 0; q < 9; ++q) dc[q] = -2.0f * cof[q] / det;
+    dc[8] += 6.0f / z;
+  }
+  return -2.0f * std::log(area);
+}
+
 struct Surfel {
   float tu[3], tv[3], tw[3], mx, my, rad, op, n[3], c[3];
+  float low_pass = 0;  // c: added to rho2d
   Surfel(const float* f, int n_, int j) {
     for (int q = 0; q < 3; ++q) {
       tu[q] = f[(kTu0 + q) * n_ + j];
@@ -133,7 +158,7 @@ inline void IntersectRow(const Surfel& s, F16 px, float py, float min_power, I16
   h->dxm = s.mx - px;
   h->dym = simd::Splat(s.my - py);
   h->rho3d = h->u * h->u + h->v * h->v;
-  h->rho2d = kSurfelFilterInvSquare * (h->dxm * h->dxm + h->dym * h->dym);
+  h->rho2d = kSurfelFilterInvSquare * (h->dxm * h->dxm + h->dym * h->dym) + s.low_pass;
   h->splat_branch = h->rho3d <= h->rho2d;
   const F16 rho = simd::Min(h->rho3d, h->rho2d);
   h->z = s.tw[0] * h->u + s.tw[1] * h->v + s.tw[2];
@@ -171,6 +196,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   const float bg[3] = {o.background[0], o.background[1], o.background[2]};
   const Eigen::Matrix3f Rt = o.camera.R.transpose().cast<float>();
   const F16 lanes = simd::Lanes();
+  const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
 
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int tile = 0; tile < bins.num_tiles(); ++tile) {
@@ -215,8 +241,9 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
         for (int k = 0; k < kTilePixels; ++k) any += st[aLive][k];
         if (any == 0) break;
       }
-      const Surfel s(f, n, j);
+      Surfel s(f, n, j);
       if (!(s.op > kMinAlpha)) continue;
+      if (area_preserving) s.low_pass = LowPassOffset(s.tu, s.tv, s.tw, nullptr);
       const float min_power = std::log(kMinAlpha / s.op);
       int ya, yb;
       BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
@@ -309,6 +336,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
   const Eigen::Matrix3f Rc = o.camera.R.cast<float>();
   const F16 lanes = simd::Lanes();
   constexpr float kDmDzScale = kSurfelFar * kSurfelNear / (kSurfelFar - kSurfelNear);
+  const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
 
   scratch->entry_grads.resize(bins.ids.size() * kGradStride);
   scratch->tile_used.assign(bins.num_tiles(), 0);
@@ -404,17 +432,20 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
         }
       }
       for (int j = max_last - 1; j >= 0; --j) {
-        const Surfel s(f, n, j);
+        Surfel s(f, n, j);
         if (!(s.op >
               kMinAlpha)) {  // invisible everywhere: no gradient (the row must still be written)
           std::fill(tg + static_cast<size_t>(j) * kGradStride,
                     tg + static_cast<size_t>(j + 1) * kGradStride, 0.0f);
           continue;
         }
+        float dlow[9] = {};
+        if (area_preserving) s.low_pass = LowPassOffset(s.tu, s.tv, s.tw, dlow);
         const float min_power = std::log(kMinAlpha / s.op);
         int ya, yb;
         BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
         const float jf = static_cast<float>(j);
+        F16 glow{};  // d loss / d c (the low-pass offset)
         F16 gTu0{}, gTu1{}, gTu2{}, gTv0{}, gTv1{}, gTv2{}, gTw0{}, gTw1{}, gTw2{}, gmx{}, gmy{},
             gop{};
         F16 gn0{}, gn1{}, gn2{}, gc0{}, gc1{}, gc2{};
@@ -486,6 +517,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
           const F16 drho2d = simd::Masked(~h.splat_branch, drho) * (2.0f * kSurfelFilterInvSquare);
           gmx += drho2d * h.dxm;
           gmy += drho2d * h.dym;
+          glow += simd::Masked(~h.splat_branch, drho);
           // z = T_w . (u, v, 1) in both branches.
           const F16 dzv = simd::Masked(valid, dz);
           du += dzv * s.tw[0];
@@ -520,6 +552,11 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
                                         &gTw0, &gTw1, &gTw2, &gmx,  &gmy,  &gop,
                                         &gn0,  &gn1,  &gn2,  &gc0,  &gc1,  &gc2};
         for (int q = 0; q < kGradStride; ++q) dst[q] = simd::Sum(*accs[q]);
+        if (area_preserving && s.low_pass > 0) {
+          const float gl = simd::Sum(glow);
+          // The rows T_u, T_v, T_w lead the gradient stride (gTu0 = 0).
+          for (int q = 0; q < 9; ++q) dst[q] += gl * dlow[q];
+        }
       }
       scratch->tile_used[tile] = static_cast<uint32_t>(max_last);
     }

@@ -33,9 +33,11 @@ struct ReferenceSurfelRender {
   std::vector<double> depth, alpha, median, distortion;
 };
 
+// `area_preserving`: the low-pass floor's opacity scaled by min(1, 2 |det J|), det J = det M / z^3
+// (SurfelLowPass::kAreaPreserving); false: the reference's full-opacity floor.
 template <typename Model>
 ReferenceSurfelRender RenderSurfelsReference(const Model& m, const Camera& cam, int sh_degree,
-                                             const double bg[3]) {
+                                             const double bg[3], bool area_preserving) {
   struct S {
     Eigen::Matrix3d M;  // rows T_u, T_v, T_w
     Eigen::Vector2d center;
@@ -107,8 +109,12 @@ ReferenceSurfelRender RenderSurfelsReference(const Model& m, const Camera& cam, 
         if (p.z() == 0) continue;
         const double u = p.x() / p.z(), v = p.y() / p.z();
         const double rho3d = u * u + v * v;
-        const double rho2d = 2 * ((s.center.x() - px) * (s.center.x() - px) +
-                                  (s.center.y() - py) * (s.center.y() - py));
+        double rho2d = 2 * ((s.center.x() - px) * (s.center.x() - px) +
+                            (s.center.y() - py) * (s.center.y() - py));
+        if (area_preserving) {
+          const double area = 2 * std::abs(s.M.determinant()) / std::pow(s.M(2, 2), 3);
+          if (area < 1) rho2d -= 2 * std::log(std::max(area, 1e-6));
+        }
         const double z = s.M(2, 0) * u + s.M(2, 1) * v + s.M(2, 2);
         if (z < near) continue;
         const double G = std::exp(-0.5 * std::min(rho3d, rho2d));

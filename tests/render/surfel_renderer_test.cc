@@ -28,9 +28,11 @@ SurfelModel RandomSurfels(int n, uint64_t seed, double scale_lo = 0.1, double sc
   return m;
 }
 
-SurfelRenderOptions Options(const Camera& cam) {
+SurfelRenderOptions Options(const Camera& cam,
+                            SurfelLowPass low_pass = SurfelLowPass::kAreaPreserving) {
   SurfelRenderOptions o;
   o.camera = cam;
+  o.low_pass = low_pass;
   o.sh_degree = 3;
   o.background[0] = 0.2f;
   o.background[1] = 0.5f;
@@ -40,13 +42,17 @@ SurfelRenderOptions Options(const Camera& cam) {
 
 TEST(SurfelRendererTest, TiledRenderMatchesTheReference) {
   const double bg[3] = {0.2, 0.5, 0.7};
-  for (uint64_t seed : {1, 2, 3, 4}) {
+  for (uint64_t seed : {1, 2, 3, 4, 5, 6}) {
+    // Odd seeds: the reference's full-opacity low-pass floor; even: the area-preserving one.
+    const SurfelLowPass low_pass =
+        seed % 2 == 1 ? SurfelLowPass::kReference : SurfelLowPass::kAreaPreserving;
     const Camera cam = testing::RenderTestCamera(40, 36);
     const SurfelModel m = RandomSurfels(30, seed);
     SurfelRenderer renderer;
     SurfelRender out;
-    renderer.Forward(m, Options(cam), &out);
-    const auto ref = testing::RenderSurfelsReference(m, cam, 3, bg);
+    renderer.Forward(m, Options(cam, low_pass), &out);
+    const auto ref = testing::RenderSurfelsReference(m, cam, 3, bg,
+                                                     low_pass == SurfelLowPass::kAreaPreserving);
     EXPECT_LT(testing::MaxAbsDiff(out.color, ref.color), 1e-5) << seed;
     EXPECT_LT(testing::MaxAbsDiff(out.alpha, ref.alpha), 1e-5) << seed;
     EXPECT_LT(testing::MaxAbsDiff(out.normal, ref.normal), 1e-5) << seed;
@@ -74,8 +80,9 @@ TEST(SurfelRendererTest, TiledRenderMatchesTheReference) {
 // Gradient of every raw parameter for an upstream gradient on each output in turn, against central
 // differences of the double-precision reference.
 void CheckGradients(const SurfelModel& m, const Camera& cam, const char* label,
-                    bool expect_most_checked) {
-  const SurfelRenderOptions o = Options(cam);
+                    bool expect_most_checked,
+                    SurfelLowPass low_pass = SurfelLowPass::kAreaPreserving) {
+  const SurfelRenderOptions o = Options(cam, low_pass);
   const double bg[3] = {0.2, 0.5, 0.7};
   SurfelRenderer renderer;
   SurfelRender out;
@@ -98,7 +105,8 @@ void CheckGradients(const SurfelModel& m, const Camera& cam, const char* label,
     SurfelGradients analytic;
     renderer.Backward(m, o, out, grad, &analytic);
     auto loss = [&](const testing::SurfelModelD& md) {
-      const auto r = testing::RenderSurfelsReference(md, cam, 3, bg);
+      const auto r = testing::RenderSurfelsReference(md, cam, 3, bg,
+                                                     low_pass == SurfelLowPass::kAreaPreserving);
       const std::vector<double>* buf[] = {&r.color,        &r.depth,  &r.alpha,     &r.normal,
                                           &r.normal_world, &r.median, &r.distortion};
       double l = 0;
@@ -167,7 +175,16 @@ TEST(SurfelRendererGradientTest, AllParametersAllOutputsMatchNumericDifferentiat
 TEST(SurfelRendererGradientTest, LowPassBranchMatchesNumericDifferentiation) {
   SurfelModel m = RandomSurfels(6, 12, 0.002, 0.004);
   for (size_t i = 0; i < m.size(); ++i) m.opacity_logits[i] = 2.0f;
-  CheckGradients(m, testing::RenderTestCamera(), "low-pass", false);
+  CheckGradients(m, testing::RenderTestCamera(), "low-pass", false, SurfelLowPass::kReference);
+}
+
+// Surfels of a fraction of a pixel (about 0.2-0.6 px at this camera), some nearly edge-on: the
+// area-preserving floor's opacity min(1, 2 |det J|) is below one, so its gradient through det M
+// (scales, rotation, position, depth) is exercised beside the splat branch.
+TEST(SurfelRendererGradientTest, AreaPreservingLowPassMatchesNumericDifferentiation) {
+  SurfelModel m = RandomSurfels(8, 13, 0.02, 0.06);
+  for (size_t i = 0; i < m.size(); ++i) m.opacity_logits[i] = 2.0f;
+  CheckGradients(m, testing::RenderTestCamera(), "area-preserving low-pass", false);
 }
 
 TEST(SurfelRendererGeometryTest, FlatSplatFacingTheCamera) {

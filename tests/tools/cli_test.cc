@@ -143,6 +143,14 @@ TEST_F(CliTest, SolveRejectsBadOptions) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("--mutual_mode must be alternate or joint"), std::string::npos)
       << r.output;
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --surfel_low_pass mip");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.output, "error: --surfel_low_pass must be area or reference\n");
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --lambda_distortion nan");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.output, "error: --lambda_distortion must be >= 0 (or -1 for the default)\n");
   for (const char* bad : {"1.5", "grey", "0.5x"}) {
     r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
                             " --output /tmp/x --background " + bad);
