@@ -3,6 +3,12 @@
 //   k = x T_w - T_u, l = y T_w - T_v, p = k x l, (u, v) = (p_x, p_y) / p_z   at the pixel centre
 //   (x, y) rho = min(u^2 + v^2, 2 |m - (x, y)|^2 + c)   (the screen low-pass floor), G = exp(-rho /
 //   2) z = T_w . (u, v, 1)  (skipped below the near plane), a = min(0.99, o G)
+// Outputs per pixel: C = sum w c + T_N bg, expected depth D = sum w z / A (0 where A < 1e-4),
+// A = 1 - T_N, N = sum w n (view space; world = R_c^T N), the median depth (z of the last surfel
+// blended while T > 0.5) and the depth distortion sum_i sum_{j<i} w_i w_j (m_i - m_j)^2 of NDC
+// depths m = far/(far-near) (1 - near/z). A surfel affects a pixel only inside its square
+// |x - m_x|, |y - m_y| <= radius and only where a >= 1/255; a pixel stops when T would fall below
+// 1e-4 (that surfel is not blended).
 // The low-pass floor keeps sub-pixel and edge-on surfels visible. The reference (2DGS, the
 // default) gives it the surfel's full opacity (c = 0): a surfel far thinner than a pixel then
 // covers a disk of sigma 0.7 px, so a cover of small edge-on surfels draws its silhouette 1-2 px
