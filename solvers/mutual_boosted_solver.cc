@@ -135,7 +135,9 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
     colors.swap(c);
   }
   InitGaussiansFromPoints(points, colors, options.sh_degree, &gaussians_);
-  InitSurfelsFromPoints(points, colors, options.sh_degree, options.seed + 1, &surfels_);
+  InitSurfelsFromPoints(points, colors, options.sh_degree, options.seed + 1, &surfels_,
+                        options.surfel_orientation_from_points ? SurfelOrientation::kNeighbourhood
+                                                               : SurfelOrientation::kRandom);
   if (!options.reflection) {
     // Plain 3DGS: no reflected layer (sigmoid(-30) ~ 1e-13), and its blocks never learn.
     std::fill(gaussians_.ref_opacity_logits.begin(), gaussians_.ref_opacity_logits.end(), -30.0f);

@@ -69,6 +69,12 @@ struct SolverOptions {
   // The 2DGS screen low-pass floor (mgsr/render/rasterize_surfels.h): the reference's
   // full-opacity one, or area-preserving (edge-on and sub-pixel surfels do not dilate silhouettes).
   bool surfel_area_preserving_low_pass = false;
+  // Initial 2DGS disk orientation: in the plane of each initial point's nearest neighbours
+  // (mgsr/model/init_from_points.h), or the reference's random rotation. Small disks get almost no
+  // orientation gradient from the photos (the screen low-pass makes them look alike at any tilt),
+  // so a random start leaves many tilted, and a tilted disk must sit deeper for its near edge not
+  // to stand out of the surface: README, surface accuracy.
+  bool surfel_orientation_from_points = true;
   // Per-view exposure compensation (mgsr/loss/exposure_compensation.h): an affine colour model per
   // training view in front of every comparison with a photo, learned at its own rate with a weak
   // prior towards identity, re-fitted with Ceres (Huber) against the warmed-up render when the

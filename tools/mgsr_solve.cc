@@ -49,6 +49,9 @@ DEFINE_string(mutual_mode, "alternate", "alternate (the paper) | joint (the auth
 DEFINE_string(surfel_low_pass, "reference",
               "2DGS screen low-pass floor: reference (2DGS: full opacity) | area (its opacity "
               "scaled by the surfel's projected area: no silhouette dilation).");
+DEFINE_string(surfel_init, "neighbours",
+              "Initial 2DGS disk orientation: neighbours (in the plane of each initial point's 16 "
+              "nearest points) | random (the reference).");
 DEFINE_int32(warmup_max_iterations, -1, "Cap of warm-up iterations per branch (-1: preset).");
 DEFINE_int32(warmup_min_iterations, -1, "Auto-stop only after this iteration (-1: preset).");
 DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");
@@ -374,6 +377,9 @@ int main(int argc, char** argv) {
   if (FLAGS_surfel_low_pass != "area" && FLAGS_surfel_low_pass != "reference")
     return Fail("--surfel_low_pass must be area or reference");
   options.surfel_area_preserving_low_pass = FLAGS_surfel_low_pass == "area";
+  if (FLAGS_surfel_init != "neighbours" && FLAGS_surfel_init != "random")
+    return Fail("--surfel_init must be neighbours or random");
+  options.surfel_orientation_from_points = FLAGS_surfel_init == "neighbours";
   if (FLAGS_warmup_max_iterations >= 0) options.warmup_max_iterations = FLAGS_warmup_max_iterations;
   if (FLAGS_warmup_min_iterations >= 0) options.warmup_min_iterations = FLAGS_warmup_min_iterations;
   if (FLAGS_mutual_iterations >= 0) options.mutual_iterations = FLAGS_mutual_iterations;
@@ -633,6 +639,7 @@ int main(int argc, char** argv) {
                             {"method", FLAGS_method},
                             {"mutual_mode", options.mutual_mode},
                             {"surfel_low_pass", FLAGS_surfel_low_pass},
+                            {"surfel_init", FLAGS_surfel_init},
                             {"seconds",
                              {{"load", load_seconds},
                               {"warmup", summary.warmup_seconds},

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <nanoflann.hpp>
 
 #include "mgsr/core/rng.h"
@@ -83,9 +85,48 @@ void InitGaussiansFromPoints(const std::vector<Eigen::Vector3f>& points,
   }
 }
 
+std::vector<float> NeighbourhoodRotations(const std::vector<Eigen::Vector3f>& points, int k) {
+  std::vector<float> out(4 * points.size(), 0.0f);
+  for (size_t i = 0; i < points.size(); ++i) out[4 * i] = 1.0f;
+  if (points.size() < 3) return out;
+  Cloud cloud{points};
+  Tree tree(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  tree.buildIndex();
+  const int want = std::max(3, std::min<int>(k, static_cast<int>(points.size())));
+#pragma omp parallel
+  {
+    std::vector<size_t> idx(want);
+    std::vector<float> d2(want);
+#pragma omp for schedule(static)
+    for (int64_t i = 0; i < static_cast<int64_t>(points.size()); ++i) {
+      const size_t found = tree.knnSearch(points[i].data(), want, idx.data(), d2.data());
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      for (size_t q = 0; q < found; ++q) mean += points[idx[q]].cast<double>();
+      mean /= static_cast<double>(found);
+      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+      for (size_t q = 0; q < found; ++q) {
+        const Eigen::Vector3d d = points[idx[q]].cast<double>() - mean;
+        cov += d * d.transpose();
+      }
+      // Eigenvalues ascend: the last two vectors span the plane, the first is its normal.
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+      Eigen::Matrix3d r;
+      r.col(0) = eig.eigenvectors().col(2);
+      r.col(1) = eig.eigenvectors().col(1);
+      r.col(2) = r.col(0).cross(r.col(1));
+      const Eigen::Quaterniond q(r);
+      out[4 * i] = static_cast<float>(q.w());
+      out[4 * i + 1] = static_cast<float>(q.x());
+      out[4 * i + 2] = static_cast<float>(q.y());
+      out[4 * i + 3] = static_cast<float>(q.z());
+    }
+  }
+  return out;
+}
+
 void InitSurfelsFromPoints(const std::vector<Eigen::Vector3f>& points,
                            const std::vector<Eigen::Vector3f>& colors, int max_sh_degree,
-                           uint64_t seed, SurfelModel* m) {
+                           uint64_t seed, SurfelModel* m, SurfelOrientation orientation) {
   CHECK_EQ(points.size(), colors.size());
   CHECK_LE(max_sh_degree, 3);
   *m = SurfelModel();
@@ -107,6 +148,7 @@ void InitSurfelsFromPoints(const std::vector<Eigen::Vector3f>& points,
     for (int d = 0; d < 4; ++d) m->quats[4 * i + d] = static_cast<float>(rng.Uniform());
     m->opacity_logits[i] = logit;
   }
+  if (orientation == SurfelOrientation::kNeighbourhood) m->quats = NeighbourhoodRotations(points);
 }
 
 }  // namespace mgsr

@@ -3,7 +3,8 @@
 // 3 nearest neighbours). 3DGS: identity rotation, reflected SH DC = transmitted DC, reflected
 // opacity 0.1 and beta 0.1 (the reference stores beta = 1 with an infinite logit, frozen until
 // its first reset to 0.1; starting at 0.1 is equivalent after that reset). 2DGS: a random but
-// seeded rotation.
+// seeded rotation (the reference), or the principal axes of each point's neighbourhood
+// (SurfelOrientation::kNeighbourhood).
 #pragma once
 
 #include <Eigen/Core>
@@ -25,8 +26,20 @@ std::vector<float> MeanSquaredNeighbourDistance(const std::vector<Eigen::Vector3
 void InitGaussiansFromPoints(const std::vector<Eigen::Vector3f>& points,
                              const std::vector<Eigen::Vector3f>& colors, int max_sh_degree,
                              GaussianModel* model);
+// Rotation per point whose columns are the principal axes of the point and its k - 1 nearest
+// neighbours, largest spread first: the third column is the normal of the best-fitting plane (sign
+// arbitrary; surfels are two-sided). Right-handed; (w, x, y, z) per point, 4 x N. Fewer than 3
+// points: identity.
+std::vector<float> NeighbourhoodRotations(const std::vector<Eigen::Vector3f>& points, int k = 16);
+
+enum class SurfelOrientation {
+  kRandom,         // the reference: U(0,1)^4, seeded
+  kNeighbourhood,  // disk in the plane of the point's 16 nearest neighbours
+};
+
 void InitSurfelsFromPoints(const std::vector<Eigen::Vector3f>& points,
                            const std::vector<Eigen::Vector3f>& colors, int max_sh_degree,
-                           uint64_t seed, SurfelModel* model);
+                           uint64_t seed, SurfelModel* model,
+                           SurfelOrientation orientation = SurfelOrientation::kRandom);
 
 }  // namespace mgsr

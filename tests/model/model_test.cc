@@ -1,7 +1,9 @@
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 
+#include "mgsr/core/rng.h"
 #include "mgsr/model/activations.h"
 #include "mgsr/model/gaussian_model.h"
 #include "mgsr/model/init_from_points.h"
@@ -66,6 +68,46 @@ TEST(InitFromPointsTest, SurfelsHaveSeededRandomRotations) {
   EXPECT_NE(a.quats, c.quats);
   EXPECT_EQ(a.log_scales.size(), 2 * pts.size());
   EXPECT_NE(a.quats[0], a.quats[4]);
+}
+
+// Points on a tilted plane and on a sphere: every disk lies in the local surface (its third axis
+// along the plane's normal / the radius), the rotation is proper, and the option reaches the model.
+TEST(InitFromPointsTest, NeighbourhoodOrientationLaysDisksInTheSurface) {
+  Rng rng(3);
+  const Eigen::Vector3d plane_normal = Eigen::Vector3d(0.3, -0.5, 1.0).normalized();
+  const Eigen::Vector3d a = plane_normal.unitOrthogonal(), b = plane_normal.cross(a);
+  std::vector<Eigen::Vector3f> plane, sphere;
+  for (int i = 0; i < 400; ++i) {
+    plane.push_back((rng.Uniform() * a + rng.Uniform() * b + 0.2 * plane_normal).cast<float>());
+    Eigen::Vector3d d(rng.Normal(), rng.Normal(), rng.Normal());
+    sphere.push_back((0.7 * d.normalized()).cast<float>());
+  }
+  auto third_axis = [](const std::vector<float>& q, size_t i, double* det) {
+    const Eigen::Quaterniond r(q[4 * i], q[4 * i + 1], q[4 * i + 2], q[4 * i + 3]);
+    EXPECT_NEAR(r.norm(), 1.0, 1e-5);
+    *det = r.normalized().toRotationMatrix().determinant();
+    return Eigen::Vector3d(r.normalized().toRotationMatrix().col(2));
+  };
+  const std::vector<float> qp = NeighbourhoodRotations(plane);
+  const std::vector<float> qs = NeighbourhoodRotations(sphere);
+  double worst_plane = 1, worst_sphere = 1, det = 0;
+  for (size_t i = 0; i < plane.size(); ++i) {
+    worst_plane = std::min(worst_plane, std::abs(third_axis(qp, i, &det).dot(plane_normal)));
+    EXPECT_NEAR(det, 1.0, 1e-5);
+    const Eigen::Vector3d radial = sphere[i].cast<double>().normalized();
+    worst_sphere = std::min(worst_sphere, std::abs(third_axis(qs, i, &det).dot(radial)));
+  }
+  EXPECT_GT(worst_plane, 0.9999);  // exact up to float rounding
+  EXPECT_GT(worst_sphere, 0.97);   // 16 neighbours span ~0.2 of the radius: a slight chord tilt
+  SurfelModel m, random;
+  std::vector<Eigen::Vector3f> colors(sphere.size(), Eigen::Vector3f(0.5f, 0.5f, 0.5f));
+  InitSurfelsFromPoints(sphere, colors, 3, 1, &m, SurfelOrientation::kNeighbourhood);
+  InitSurfelsFromPoints(sphere, colors, 3, 1, &random, SurfelOrientation::kRandom);
+  EXPECT_EQ(m.quats, qs);
+  EXPECT_NE(random.quats, qs);
+  // Too few points for a plane: identity.
+  const std::vector<float> two = NeighbourhoodRotations({plane[0], plane[1]});
+  EXPECT_EQ(two, (std::vector<float>{1, 0, 0, 0, 1, 0, 0, 0}));
 }
 
 TEST(ParamBlockTest, BlocksCoverEveryFieldWithMatchingSizes) {

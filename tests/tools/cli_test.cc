@@ -148,6 +148,10 @@ TEST_F(CliTest, SolveRejectsBadOptions) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_EQ(r.output, "error: --surfel_low_pass must be area or reference\n");
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --surfel_init pca");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.output, "error: --surfel_init must be neighbours or random\n");
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
                           " --output /tmp/x --lambda_distortion nan");
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_EQ(r.output, "error: --lambda_distortion must be >= 0 (or -1 for the default)\n");

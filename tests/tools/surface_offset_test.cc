@@ -1,8 +1,9 @@
 // Regression guard on where the reconstructed surface lies (issue #17): a short 2DGS run on a
 // small synthetic scene, scored by mgsr_solve itself against the scene's exact mesh. Today's
-// surfaces lie about one to two pixel footprints inside the truth (README, surface accuracy); the
+// surfaces still lie up to a pixel footprint inside the truth (README, surface accuracy); the
 // bounds catch a regression of the kind the exact metric was built to see (a convention slip of
-// the pixel centre, the depth sign, the fusion's truncation), and the exact-depth ceiling must sit
+// the pixel centre, the depth sign, the fusion's truncation, surfels initialised at random
+// orientations again: mesh -0.99 px, median depth -1.30 px), and the exact-depth ceiling must sit
 // on the surface.
 #include <gtest/gtest.h>
 
@@ -17,7 +18,7 @@ namespace {
 
 const std::string kTools = MGSR_TOOLS_DIR;
 
-TEST(SurfaceOffsetTest, ShortRunLiesWithinTwoAndAHalfFootprintsOfTheTruth) {
+TEST(SurfaceOffsetTest, ShortRunLiesWithinAFootprintOfTheTruth) {
   const std::string dir = testing::ScratchDir();
   const auto synth = testing::RunCommand(kTools + "/mgsr_synth --output " + dir +
                                          "/scene --width 64 --height 64 --num_views 24 "
@@ -34,11 +35,12 @@ TEST(SurfaceOffsetTest, ShortRunLiesWithinTwoAndAHalfFootprintsOfTheTruth) {
   const double mesh_px = m["mesh"]["signed_offset_median_px"].get<double>();
   const double ceiling_px = m["mesh"]["ceiling"]["signed_offset_median_px"].get<double>();
   const double depth_px = m["depth"]["end"]["median"]["median_px"].get<double>();
-  // Measured when written (seed 5): mesh -0.99 px, median depth -1.30 px, ceiling +0.07 px.
-  EXPECT_GT(mesh_px, -2.5) << r.output;
+  // Measured (seed 5, disks initialised in the plane of their neighbours): mesh -0.50 px, median
+  // depth +0.02 px, ceiling +0.07 px.
+  EXPECT_GT(mesh_px, -0.85) << r.output;
   EXPECT_LT(mesh_px, 0.5) << r.output;
-  EXPECT_GT(depth_px, -2.5) << r.output;
-  EXPECT_LT(depth_px, 0.5) << r.output;
+  EXPECT_GT(depth_px, -0.8) << r.output;
+  EXPECT_LT(depth_px, 0.8) << r.output;
   EXPECT_LT(std::abs(ceiling_px), 0.25) << r.output;
 }
 
