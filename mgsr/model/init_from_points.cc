@@ -145,7 +145,9 @@ void InitSurfelsFromPoints(const std::vector<Eigen::Vector3f>& points,
     }
     m->log_scales[2 * i] = m->log_scales[2 * i + 1] = log_scale;
     // The reference draws U(0,1)^4 and normalises on use; same here, seeded.
-    for (int d = 0; d < 4; ++d) m->quats[4 * i + d] = static_cast<float>(rng.Uniform());
+    if (orientation == SurfelOrientation::kRandom) {
+      for (int d = 0; d < 4; ++d) m->quats[4 * i + d] = static_cast<float>(rng.Uniform());
+    }
     m->opacity_logits[i] = logit;
   }
   if (orientation == SurfelOrientation::kNeighbourhood) m->quats = NeighbourhoodRotations(points);
