@@ -26,7 +26,8 @@ void AddSh(PlyElement* e, const std::string& prefix, const std::vector<float>& s
 
 Status GetStrided(const PlyElement& e, const std::string& path, const std::string& name,
                   std::vector<float>* v, size_t stride, size_t offset) {
-  const int p = e.FindProperty(name);
+  int p = -1;
+  MGSR_RETURN_IF_ERROR(e.FindScalar(path, name, &p));
   if (p < 0) return Status::Error(path + ": missing vertex property '" + name + "'");
   for (size_t i = 0; i < e.count; ++i) {
     const double x = e.columns[p][i];

@@ -1,6 +1,7 @@
 #include "mgsr/io/ply.h"
 
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <sstream>
 
@@ -91,6 +92,15 @@ int PlyElement::FindProperty(const std::string& n) const {
   return -1;
 }
 
+Status PlyElement::FindScalar(const std::string& path, const std::string& n, int* index) const {
+  *index = FindProperty(n);
+  if (*index >= 0 && properties[*index].is_list) {
+    return Status::Error(path + ": property '" + n + "' of element '" + name +
+                         "' is a list, expected a scalar");
+  }
+  return Status::Ok();
+}
+
 void PlyElement::AddColumn(const std::string& n, const std::string& type,
                            std::vector<double> values) {
   PlyProperty p;
@@ -177,12 +187,26 @@ Status ReadPly(const std::string& path, PlyData* ply) {
   }
   if (!have_format) return Status::Error(path + ": PLY header has no format line");
 
-  // Sanity bound on counts so a corrupt header cannot trigger a huge allocation.
-  for (PlyElement& e : ply->elements) {
-    if (e.count > data.size()) {
-      return Status::Error(path + ": element '" + e.name + "' declares " + std::to_string(e.count) +
-                           " items, more than the file can hold (corrupt or truncated)");
+  // Bound the declared sizes by the file before allocating, so a small corrupt header cannot
+  // demand gigabytes: every scalar takes at least one byte of the body (binary: its type's size;
+  // ASCII: a digit), every list at least its count.
+  const uint64_t body_bytes = data.size() - body;
+  uint64_t least_bytes = 0;
+  for (const PlyElement& e : ply->elements) {
+    uint64_t item_bytes = 0;
+    for (const PlyProperty& p : e.properties) {
+      const int size = TypeSize(p.is_list ? p.count_type : p.type);
+      item_bytes += ply->format == PlyFormat::kAscii ? 1 : static_cast<uint64_t>(size);
     }
+    const bool overflow = item_bytes > 0 && e.count > (UINT64_MAX - least_bytes) / item_bytes;
+    if (e.count > data.size() || overflow || least_bytes + e.count * item_bytes > body_bytes) {
+      return Status::Error(path + ": element '" + e.name + "' declares " + std::to_string(e.count) +
+                           " items of " + std::to_string(e.properties.size()) +
+                           " properties, more than the file can hold (corrupt or truncated)");
+    }
+    least_bytes += e.count * item_bytes;
+  }
+  for (PlyElement& e : ply->elements) {
     e.columns.assign(e.properties.size(), {});
     e.lists.assign(e.properties.size(), {});
     for (size_t p = 0; p < e.properties.size(); ++p) {
@@ -324,7 +348,16 @@ Status ReadTriangleMesh(const std::string& path, TriangleMesh* mesh) {
   *mesh = TriangleMesh();
   const PlyElement* v = ply.FindElement("vertex");
   if (v == nullptr) return Status::Error(path + ": PLY has no 'vertex' element");
-  const int ix = v->FindProperty("x"), iy = v->FindProperty("y"), iz = v->FindProperty("z");
+  int ix, iy, iz, inx, iny, inz, ir, ig, ib;
+  MGSR_RETURN_IF_ERROR(v->FindScalar(path, "x", &ix));
+  MGSR_RETURN_IF_ERROR(v->FindScalar(path, "y", &iy));
+  MGSR_RETURN_IF_ERROR(v->FindScalar(path, "z", &iz));
+  MGSR_RETURN_IF_ERROR(v->FindScalar(path, "nx", &inx));
+  MGSR_RETURN_IF_ERROR(v->FindScalar(path, "ny", &iny));
+  MGSR_RETURN_IF_ERROR(v->FindScalar(path, "nz", &inz));
+  MGSR_RETURN_IF_ERROR(v->FindScalar(path, "red", &ir));
+  MGSR_RETURN_IF_ERROR(v->FindScalar(path, "green", &ig));
+  MGSR_RETURN_IF_ERROR(v->FindScalar(path, "blue", &ib));
   if (ix < 0 || iy < 0 || iz < 0) return Status::Error(path + ": vertices lack x, y, z");
   mesh->vertices.resize(v->count);
   for (size_t i = 0; i < v->count; ++i) {
@@ -333,15 +366,12 @@ Status ReadTriangleMesh(const std::string& path, TriangleMesh* mesh) {
       return Status::Error(path + ": vertex " + std::to_string(i) + " has NaN/inf coordinates");
     }
   }
-  const int inx = v->FindProperty("nx"), iny = v->FindProperty("ny"), inz = v->FindProperty("nz");
   if (inx >= 0 && iny >= 0 && inz >= 0) {
     mesh->vertex_normals.resize(v->count);
     for (size_t i = 0; i < v->count; ++i) {
       mesh->vertex_normals[i] = {v->columns[inx][i], v->columns[iny][i], v->columns[inz][i]};
     }
   }
-  const int ir = v->FindProperty("red"), ig = v->FindProperty("green"),
-            ib = v->FindProperty("blue");
   if (ir >= 0 && ig >= 0 && ib >= 0) {
     const double scale = IsIntegerType(v->properties[ir].type) ? 1.0 / 255.0 : 1.0;
     mesh->vertex_colors.resize(v->count);

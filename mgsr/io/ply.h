@@ -29,6 +29,9 @@ struct PlyElement {
   std::vector<std::vector<std::vector<int64_t>>> lists;
 
   int FindProperty(const std::string& name) const;  // -1 when absent
+  // Index of scalar property `name` in *index (-1 when absent); an error naming `path` when the
+  // property is declared as a list, so a reader never indexes the empty column of a list.
+  Status FindScalar(const std::string& path, const std::string& name, int* index) const;
   // Appends a scalar float property filled from `values` (size must equal count).
   void AddColumn(const std::string& name, const std::string& type, std::vector<double> values);
 };

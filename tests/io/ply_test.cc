@@ -91,6 +91,42 @@ TEST(PlyTest, BadFilesGiveClearErrors) {
   EXPECT_NE(s.message().find("refers to vertex 1 of 1"), std::string::npos) << s.message();
 }
 
+// Found by fuzzing (#18): a list where a scalar belongs crashed the readers, and a small header
+// declaring many properties over many items demanded gigabytes before reading a byte.
+TEST(PlyTest, ListPropertiesAndOversizedHeadersAreRefused) {
+  const std::string dir = testing::ScratchDir();
+  TriangleMesh m;
+  for (const std::string name : {"x", "nx", "red"}) {
+    std::string ply = "ply\nformat ascii 1.0\nelement vertex 1\n";
+    for (const std::string p : {"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue"}) {
+      ply += p == name ? "property list uchar float " + p + "\n" : "property float " + p + "\n";
+    }
+    ply += "end_header\n1 0.5 0 0 0 0 1 0 0 0\n";
+    const std::string path = dir + "/list_" + name + ".ply";
+    ASSERT_TRUE(WriteStringToFileAtomic(path, ply).ok());
+    const Status s = ReadTriangleMesh(path, &m);
+    ASSERT_FALSE(s.ok()) << name;
+    EXPECT_EQ(s.message(), path + ": property '" + name +
+                               "' of element 'vertex' is a list, expected a scalar");
+    GaussianModel g;
+    EXPECT_FALSE(ReadGaussianPly(path, &g).ok());  // the model readers go through the same check
+  }
+  // 3,000 double properties over 100,000 vertices: 2.4 GB of doubles from a 60 kB file.
+  std::string header = "ply\nformat binary_little_endian 1.0\nelement vertex 100000\n";
+  for (int p = 0; p < 3000; ++p) header += "property double p" + std::to_string(p) + "\n";
+  header += "end_header\n" + std::string(1000, '\0');
+  ASSERT_TRUE(WriteStringToFileAtomic(dir + "/huge.ply", header).ok());
+  const Status s = ReadTriangleMesh(dir + "/huge.ply", &m);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("more than the file can hold"), std::string::npos) << s.message();
+  // The same in ASCII, where a value takes at least a byte.
+  std::string ascii = "ply\nformat ascii 1.0\nelement vertex 100000\n";
+  for (int p = 0; p < 3000; ++p) ascii += "property float p" + std::to_string(p) + "\n";
+  ascii += "end_header\n" + std::string(1000, '1');
+  ASSERT_TRUE(WriteStringToFileAtomic(dir + "/huge_ascii.ply", ascii).ok());
+  EXPECT_FALSE(ReadTriangleMesh(dir + "/huge_ascii.ply", &m).ok());
+}
+
 TEST(PlyTest, GaussianPlyRoundTripHasStandardNames) {
   const std::string dir = testing::ScratchDir();
   Rng rng(7);
