@@ -19,6 +19,7 @@
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
 #include "mgsr/io/model_ply.h"
+#include "mgsr/io/output_folder.h"
 #include "mgsr/io/ply.h"
 #include "mgsr/io/scene.h"
 #include "mgsr/eval/ground_truth.h"
@@ -106,6 +107,9 @@ DEFINE_int32(checkpoint_every, 500,
              "Write OUTPUT/checkpoints/latest.ckpt every N iterations (0: only on Ctrl-C).");
 DEFINE_bool(resume, false,
             "Continue from OUTPUT/checkpoints/latest.ckpt (same options and scene).");
+DEFINE_bool(overwrite, false,
+            "Replace a previous run in --output (its results, checkpoints and log); without it "
+            "a non-empty output folder is refused.");
 
 namespace {
 
@@ -270,12 +274,23 @@ class ProgressLog : public mgsr::IterationCallback {
   // branch when it trains alone); an untrained branch shows as "-".
   ProgressLog(const std::string& csv_path, int every, int expected_total, bool append,
               bool train_2d, bool train_3d)
-      : csv_(csv_path, append ? std::ios::app : std::ios::trunc),
+      : path_(csv_path),
         every_(every),
         expected_(expected_total),
         train_2d_(train_2d),
         train_3d_(train_3d) {
-    if (!append) csv_ << "stage,iteration,branch,loss,gaussians,surfels,seconds\n";
+    // A resumed run continues the log; a missing or empty one starts with its header.
+    const bool header = !append || !mgsr::FileExists(csv_path) || std::ifstream(csv_path).peek() ==
+                                                                      std::ifstream::traits_type::eof();
+    csv_.open(csv_path, append ? std::ios::app : std::ios::trunc);
+    if (header) csv_ << "stage,iteration,branch,loss,gaussians,surfels,seconds\n";
+  }
+  // The rows so far reach the disk (at every checkpoint, so a killed run loses none it resumes
+  // from); an error names the file.
+  mgsr::Status Flush() {
+    csv_.flush();
+    if (!csv_) return mgsr::Status::Error(path_ + ": cannot write the training log");
+    return mgsr::Status::Ok();
   }
   void operator()(const mgsr::IterationInfo& i) override {
     const bool is2d = i.branch == mgsr::Branch::kSurfels2D;
@@ -298,6 +313,7 @@ class ProgressLog : public mgsr::IterationCallback {
   }
 
  private:
+  std::string path_;
   std::ofstream csv_;
   static std::string Format(const char* format, double v) {
     char buffer[32];
@@ -432,6 +448,28 @@ int main(int argc, char** argv) {
   }
   const mgsr::Status valid = options.Validate();
   if (!valid.ok()) return Fail(valid.message());
+  if (FLAGS_resume && FLAGS_overwrite) {
+    std::fprintf(stderr, "error: --resume and --overwrite exclude each other\n");
+    return 2;
+  }
+  const std::string ckpt_dir = mgsr::JoinPath(FLAGS_output, "checkpoints");
+  const std::string ckpt = mgsr::JoinPath(ckpt_dir, "latest.ckpt");
+  if (FLAGS_resume && !mgsr::FileExists(ckpt)) return Fail(ckpt + ": no checkpoint to resume from");
+  mgsr::OutputFolder out;
+  {
+    const mgsr::Status opened = mgsr::OutputFolder::Open(
+        FLAGS_output,
+        FLAGS_resume      ? mgsr::OutputMode::kResume
+        : FLAGS_overwrite ? mgsr::OutputMode::kOverwrite
+                          : mgsr::OutputMode::kFresh,
+        &out);
+    if (!opened.ok()) return Fail(opened.message());
+  }
+  // From here on a failure takes back the results it wrote: no folder looks finished unless it is.
+  const auto fail = [&out](const std::string& message) {
+    out.Discard();
+    return Fail(message);
+  };
 
   mgsr::Timer total;
   nlohmann::json colmap_metrics;
@@ -444,9 +482,11 @@ int main(int argc, char** argv) {
     if (FLAGS_resume && mgsr::DirectoryExists(mgsr::JoinPath(dense, "sparse"))) {
       std::printf("colmap: reusing %s (--resume)\n", dense.c_str());
     } else {
+      const mgsr::Status prepared = out.Prepare();  // colmap writes into the output folder
+      if (!prepared.ok()) return fail(prepared.message());
       mgsr::ColmapPipelineSummary cs;
       const mgsr::Status ran = mgsr::RunColmapPipeline(co, &cs);
-      if (!ran.ok()) return Fail(ran.message());
+      if (!ran.ok()) return fail(ran.message());
       mgsr_tools::PrintColmapSummary(cs);
       colmap_metrics = {{"images_given", cs.images_given},
                         {"images_registered", cs.images_registered},
@@ -465,10 +505,8 @@ int main(int argc, char** argv) {
   so.seed = FLAGS_seed;
   mgsr::Scene scene;
   mgsr::Status s = mgsr::LoadScene(FLAGS_workspace, so, &scene);
-  if (!s.ok()) return Fail(s.message());
+  if (!s.ok()) return fail(s.message());
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-  s = mgsr::MakeDirectories(mgsr::JoinPath(FLAGS_output, "renders"));
-  if (!s.ok()) return Fail(s.message());
   const double load_seconds = load_timer.ElapsedSeconds();
   const mgsr::Camera& cam0 = scene.views.front().camera;
   std::printf("scene: %s (%s), %zu train / %zu test views, %dx%d, %zu points, masks: %s\n",
@@ -481,21 +519,23 @@ int main(int argc, char** argv) {
   std::printf("background: %s\n", background_note.c_str());
 
   mgsr::MutualBoostedSolver solver(options, scene);
-  const std::string ckpt_dir = mgsr::JoinPath(FLAGS_output, "checkpoints");
-  const std::string ckpt = mgsr::JoinPath(ckpt_dir, "latest.ckpt");
-  s = mgsr::MakeDirectories(ckpt_dir);
-  if (!s.ok()) return Fail(s.message());
   if (FLAGS_resume) {
-    if (!mgsr::FileExists(ckpt)) return Fail(ckpt + ": no checkpoint to resume from");
     s = solver.LoadCheckpoint(ckpt);
-    if (!s.ok()) return Fail(s.message());
+    if (!s.ok()) return fail(s.message());
     std::printf("resuming from %s\n", ckpt.c_str());
   }
+  // The previous run's results go only now that the scene and the checkpoint are accepted.
+  s = out.Prepare();
+  if (s.ok()) s = mgsr::MakeDirectories(out.Path("renders"));
+  if (s.ok()) s = mgsr::MakeDirectories(ckpt_dir);
+  if (!s.ok()) return fail(s.message());
   const int trained_branches = (options.train_2d ? 1 : 0) + (options.train_3d ? 1 : 0);
-  ProgressLog log(mgsr::JoinPath(FLAGS_output, "log.csv"), FLAGS_log_every,
+  ProgressLog log(out.Path("log.csv"), FLAGS_log_every,
                   trained_branches * options.warmup_max_iterations +
                       (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations,
                   FLAGS_resume, options.train_2d, options.train_3d);
+  s = log.Flush();
+  if (!s.ok()) return fail(s.message());
   solver.AddCallback(&log);
   TestEvaluation evaluation(&solver, scene, FLAGS_eval_every);
   solver.AddCallback(&evaluation);
@@ -515,9 +555,10 @@ int main(int argc, char** argv) {
   while (true) {
     s = solver.Solve(&summary);
     if (s.ok()) break;
-    if (s.message().rfind("interrupted", 0) != 0) return Fail(s.message());
-    const mgsr::Status saved = solver.SaveCheckpoint(ckpt);
-    if (!saved.ok()) return Fail(saved.message());
+    if (s.message().rfind("interrupted", 0) != 0) return fail(s.message());
+    mgsr::Status saved = solver.SaveCheckpoint(ckpt);
+    if (saved.ok()) saved = log.Flush();
+    if (!saved.ok()) return fail(saved.message());
     if (g_interrupted) {
       std::fprintf(stderr, "%s: checkpoint written to %s; run again with --resume to continue\n",
                    s.message().c_str(), ckpt.c_str());
@@ -530,16 +571,21 @@ int main(int argc, char** argv) {
     // The finished state: --resume then skips training and only rebuilds the outputs (e.g. a mesh
     // with other fusion settings).
     s = solver.SaveCheckpoint(ckpt);
-    if (!s.ok()) return Fail(s.message());
+    if (!s.ok()) return fail(s.message());
   }
+  s = log.Flush();
+  if (!s.ok()) return fail(s.message());
 
   // Models: only the branches this method trains (an untrained branch is its initialisation).
-  if (options.train_2d)
-    s = mgsr::WriteSurfelPly(mgsr::JoinPath(FLAGS_output, "point_cloud_2d.ply"), solver.surfels());
-  if (s.ok() && options.train_3d)
-    s = mgsr::WriteGaussianPly(mgsr::JoinPath(FLAGS_output, "point_cloud_3d.ply"),
-                               solver.gaussians());
-  if (!s.ok()) return Fail(s.message());
+  if (options.train_2d) {
+    s = mgsr::WriteSurfelPly(out.Path("point_cloud_2d.ply"), solver.surfels());
+    if (s.ok()) s = out.Record("point_cloud_2d.ply");
+  }
+  if (s.ok() && options.train_3d) {
+    s = mgsr::WriteGaussianPly(out.Path("point_cloud_3d.ply"), solver.gaussians());
+    if (s.ok()) s = out.Record("point_cloud_3d.ply");
+  }
+  if (!s.ok()) return fail(s.message());
 
   // Test views: PSNR / SSIM of the composite (3DGS, or 2DGS for the 2dgs method) against the
   // ground truth on its background, and the renders a person looks at.
@@ -564,7 +610,13 @@ int main(int argc, char** argv) {
     psnr_aligned += std::min(100.0, aligned.psnr);
     ssim_aligned += aligned.ssim;
     const std::string stem = mgsr::FileStem(v.name);
-    const std::string dir = mgsr::JoinPath(FLAGS_output, "renders");
+    // Each render is written and then recorded in the manifest.
+    const auto write_render = [&out, &stem](const std::string& suffix, const mgsr::Image& image) {
+      const std::string name = "renders/" + stem + "_" + suffix + ".png";
+      mgsr::Status w = mgsr::WriteImage(out.Path(name), image);
+      if (w.ok()) w = out.Record(name);
+      return w;
+    };
     float dmin = 1e30f, dmax = 0;
     for (size_t k = 0; k < sr.depth.size(); ++k) {
       if (sr.alpha.data()[k] < 0.5f) continue;
@@ -580,13 +632,12 @@ int main(int argc, char** argv) {
                                                                  {"reflected", &g.ref},
                                                                  {"weight", &g.weight},
                                                                  {"gt", &gt}}) {
-      s = mgsr::WriteImage(mgsr::JoinPath(dir, stem + "_" + suffix + ".png"), *image);
-      if (!s.ok()) return Fail(s.message());
+      s = write_render(suffix, *image);
+      if (!s.ok()) return fail(s.message());
     }
-    s = mgsr::WriteImage(mgsr::JoinPath(dir, stem + "_depth2d.png"),
-                         Colorize(sr.depth, dmin, dmax));
-    if (s.ok()) s = mgsr::WriteImage(mgsr::JoinPath(dir, stem + "_normal2d.png"), normal);
-    if (!s.ok()) return Fail(s.message());
+    s = write_render("depth2d", Colorize(sr.depth, dmin, dmax));
+    if (s.ok()) s = write_render("normal2d", normal);
+    if (!s.ok()) return fail(s.message());
     // Depth error against ground-truth depth maps when the scene has them (synthetic scenes).
     mgsr::Image gt_depth;
     double err = 0;
@@ -629,9 +680,20 @@ int main(int argc, char** argv) {
   surface.truncation_voxels = FLAGS_tsdf_truncation;
   mgsr::TriangleMesh mesh;
   s = mgsr::ExtractSurface(&solver, options, scene, surface, &mesh);
-  const std::string mesh_path = mgsr::JoinPath(FLAGS_output, "mesh.ply");
+  const std::string mesh_path = out.Path("mesh.ply");
+  if (s.ok() && mesh.triangles.empty()) {
+    s = mgsr::Status::Error(
+        mesh_path + ": the fused mesh is empty (no rendered depth of the foreground reached the "
+                    "fusion volume: check the cameras, the masks and the scene's scale)");
+  }
   if (s.ok()) s = mgsr::WriteTriangleMesh(mesh_path, mesh);
-  if (!s.ok()) std::fprintf(stderr, "warning: no mesh: %s\n", s.message().c_str());
+  if (s.ok()) s = out.Record("mesh.ply");
+  if (!s.ok()) {
+    const bool kept = mgsr::FileExists(ckpt);
+    return fail(s.message() + (kept ? "; the trained state is kept in " + ckpt +
+                                          " (--resume rebuilds the outputs from it)"
+                                    : ""));
+  }
   const double mesh_seconds = mesh_timer.ElapsedSeconds();
 
   nlohmann::json metrics = {{"scene", FLAGS_workspace},
@@ -664,7 +726,7 @@ int main(int argc, char** argv) {
                               {"ssim_aligned", ssim_aligned},
                               {"per_view", per_view}}},
                             {"mesh",
-                             {{"path", s.ok() ? mesh_path : ""},
+                             {{"path", mesh_path},
                               {"vertices", mesh.vertices.size()},
                               {"triangles", mesh.triangles.size()},
                               {"resolution_scale", surface.resolution_scale},
@@ -696,20 +758,21 @@ int main(int argc, char** argv) {
   if (ground_truth.found()) {
     const mgsr::Status reported =
         ReportGeometry(&solver, options, scene, ground_truth, *gt_caster, surface,
-                       s.ok() ? &mesh : nullptr,
+                       &mesh,
                        depth_after_warmup.path(), &metrics);
     if (!reported.ok()) std::fprintf(stderr, "warning: %s\n", reported.message().c_str());
   }
-  s = mgsr::WriteStringToFileAtomic(mgsr::JoinPath(FLAGS_output, "metrics.json"),
-                                    metrics.dump(2) + "\n");
-  if (!s.ok()) return Fail(s.message());
+  // Last: the manifest of every file this run wrote, so metrics.json vouches for the folder.
+  metrics["files"] = out.Manifest();
+  s = out.Write("metrics.json", metrics.dump(2) + "\n");
+  if (!s.ok()) return fail(s.message());
   std::printf("test views: PSNR %.2f dB, SSIM %.4f (exposure-aligned %.2f dB, %.4f)", psnr, ssim,
               psnr_aligned, ssim_aligned);
   if (depth_views > 0)
     std::printf(", 2DGS depth error %.4f (%.3f%% of the extent)", depth_err / depth_views,
                 100 * depth_err / depth_views / scene.extent);
   std::printf("\nmesh: %s (%zu triangles); metrics: %s; total %.0f s\n", mesh_path.c_str(),
-              mesh.triangles.size(), mgsr::JoinPath(FLAGS_output, "metrics.json").c_str(),
+              mesh.triangles.size(), out.Path("metrics.json").c_str(),
               total.ElapsedSeconds());
   return 0;
 }

@@ -27,7 +27,7 @@ Status WriteStringToFileAtomic(const std::string& path, const std::string& conte
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) return Status::Error(path + ": cannot open for writing");
     out.write(contents.data(), static_cast<std::streamsize>(contents.size()));
-    out.flush();
+    out.close();  // a full disk may only show when the last buffer goes out
     if (!out) {
       out.close();
       std::remove(tmp.c_str());

@@ -11,6 +11,7 @@
 #include "mgsr/io/colmap_model.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
+#include "mgsr/io/output_folder.h"
 #include "test_util.h"
 
 namespace mgsr {
@@ -87,6 +88,86 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
   const auto bad = testing::RunCommand(kTools + "/mgsr_eval --run " + base_);
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_NE(bad.output.find("metrics.json: cannot open"), std::string::npos) << bad.output;
+}
+
+// #18: one run's results are never mixed with another's, and metrics.json vouches for each file.
+TEST_F(CliTest, SolveRefusesAStaleFolderAndListsWhatItWrote) {
+  const std::string dir = Copy();
+  const std::string solve = kTools + "/mgsr_solve --workspace " + base_ +
+                            " --warmup_max_iterations 10 --warmup_min_iterations 0 "
+                            "--mutual_iterations 4 --log_every 100 --eval_every 0 --output ";
+  auto r = testing::RunCommand(solve + dir + "/a");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = testing::RunCommand(solve + dir + "/b --seed 2");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = testing::RunCommand(solve + dir + "/a --seed 3");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.output, "error: " + dir + "/a: output folder is not empty (use --overwrite to "
+                                        "replace a previous run, or --resume to continue it)\n");
+  r = testing::RunCommand(solve + dir + "/a --resume --overwrite");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.output, "error: --resume and --overwrite exclude each other\n");
+
+  // Every result is listed with its size and SHA-256, and the list is complete.
+  std::string text;
+  ASSERT_TRUE(ReadFileToString(dir + "/a/metrics.json", &text).ok());
+  const nlohmann::json metrics = nlohmann::json::parse(text);
+  ASSERT_TRUE(metrics.contains("files"));
+  EXPECT_TRUE(VerifyOutputManifest(dir + "/a", metrics).ok());
+  size_t renders = 0;
+  for (const auto& e : fs::directory_iterator(dir + "/a/renders")) {
+    EXPECT_TRUE(metrics["files"].contains("renders/" + e.path().filename().string())) << e.path();
+    ++renders;
+  }
+  EXPECT_EQ(renders, 2u * 7u);  // two test views, seven images each
+  for (const char* f : {"mesh.ply", "point_cloud_2d.ply", "point_cloud_3d.ply"})
+    EXPECT_TRUE(metrics["files"].contains(f)) << f;
+
+  // Another run's mesh beside these metrics is caught by mgsr_eval --run.
+  fs::copy_file(dir + "/b/mesh.ply", dir + "/a/mesh.ply", fs::copy_options::overwrite_existing);
+  r = testing::RunCommand(kTools + "/mgsr_eval --run " + dir + "/a");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.output.rfind("error: " + dir + "/a/mesh.ply: does not match the checksum in", 0), 0u)
+      << r.output;
+
+  // --overwrite replaces the run: nothing of the old one survives beside the new one.
+  ASSERT_TRUE(WriteStringToFileAtomic(dir + "/a/renders/stale_gt.png", "x").ok());
+  r = testing::RunCommand(solve + dir + "/a --overwrite --seed 3");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_FALSE(fs::exists(dir + "/a/renders/stale_gt.png"));
+  ASSERT_TRUE(ReadFileToString(dir + "/a/metrics.json", &text).ok());
+  EXPECT_TRUE(VerifyOutputManifest(dir + "/a", nlohmann::json::parse(text)).ok());
+  r = testing::RunCommand(kTools + "/mgsr_eval --run " + dir + "/a");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+}
+
+// A run that cannot write its results fails, and takes back what it wrote: a file-size limit
+// stands in for a full disk (the writes fail with EFBIG once SIGXFSZ is ignored).
+TEST_F(CliTest, SolveThatCannotWriteLeavesNoResult) {
+  const std::string dir = Copy();
+  const std::string args = " --workspace " + base_ +
+                           " --warmup_max_iterations 10 --warmup_min_iterations 0 "
+                           "--mutual_iterations 4 --log_every 100 --eval_every 0 "
+                           "--checkpoint_every 0 --output " +
+                           dir + "/full";
+  // 80 kB: the models (26 and 48 kB) and renders are written, the mesh (~100 kB) is not.
+  auto r = testing::RunCommand("bash -c \"trap '' XFSZ; ulimit -f 80; " + kTools +
+                               "/mgsr_solve" + args + "\"");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find(dir + "/full/mesh.ply: write failed (disk full?)"), std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("error: "), r.output.rfind("error: ")) << "one error: " << r.output;
+  for (const char* f : {"metrics.json", "mesh.ply", "point_cloud_2d.ply", "point_cloud_3d.ply",
+                        "renders"}) {
+    EXPECT_FALSE(fs::exists(dir + "/full/" + f)) << f;
+  }
+  // An output below a file cannot be created: refused before any training.
+  ASSERT_TRUE(WriteStringToFileAtomic(dir + "/plain_file", "x").ok());
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
+                          "/plain_file/out");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.output.rfind("error: " + dir + "/plain_file/out: cannot create folder", 0), 0u)
+      << r.output;
 }
 
 TEST_F(CliTest, SingleBranchMethodReportsAndWritesOnlyItsBranch) {

@@ -1,0 +1,11 @@
+// SHA-256 (FIPS 180-4) of a byte string, as the 64 lower-case hex digits `sha256sum` prints: the
+// checksums a run records for its outputs and its checkpoints, checkable with coreutils.
+#pragma once
+
+#include <string>
+
+namespace mgsr {
+
+std::string Sha256Hex(const std::string& bytes);
+
+}  // namespace mgsr

@@ -1,0 +1,122 @@
+#include "mgsr/io/output_folder.h"
+
+#include <filesystem>
+#include <system_error>
+
+#include "mgsr/core/sha256.h"
+#include "mgsr/io/file_util.h"
+
+namespace mgsr {
+namespace fs = std::filesystem;
+namespace {
+
+// Removes `path` (a file or a folder of results) and a temporary left beside it.
+Status RemovePath(const std::string& path) {
+  std::error_code ec;
+  fs::remove(path + ".tmp", ec);
+  if (!fs::exists(fs::symlink_status(path, ec))) return Status::Ok();  // nothing (or no folder)
+  fs::remove_all(path, ec);
+  if (ec) return Status::Error(path + ": cannot remove the previous run's output: " + ec.message());
+  return Status::Ok();
+}
+
+}  // namespace
+
+const std::vector<std::string>& OutputFolder::ResultNames() {
+  static const std::vector<std::string> names = {"metrics.json", "mesh.ply", "point_cloud_2d.ply",
+                                                 "point_cloud_3d.ply", "renders"};
+  return names;
+}
+
+const std::vector<std::string>& OutputFolder::StateNames() {
+  static const std::vector<std::string> names = {"checkpoints", "log.csv", "colmap"};
+  return names;
+}
+
+Status OutputFolder::Open(const std::string& dir, OutputMode mode, OutputFolder* folder) {
+  *folder = OutputFolder();
+  folder->dir_ = dir;
+  std::error_code ec;
+  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
+    return Status::Error(dir + ": output exists and is not a folder");
+  if (mode == OutputMode::kFresh && fs::is_directory(dir, ec) &&
+      fs::directory_iterator(dir, ec) != fs::directory_iterator()) {
+    return Status::Error(dir + ": output folder is not empty (use --overwrite to replace a previous "
+                               "run, or --resume to continue it)");
+  }
+  folder->mode_ = mode;
+  return Status::Ok();
+}
+
+Status OutputFolder::Prepare() {
+  if (prepared_) return Status::Ok();
+  prepared_ = true;
+  MGSR_RETURN_IF_ERROR(ClearResults());
+  if (mode_ == OutputMode::kOverwrite) {
+    for (const std::string& name : StateNames()) MGSR_RETURN_IF_ERROR(RemovePath(Path(name)));
+  }
+  return MakeDirectories(dir_);
+}
+
+Status OutputFolder::ClearResults() const {
+  // metrics.json goes first (it leads ResultNames), so an interrupted clean-up never leaves a
+  // manifest without its files.
+  for (const std::string& name : ResultNames()) MGSR_RETURN_IF_ERROR(RemovePath(Path(name)));
+  return Status::Ok();
+}
+
+std::string OutputFolder::Path(const std::string& relative) const {
+  return JoinPath(dir_, relative);
+}
+
+Status OutputFolder::Record(const std::string& relative) {
+  std::string bytes;
+  MGSR_RETURN_IF_ERROR(ReadFileToString(Path(relative), &bytes));
+  for (Entry& e : written_) {
+    if (e.name == relative) {
+      e.bytes = bytes.size();
+      e.sha256 = Sha256Hex(bytes);
+      return Status::Ok();
+    }
+  }
+  written_.push_back({relative, Sha256Hex(bytes), bytes.size()});
+  return Status::Ok();
+}
+
+Status OutputFolder::Write(const std::string& relative, const std::string& contents) {
+  MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(Path(relative), contents));
+  return Record(relative);
+}
+
+nlohmann::json OutputFolder::Manifest() const {
+  nlohmann::json files = nlohmann::json::object();
+  for (const Entry& e : written_) files[e.name] = {{"bytes", e.bytes}, {"sha256", e.sha256}};
+  return files;
+}
+
+void OutputFolder::Discard() {
+  // Best effort: the run is failing already, and its own error is the one to report.
+  for (const Entry& e : written_) (void)RemovePath(Path(e.name));
+  written_.clear();
+  (void)ClearResults();
+}
+
+Status VerifyOutputManifest(const std::string& dir, const nlohmann::json& metrics) {
+  const std::string where = JoinPath(dir, "metrics.json");
+  if (!metrics.contains("files") || !metrics["files"].is_object())
+    return Status::Error(where + ": no list of output files (written before checksums were kept?)");
+  for (const auto& [name, entry] : metrics["files"].items()) {
+    const std::string path = JoinPath(dir, name);
+    std::string bytes;
+    if (!ReadFileToString(path, &bytes).ok())
+      return Status::Error(path + ": listed in " + where + " but missing");
+    if (!entry.is_object() || !entry.contains("sha256") || !entry["sha256"].is_string() ||
+        entry["sha256"].get<std::string>() != Sha256Hex(bytes)) {
+      return Status::Error(path + ": does not match the checksum in " + where +
+                           " (written by another run, or changed since)");
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace mgsr
