@@ -25,8 +25,10 @@ class Adam {
   using LearningRates =
       std::function<void(const std::string& name, int width, std::vector<float>* rates)>;
 
-  // One update of every block.
-  void Step(const std::vector<ParamBlock>& params, const std::vector<ParamBlock>& grads,
+  // One update of every block. Returns the name of the first block whose gradient holds a NaN or
+  // an infinity (its update is skipped so the parameters stay as they were), or "" when all are
+  // finite.
+  std::string Step(const std::vector<ParamBlock>& params, const std::vector<ParamBlock>& grads,
             const LearningRates& learning_rates);
   // Mirror the model's row operations.
   void KeepRows(const std::vector<uint8_t>& keep);

@@ -1,8 +1,19 @@
 // Checkpoints of MutualBoostedSolver: a tagged little-endian binary file with everything needed to
 // continue a run exactly (models, optimiser states, density statistics, the random generator, the
 // view order, the stage, iteration and auto-stop windows). Written atomically.
+//
+// Format 3: magic, the options it was written under (name = value lines), the scene's fingerprint
+// (per view: name and a SHA-256 of its size, camera and split), the state, and a SHA-256 of all of
+// it. Loading verifies the checksum first, then refuses other options or another scene naming
+// what differs, then checks every value (finite parameters and moments, steps and iterations in
+// range) before changing anything.
+#include <cmath>
+#include <cstdio>
 #include <deque>
+#include <map>
+#include <sstream>
 
+#include "mgsr/core/sha256.h"
 #include "mgsr/io/binary_stream.h"
 #include "mgsr/io/file_util.h"
 #include "solvers/mutual_boosted_solver.h"
@@ -10,8 +21,42 @@
 namespace mgsr {
 namespace {
 
-// Format 2 added the exposure models.
-constexpr char kMagic[8] = {'M', 'G', 'S', 'R', 'C', 'K', 'P', '2'};
+// Format 2 added the exposure models, 3 the options, the scene fingerprint and the checksum.
+constexpr char kMagic[8] = {'M', 'G', 'S', 'R', 'C', 'K', 'P', '3'};
+constexpr size_t kChecksumChars = 64;
+
+std::string SettingsText(const SolverOptions& o) {
+  std::string text;
+  for (const auto& [name, value] : o.Settings()) text += name + " = " + value + "\n";
+  return text;
+}
+
+// What identifies a view for resuming: its size, camera and split (not the pixels: a re-exported
+// photo may differ in its last bit and still be the same view).
+std::string ViewFingerprint(const View& v) {
+  const Camera& c = v.camera;
+  std::string text;
+  char number[32];
+  auto add = [&](double x) {
+    std::snprintf(number, sizeof(number), "%.17g ", x);
+    text += number;
+  };
+  for (double x : {static_cast<double>(c.width), static_cast<double>(c.height), c.fx, c.fy, c.cx,
+                   c.cy})
+    add(x);
+  for (int i = 0; i < 9; ++i) add(c.R(i / 3, i % 3));
+  for (int i = 0; i < 3; ++i) add(c.t(i));
+  text += v.is_test ? "test" : "train";
+  return Sha256Hex(text);
+}
+
+template <typename Block>
+bool AllFinite(const Block& values) {
+  for (float x : values) {
+    if (!std::isfinite(x)) return false;
+  }
+  return true;
+}
 
 template <typename T>
 void WriteVector(BinaryWriter* w, const std::vector<T>& v) {
@@ -66,6 +111,10 @@ Status ReadModel(BinaryReader* r, Model* m) {
     if (blocks[k].data->size() % width != 0 || (k > 0 && blocks[k].data->size() / width != rows)) {
       return Status::Error(r->path() + ": corrupt checkpoint (block sizes disagree)");
     }
+    if (!AllFinite(*blocks[k].data)) {
+      return Status::Error(r->path() + ": checkpoint holds NaN or infinite values in parameter "
+                           "block '" + name + "'");
+    }
     rows = blocks[k].data->size() / width;
   }
   return Status::Ok();
@@ -97,6 +146,13 @@ Status ReadAdam(BinaryReader* r, Adam* adam) {
     MGSR_RETURN_IF_ERROR(ReadVector(r, &s.m));
     MGSR_RETURN_IF_ERROR(ReadVector(r, &s.v));
     s.width = width;
+    bool v_ok = true;
+    for (float x : s.v) v_ok = v_ok && x >= 0;
+    if (width <= 0 || s.step < 0 || s.m.size() != s.v.size() || s.m.size() % width != 0 ||
+        !AllFinite(s.m) || !AllFinite(s.v) || !v_ok) {
+      return Status::Error(r->path() + ": corrupt checkpoint (optimiser state of '" + name +
+                           "': negative step, NaN or negative moments, or sizes that disagree)");
+    }
     adam->state()[name] = std::move(s);
   }
   return Status::Ok();
@@ -107,6 +163,12 @@ Status ReadAdam(BinaryReader* r, Adam* adam) {
 Status MutualBoostedSolver::SaveCheckpoint(const std::string& path) const {
   BinaryWriter w;
   for (char c : kMagic) w.Write<char>(c);
+  w.WriteCString(SettingsText(options_));
+  w.Write<uint32_t>(static_cast<uint32_t>(scene_.views.size()));
+  for (const View& v : scene_.views) {
+    w.WriteCString(v.name);
+    w.WriteCString(ViewFingerprint(v));
+  }
   w.Write<uint32_t>(static_cast<uint32_t>(train_.size()));
   w.Write<int32_t>(stage_ == Stage::kWarmup ? 0 : 1);
   w.Write<int32_t>(next_iteration_);
@@ -136,21 +198,74 @@ Status MutualBoostedSolver::SaveCheckpoint(const std::string& path) const {
   WriteVector(&w, exposure_3d_.SaveState());
   WriteVector(&w, exposure_2d_.SaveState());
   w.Write<double>(s.exposure_fit_seconds);
-  return WriteStringToFileAtomic(path, w.data());
+  return WriteStringToFileAtomic(path, w.data() + Sha256Hex(w.data()));
 }
 
 Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
   std::string data;
   MGSR_RETURN_IF_ERROR(ReadFileToString(path, &data));
+  if (data.size() < sizeof(kMagic) || data.compare(0, 7, kMagic, 7) != 0)
+    return Status::Error(path + ": not an MGSR checkpoint");
+  if (data[7] != kMagic[7]) {
+    return Status::Error(path + ": checkpoint format " + std::string(1, data[7]) +
+                         " is from another version of mgsr (this one reads format " +
+                         std::string(1, kMagic[7]) + "); start again without --resume");
+  }
+  if (data.size() < sizeof(kMagic) + kChecksumChars ||
+      Sha256Hex(data.substr(0, data.size() - kChecksumChars)) !=
+          data.substr(data.size() - kChecksumChars)) {
+    return Status::Error(path + ": checksum does not match (corrupt or truncated checkpoint)");
+  }
+  data.resize(data.size() - kChecksumChars);
   BinaryReader r(path, data);
   char magic[8] = {};
   for (char& c : magic) MGSR_RETURN_IF_ERROR(r.Read(&c));
-  if (std::string(magic, 7) != std::string(kMagic, 7))
-    return Status::Error(path + ": not an MGSR checkpoint");
-  if (magic[7] != kMagic[7]) {
-    return Status::Error(path + ": checkpoint format " + std::string(1, magic[7]) +
-                         " is from another version of mgsr (this one reads format " +
-                         std::string(1, kMagic[7]) + "); start again without --resume");
+
+  // The options of the run that wrote it: the first that differs is named.
+  std::string settings;
+  MGSR_RETURN_IF_ERROR(r.ReadCString(&settings));
+  std::map<std::string, std::string> recorded;
+  {
+    std::istringstream lines(settings);
+    std::string line;
+    while (std::getline(lines, line)) {
+      const size_t eq = line.find(" = ");
+      if (eq != std::string::npos) recorded[line.substr(0, eq)] = line.substr(eq + 3);
+    }
+  }
+  for (const auto& [name, value] : options_.Settings()) {
+    const auto it = recorded.find(name);
+    if (it == recorded.end()) {
+      return Status::Error(path + ": the checkpoint does not record option " + name +
+                           " (written by another version); start again with --overwrite");
+    }
+    if (it->second != value) {
+      return Status::Error(path + ": the checkpoint was written with " + name + " = " +
+                           it->second + ", this run has " + name + " = " + value +
+                           "; resume with the options of that run, or start again with --overwrite");
+    }
+  }
+  // The scene: same views in the same order, with the same cameras and split.
+  uint32_t all_views = 0;
+  MGSR_RETURN_IF_ERROR(r.Read(&all_views));
+  if (all_views != scene_.views.size()) {
+    return Status::Error(path + ": the checkpoint was written for a scene of " +
+                         std::to_string(all_views) + " views, this one has " +
+                         std::to_string(scene_.views.size()));
+  }
+  for (const View& v : scene_.views) {
+    std::string name, fingerprint;
+    MGSR_RETURN_IF_ERROR(r.ReadCString(&name));
+    MGSR_RETURN_IF_ERROR(r.ReadCString(&fingerprint));
+    if (name != v.name) {
+      return Status::Error(path + ": the checkpoint was written for another scene (view '" +
+                           name + "' there, '" + v.name + "' here)");
+    }
+    if (fingerprint != ViewFingerprint(v)) {
+      return Status::Error(path + ": view '" + v.name +
+                           "' has another size, camera or split than when the checkpoint was "
+                           "written");
+    }
   }
   uint32_t views = 0;
   MGSR_RETURN_IF_ERROR(r.Read(&views));
@@ -213,6 +328,18 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
   for (int v : stack) {
     if (v < 0 || v >= static_cast<int>(scene_.views.size()))
       return Status::Error(path + ": corrupt checkpoint (view order)");
+  }
+  const int last = stage == 0 ? options_.warmup_max_iterations : options_.mutual_iterations;
+  if (stage < 0 || stage > 1 || next < 1 || next > last + 1 || sh < 0 ||
+      sh > options_.sh_degree) {
+    return Status::Error(path + ": corrupt checkpoint (stage " + std::to_string(stage) +
+                         ", next iteration " + std::to_string(next) + ", SH degree " +
+                         std::to_string(sh) + " out of range)");
+  }
+  for (const std::vector<double>* window : {&w2, &w3}) {
+    for (double x : *window) {
+      if (!std::isfinite(x)) return Status::Error(path + ": corrupt checkpoint (NaN in a loss window)");
+    }
   }
   // Everything read: commit.
   stage_ = stage == 0 ? Stage::kWarmup : Stage::kMutual;

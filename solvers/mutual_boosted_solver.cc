@@ -72,9 +72,10 @@ void MoveGradients(RenderGradients* g, SurfelRenderGrad* out) {
 }
 
 // After a branch's backward: densification statistics, the Adam step, then density control and
-// opacity resets on the branch's schedule (reference 1.10). The same for both branches.
+// opacity resets on the branch's schedule (reference 1.10). The same for both branches. Returns the
+// name of a parameter block whose gradient was not finite ("" when all were).
 template <typename Model>
-void OptimizeAndControlDensity(const SolverOptions& o, const BranchSchedule& s, size_t budget,
+std::string OptimizeAndControlDensity(const SolverOptions& o, const BranchSchedule& s, size_t budget,
                                int it, const Camera& camera, const std::vector<float>& mean2d_grads,
                                const std::vector<float>& radii, double extent, Model& grads,
                                Model* model, Adam* adam, DensityStats* stats, Rng* rng) {
@@ -83,7 +84,8 @@ void OptimizeAndControlDensity(const SolverOptions& o, const BranchSchedule& s, 
     ScreenGradientNorms(mean2d_grads, camera.width, camera.height, &norms);
     stats->Accumulate(norms, radii);
   }
-  adam->Step(model->Blocks(), grads.Blocks(), Rates(o, it, extent));
+  const std::string nonfinite = adam->Step(model->Blocks(), grads.Blocks(), Rates(o, it, extent));
+  if (!nonfinite.empty()) return nonfinite;  // the run stops: no density decisions on bad data
   if (it > s.densify_from && it < s.densify_until && it % s.densify_interval == 0) {
     DensityOptions d;
     d.grad_threshold = o.densify_grad_threshold;
@@ -93,6 +95,7 @@ void OptimizeAndControlDensity(const SolverOptions& o, const BranchSchedule& s, 
     DensifyAndPrune(model, adam, stats, d, extent, it > s.opacity_reset_interval, rng);
   }
   if (it < s.densify_until && it % s.opacity_reset_interval == 0) ResetOpacity(model, adam);
+  return "";
 }
 
 }  // namespace
@@ -297,7 +300,7 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
   SurfelGradients grads;
   surfel_renderer_.Backward(surfels_, ro, render, rg, &grads);
 
-  OptimizeAndControlDensity(o, o.schedule_2d, o.max_surfels, it, v.camera, grads.mean2d,
+  nonfinite_block_ = OptimizeAndControlDensity(o, o.schedule_2d, o.max_surfels, it, v.camera, grads.mean2d,
                             surfel_renderer_.projected().radius, scene_.extent, grads.params,
                             &surfels_, &adam_2d_, &stats_2d_, &rng_);
   return loss;
@@ -344,7 +347,7 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it,
   GaussianGradients grads;
   gaussian_renderer_.Backward(gaussians_, ro, render, rg, &grads);
 
-  OptimizeAndControlDensity(o, o.schedule_3d, o.max_gaussians, it, v.camera, grads.mean2d,
+  nonfinite_block_ = OptimizeAndControlDensity(o, o.schedule_3d, o.max_gaussians, it, v.camera, grads.mean2d,
                             gaussian_renderer_.projected().radius, scene_.extent, grads.params,
                             &gaussians_, &adam_3d_, &stats_3d_, &rng_);
   return loss;
@@ -370,6 +373,20 @@ void MutualBoostedSolver::BackpropIntoSurfels(int view, int it, SurfelRender* re
   SurfelGradients grads;
   surfel_renderer_.Backward(surfels_, ro, *render, rg, &grads);
   adam_2d_.Step(surfels_.Blocks(), grads.params.Blocks(), Rates(options_, it, scene_.extent));
+}
+
+Status MutualBoostedSolver::CheckFinite(Branch branch, int iteration, double loss) const {
+  if (std::isfinite(loss) && nonfinite_block_.empty()) return Status::Ok();
+  const std::string where = std::string(branch == Branch::kSurfels2D ? "2DGS" : "3DGS") + " " +
+                            (stage_ == Stage::kWarmup ? "warm-up" : "mutual") + " iteration " +
+                            std::to_string(iteration);
+  if (!nonfinite_block_.empty()) {
+    return Status::Error("non-finite gradient of parameter block '" + nonfinite_block_ + "' at " +
+                         where + " (loss " + std::to_string(loss) +
+                         "); stopped, the last checkpoint is the last good state");
+  }
+  return Status::Error("non-finite loss (" + std::to_string(loss) + ") at " + where +
+                       "; stopped, the last checkpoint is the last good state");
 }
 
 Status MutualBoostedSolver::Solve(SolveSummary* summary) {
@@ -412,12 +429,14 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
     const int view = NextView();
     if (!done_2d) {
       sum.final_loss_2d = StepSurfels(view, Stage::kWarmup, it, nullptr);
+      MGSR_RETURN_IF_ERROR(CheckFinite(Branch::kSurfels2D, it, sum.final_loss_2d));
       sum.warmup_iterations_2d = it;
       Notify(Stage::kWarmup, it, Branch::kSurfels2D, sum.final_loss_2d);
       sum.auto_stopped_2d = o.auto_stop && stop_2d_.Update(it, sum.final_loss_2d);
     }
     if (!done_3d) {
       sum.final_loss_3d = StepGaussians(view, Stage::kWarmup, it, nullptr);
+      MGSR_RETURN_IF_ERROR(CheckFinite(Branch::kGaussians3D, it, sum.final_loss_3d));
       sum.warmup_iterations_3d = it;
       Notify(Stage::kWarmup, it, Branch::kGaussians3D, sum.final_loss_3d);
       sum.auto_stopped_3d = o.auto_stop && stop_3d_.Update(it, sum.final_loss_3d);
@@ -458,6 +477,7 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
       SurfelRender s2;
       if (o.bidirectional) RenderSurfels(scene_.views[view].camera, &s2);
       sum.final_loss_2d = StepSurfels(view, Stage::kMutual, schedule_it, &target);
+      MGSR_RETURN_IF_ERROR(CheckFinite(Branch::kSurfels2D, it, sum.final_loss_2d));
       if (o.bidirectional) {
         // d L_2D / d C_tran: the render loss is symmetric in its two images, so it is the gradient
         // of the same loss with the roles swapped (the 2DGS render as the target). Pixels forced to
@@ -489,6 +509,7 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
       GaussianRender g3;
       if (o.bidirectional) RenderGaussians(scene_.views[view].camera, &g3);
       sum.final_loss_3d = StepGaussians(view, Stage::kMutual, schedule_it, &s.depth);
+      MGSR_RETURN_IF_ERROR(CheckFinite(Branch::kGaussians3D, it, sum.final_loss_3d));
       if (o.bidirectional) {
         // d L_Z / d Z2D for L_Z = mean((D / max D - Z / max Z)^2), maxima held constant. The surfel
         // renderer still holds the forward state of `s` (the 3DGS step does not use it).

@@ -74,6 +74,10 @@ class MutualBoostedSolver {
 
   const GaussianModel& gaussians() const { return gaussians_; }
   const SurfelModel& surfels() const { return surfels_; }
+  // For tools and tests that edit a model between runs (the optimiser state keeps its rows: change
+  // values, not sizes).
+  GaussianModel* mutable_gaussians() { return &gaussians_; }
+  SurfelModel* mutable_surfels() { return &surfels_; }
   int active_sh_degree() const { return sh_degree_; }
   // Per-view colour transforms (indexed like scene.views; identity for test views).
   const ExposureModel& exposure(Branch branch) const { return ExposureFor(branch); }
@@ -87,6 +91,9 @@ class MutualBoostedSolver {
     Image gt_2d, gt_3d;  // ground truth on each branch's background
   };
   double StepSurfels(int view, Stage stage, int iteration, const Image* transmitted_target);
+  // An error naming the branch, iteration and block when the last step's loss or gradient was not
+  // finite (NaN or inf): the run stops before a bad state can reach a checkpoint.
+  Status CheckFinite(Branch branch, int iteration, double loss) const;
   double StepGaussians(int view, Stage stage, int iteration, const Image* surfel_depth);
   // Bidirectional mode: back-propagates a gradient on the other branch's render (whose forward
   // state its renderer still holds) and steps that branch.
@@ -132,6 +139,7 @@ class MutualBoostedSolver {
   bool finished_ = false;
   AutoStop stop_2d_, stop_3d_;
   SolveSummary summary_;
+  std::string nonfinite_block_;  // of the last step, for CheckFinite
   volatile std::sig_atomic_t stop_requested_ = 0;
 };
 

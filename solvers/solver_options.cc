@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 namespace mgsr {
 namespace {
@@ -87,6 +88,77 @@ Status SolverOptions::Validate() const {
   if (!(background_2d >= 0 && background_2d <= 1) || !(background_3d >= 0 && background_3d <= 1))
     return Status::Error("background levels must be in [0, 1]");
   return Status::Ok();
+}
+
+namespace {
+
+std::string Text(double v) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%.17g", v);
+  return buffer;
+}
+std::string Text(const BranchSchedule& b) {
+  return std::to_string(b.densify_from) + " " + std::to_string(b.densify_until) + " " +
+         std::to_string(b.densify_interval) + " " + std::to_string(b.opacity_reset_interval) +
+         " " + Text(b.min_opacity);
+}
+
+}  // namespace
+
+std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const {
+  return {{"auto_stop", Text(auto_stop)},
+          {"warmup_min_iterations", Text(warmup_min_iterations)},
+          {"warmup_max_iterations", Text(warmup_max_iterations)},
+          {"auto_stop_window", Text(auto_stop_window)},
+          {"auto_stop_range", Text(auto_stop_range)},
+          {"mutual_iterations", Text(mutual_iterations)},
+          {"mutual_mode", mutual_mode},
+          {"bidirectional", Text(bidirectional)},
+          {"train_2d", Text(train_2d)},
+          {"train_3d", Text(train_3d)},
+          {"reflection", Text(reflection)},
+          {"lambda_l1", Text(lambda_l1)},
+          {"lambda_normal", Text(lambda_normal)},
+          {"normal_from_iteration", Text(normal_from_iteration)},
+          {"lambda_distortion", Text(lambda_distortion)},
+          {"distortion_from_iteration", Text(distortion_from_iteration)},
+          {"depth_tv_warmup_2d", Text(depth_tv_warmup_2d)},
+          {"depth_tv_mutual_2d", Text(depth_tv_mutual_2d)},
+          {"transmitted_tv_3d", Text(transmitted_tv_3d)},
+          {"depth_tv_3d", Text(depth_tv_3d)},
+          {"w_2d", Text(w_2d)},
+          {"w_3d", Text(w_3d)},
+          {"w_depth", Text(w_depth)},
+          {"mutual_transmitted_weight", Text(mutual_transmitted_weight)},
+          {"mutual_image_weight", Text(mutual_image_weight)},
+          {"schedule_2d", Text(schedule_2d)},
+          {"schedule_3d", Text(schedule_3d)},
+          {"densify_grad_threshold", Text(densify_grad_threshold)},
+          {"percent_dense", Text(percent_dense)},
+          {"max_gaussians", Text(static_cast<double>(max_gaussians))},
+          {"max_surfels", Text(static_cast<double>(max_surfels))},
+          {"position_lr_init", Text(position_lr_init)},
+          {"position_lr_final", Text(position_lr_final)},
+          {"position_lr_max_steps", Text(position_lr_max_steps)},
+          {"feature_lr", Text(feature_lr)},
+          {"opacity_lr", Text(opacity_lr)},
+          {"scaling_lr", Text(scaling_lr)},
+          {"rotation_lr", Text(rotation_lr)},
+          {"sh_degree", Text(sh_degree)},
+          {"sh_interval", Text(sh_interval)},
+          {"background_2d", Text(background_2d)},
+          {"background_3d", Text(background_3d)},
+          {"surfel_area_preserving_low_pass", Text(surfel_area_preserving_low_pass)},
+          {"surfel_orientation_from_points", Text(surfel_orientation_from_points)},
+          {"exposure", ExposureModeName(exposure)},
+          {"exposure_lr", Text(exposure_lr)},
+          {"exposure_prior", Text(exposure_prior)},
+          {"exposure_offset_prior", Text(exposure_offset_prior)},
+          {"exposure_mean_prior", Text(exposure_mean_prior)},
+          {"exposure_per_branch", Text(exposure_per_branch)},
+          {"exposure_fit_at_mutual", Text(exposure_fit_at_mutual)},
+          {"max_init_points", Text(static_cast<double>(max_init_points))},
+          {"seed", std::to_string(seed)}};
 }
 
 }  // namespace mgsr

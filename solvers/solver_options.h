@@ -6,6 +6,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "mgsr/core/status.h"
 #include "mgsr/loss/exposure_compensation.h"
@@ -97,6 +99,10 @@ struct SolverOptions {
   // iterations as its own cap (auto-stop still applies) and no mutual stage.
   static bool ApplyMethod(const std::string& method, SolverOptions* options);
   Status Validate() const;
+  // Every option as (name, value text), in declaration order: what a checkpoint records so that
+  // --resume refuses to continue a run under other options, naming the one that differs. A new
+  // option adds one line here.
+  std::vector<std::pair<std::string, std::string>> Settings() const;
 };
 
 }  // namespace mgsr

@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <cstring>
+
 #include <cmath>
 #include <functional>
 #include <map>
@@ -8,6 +10,7 @@
 #include "mgsr/eval/image_metrics.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/scene.h"
+#include "mgsr/core/sha256.h"
 #include "mgsr/model/activations.h"
 #include "solvers/adam.h"
 #include "solvers/auto_stop.h"
@@ -371,6 +374,130 @@ TEST(CheckpointTest, BadCheckpointsAreRefused) {
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("not an MGSR checkpoint"), std::string::npos) << s.message();
   EXPECT_TRUE(solver.LoadCheckpoint(dir + "/ok.ckpt").ok());
+}
+
+// #18: a checkpoint carries its options, its scene's fingerprint and a checksum, and every value is
+// checked before the solver takes any of it.
+std::string Reseal(const std::string& body) { return body + Sha256Hex(body); }
+std::string Body(const std::string& data) { return data.substr(0, data.size() - 64); }
+
+void ExpectRefused(MutualBoostedSolver* solver, const std::string& path, const std::string& bytes,
+                   const std::string& expected) {
+  ASSERT_TRUE(WriteStringToFileAtomic(path, bytes).ok());
+  const Status s = solver->LoadCheckpoint(path);
+  ASSERT_FALSE(s.ok()) << expected;
+  EXPECT_EQ(s.message().rfind(path + ": ", 0), 0u) << s.message();
+  EXPECT_NE(s.message().find(expected), std::string::npos) << s.message();
+}
+
+TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
+  const std::string dir = testing::ScratchDir();
+  const Scene scene = TinyScene(dir + "/scene");
+  SolverOptions o = TinyOptions();
+  o.warmup_max_iterations = 12;
+  o.mutual_iterations = 4;
+  MutualBoostedSolver writer(o, scene);
+  StopAt stop(&writer, Stage::kWarmup, 6);
+  writer.AddCallback(&stop);
+  SolveSummary summary;
+  ASSERT_FALSE(writer.Solve(&summary).ok());  // interrupted, with Adam steps taken
+  const std::string ckpt = dir + "/ok.ckpt";
+  ASSERT_TRUE(writer.SaveCheckpoint(ckpt).ok());
+  std::string data;
+  ASSERT_TRUE(ReadFileToString(ckpt, &data).ok());
+  MutualBoostedSolver reader(o, scene);
+  ASSERT_TRUE(reader.LoadCheckpoint(ckpt).ok());
+  const std::string bad = dir + "/bad.ckpt";
+
+  // One flipped bit anywhere.
+  std::string flipped = data;
+  flipped[flipped.size() / 2] ^= 1;
+  ExpectRefused(&reader, bad, flipped, "checksum does not match (corrupt or truncated checkpoint)");
+
+  // Other options: the differing one is named, with both values.
+  for (auto edit : std::vector<std::pair<std::string, void (*)(SolverOptions*)>>{
+           {"seed = 0, this run has seed = 5", [](SolverOptions* x) { x->seed = 5; }},
+           {"mutual_iterations = 4, this run has mutual_iterations = 3",
+            [](SolverOptions* x) { x->mutual_iterations = 3; }},
+           {"train_3d = 1, this run has train_3d = 0", [](SolverOptions* x) { x->train_3d = false; }},
+       }) {
+    SolverOptions other = o;
+    edit.second(&other);
+    MutualBoostedSolver s(other, scene);
+    ExpectRefused(&s, bad, data, "the checkpoint was written with " + edit.first);
+  }
+
+  // Another scene: a moved camera, or another scene altogether.
+  Scene moved = scene;
+  moved.views[3].camera.fx *= 1.01;
+  MutualBoostedSolver on_moved(o, moved);
+  ExpectRefused(&on_moved, bad, data,
+                "view '" + scene.views[3].name + "' has another size, camera or split");
+  Scene renamed = scene;
+  renamed.views[0].name = "other.png";
+  MutualBoostedSolver on_renamed(o, renamed);
+  ExpectRefused(&on_renamed, bad, data, "the checkpoint was written for another scene");
+
+  // Values no run can produce, behind a valid checksum.
+  std::string body = Body(data);
+  const std::string last_view = scene.views.back().name + std::string(1, '\0');
+  const size_t header_end = body.find(last_view) + last_view.size() + 65;  // + fingerprint
+  int32_t next = 99;  // after the training-view count and the stage
+  std::string edited = body;
+  std::memcpy(&edited[header_end + 8], &next, sizeof(next));
+  ExpectRefused(&reader, bad, Reseal(edited), "next iteration 99");
+  // The surfel optimiser's position block (the last one named "means", width 3): its step.
+  const std::string means = std::string("means", 6) + std::string("\x03\0\0\0", 4);
+  const size_t at = body.rfind(means);
+  ASSERT_NE(at, std::string::npos);
+  int64_t step = -5;
+  edited = body;
+  std::memcpy(&edited[at + means.size()], &step, sizeof(step));
+  ExpectRefused(&reader, bad, Reseal(edited), "optimiser state of 'means'");
+
+  // A NaN parameter.
+  MutualBoostedSolver poisoned(o, scene);
+  poisoned.mutable_surfels()->opacity_logits[2] = std::nanf("");
+  ASSERT_TRUE(poisoned.SaveCheckpoint(bad).ok());
+  const Status s = reader.LoadCheckpoint(bad);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("NaN or infinite values in parameter block 'opacity_logits'"),
+            std::string::npos)
+      << s.message();
+  // Nothing of the refused files reached the reader: it still continues as the writer would.
+  ASSERT_TRUE(reader.LoadCheckpoint(ckpt).ok());
+}
+
+// A NaN that gets into a parameter stops the run at the next step with an error naming the branch,
+// the iteration and the block, instead of training on and writing NaN models.
+class PoisonAt : public IterationCallback {
+ public:
+  PoisonAt(MutualBoostedSolver* solver, int iteration) : solver_(solver), iteration_(iteration) {}
+  void operator()(const IterationInfo& i) override {
+    if (i.stage == Stage::kWarmup && i.iteration == iteration_ &&
+        i.branch == Branch::kGaussians3D) {
+      for (float& x : solver_->mutable_surfels()->opacity_logits) x = std::nanf("");
+    }
+  }
+
+ private:
+  MutualBoostedSolver* solver_;
+  int iteration_;
+};
+
+TEST(MutualBoostedSolverTest, ANonFiniteValueStopsTheRun) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  SolverOptions o = TinyOptions();
+  o.warmup_max_iterations = 20;
+  MutualBoostedSolver solver(o, scene);
+  PoisonAt poison(&solver, 7);
+  solver.AddCallback(&poison);
+  SolveSummary summary;
+  const Status s = solver.Solve(&summary);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.message().rfind("non-finite", 0), 0u) << s.message();
+  EXPECT_NE(s.message().find("2DGS warm-up iteration 8"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("the last checkpoint is the last good state"), std::string::npos);
 }
 
 // The mean prior fixes the gauge: a gradient that pushes every view's gain down alike (the scene
