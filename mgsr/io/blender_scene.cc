@@ -79,10 +79,13 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
   std::vector<Frame> frames;
   json train_meta, test_meta;
   MGSR_RETURN_IF_ERROR(ReadTransforms(root, "transforms_train.json", false, &frames, &train_meta));
+  if (frames.empty()) {
+    return Status::Error(JoinPath(root, "transforms_train.json") +
+                         ": no training frames (its 'frames' array is empty)");
+  }
   if (FileExists(JoinPath(root, "transforms_test.json"))) {
     MGSR_RETURN_IF_ERROR(ReadTransforms(root, "transforms_test.json", true, &frames, &test_meta));
   }
-  if (frames.empty()) return Status::Error(JoinPath(root, "transforms_train.json") + ": no frames");
   if (!train_meta.contains("camera_angle_x") && !train_meta.contains("fl_x")) {
     return Status::Error(JoinPath(root, "transforms_train.json") +
                          ": needs camera_angle_x or fl_x");

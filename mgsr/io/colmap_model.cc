@@ -79,9 +79,18 @@ Status WriteColmapModel(const std::string& dir, const ColmapModel& model, Colmap
 
 Status ValidateColmapModel(const ColmapModel& model, const std::string& dir) {
   std::unordered_set<uint32_t> camera_ids, image_ids;
+  std::unordered_set<std::string> image_names;
+  // Far beyond any sensor, and within int: a larger value is a corrupt field (2^32 + 48 must not
+  // read as 48).
+  constexpr uint64_t kMaxSide = 1u << 16;
   for (const ColmapCamera& c : model.cameras) {
     if (!camera_ids.insert(c.camera_id).second) {
       return Status::Error(dir + ": camera id " + std::to_string(c.camera_id) + " appears twice");
+    }
+    if (c.width == 0 || c.height == 0 || c.width > kMaxSide || c.height > kMaxSide) {
+      return Status::Error(dir + ": camera " + std::to_string(c.camera_id) + " has size " +
+                           std::to_string(c.width) + " x " + std::to_string(c.height) +
+                           " (expected 1 to " + std::to_string(kMaxSide) + " pixels a side)");
     }
     if (!AllFinite(c.params)) {
       return Status::Error(dir + ": camera " + std::to_string(c.camera_id) +
@@ -99,8 +108,17 @@ Status ValidateColmapModel(const ColmapModel& model, const std::string& dir) {
     if (!im.qvec.allFinite() || !im.tvec.allFinite()) {
       return Status::Error(dir + ": image " + im.name + " has a NaN/inf pose");
     }
-    if (im.qvec.norm() < 1e-12) {
-      return Status::Error(dir + ": image " + im.name + " has a zero quaternion");
+    if (!image_names.insert(im.name).second) {
+      return Status::Error(dir + ": image name " + im.name +
+                           " appears twice (two poses for one photo)");
+    }
+    // COLMAP normalises quaternions on reading, so any finite non-zero norm is a pose; a zero
+    // norm, or one that overflows (which would normalise to nothing and read as the identity), is
+    // a corrupt record.
+    const double norm = im.qvec.norm();
+    if (!std::isfinite(norm) || norm < 1e-12) {
+      return Status::Error(dir + ": image " + im.name + " has a quaternion of norm " +
+                           std::to_string(norm) + " (zero or overflowing: not a rotation)");
     }
   }
   for (const ColmapPoint3D& p : model.points) {

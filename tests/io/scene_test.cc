@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -255,6 +257,44 @@ TEST_F(SceneTest, TruncatedModelFile) {
 TEST_F(SceneTest, SplitFileNamingAnUnknownImage) {
   ASSERT_TRUE(WriteStringToFileAtomic(dir_ + "/split.txt", "v001.png\nghost.png\n").ok());
   ExpectLoadFails("split.txt: lists 'ghost.png', which is not in the model");
+}
+
+// #18: inputs that used to validate and then trained on wrong data.
+TEST_F(SceneTest, DuplicateImageNameIsRefused) {
+  EditModel([](ColmapModel* m) { m->images[3].name = m->images[2].name; });
+  ExpectLoadFails("image name v002.png appears twice (two poses for one photo)");
+}
+
+TEST_F(SceneTest, ImageSizeBeyondAnySensorIsRefused) {
+  EditModel([](ColmapModel* m) { m->cameras[0].width = (uint64_t{1} << 32) + 32; });
+  ExpectLoadFails("has size 4294967328 x 32 (expected 1 to 65536 pixels a side)");
+}
+
+TEST_F(SceneTest, OverflowingQuaternionIsRefused) {
+  EditModel([](ColmapModel* m) { m->images[4].qvec = Eigen::Vector4d(1e200, 1e200, 0, 0); });
+  ExpectLoadFails("image v004.png has a quaternion of norm inf (zero or overflowing");
+}
+
+TEST_F(SceneTest, SplitFileWithoutNamesIsRefused) {
+  ASSERT_TRUE(WriteStringToFileAtomic(dir_ + "/split.txt", "# test views\n\n").ok());
+  ExpectLoadFails(dir_ + "/split.txt: lists no test views");
+  std::string all;
+  Scene scene;
+  ASSERT_TRUE(fs::remove(dir_ + "/split.txt"));
+  ASSERT_TRUE(Load(&scene).ok());
+  for (const View& v : scene.views) all += v.name + "\n";
+  ASSERT_TRUE(WriteStringToFileAtomic(dir_ + "/split.txt", all).ok());
+  ExpectLoadFails(dir_ + "/split.txt: lists every image as a test view");
+}
+
+TEST_F(SceneTest, BlenderWithoutTrainingFramesNamesTheFile) {
+  fs::remove_all(dir_ + "/sparse");
+  std::string json;
+  ASSERT_TRUE(ReadFileToString(dir_ + "/transforms_train.json", &json).ok());
+  nlohmann::json j = nlohmann::json::parse(json);
+  j["frames"] = nlohmann::json::array();
+  ASSERT_TRUE(WriteStringToFileAtomic(dir_ + "/transforms_train.json", j.dump()).ok());
+  ExpectLoadFails(dir_ + "/transforms_train.json: no training frames");
 }
 
 TEST_F(SceneTest, BlenderBadJsonAndNanMatrix) {
