@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <tuple>
 
 #include "mgsr/core/rng.h"
 #include "mgsr/io/file_util.h"
@@ -44,10 +46,79 @@ Image CompositeOnBackground(const View& v, float background) {
   return out;
 }
 
-Status LoadScene(const std::string& path, const SceneOptions& options, Scene* scene) {
-  if (options.downscale < 1) return Status::Error("--downscale must be >= 1");
-  if (options.max_width < 0) return Status::Error("--max_width must be >= 0");
-  if (!DirectoryExists(path)) return Status::Error(path + ": scene folder does not exist");
+namespace {
+
+std::string Number(double v) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%.4g", v);
+  return buffer;
+}
+
+// What no real capture has: a field of view of almost nothing or almost 180 degrees, a principal
+// point far outside the image, a camera so far from the others that the scene's extent is
+// meaningless, masks that are all background. Each of these trained to an empty result before.
+Status ValidateViews(const Scene& scene) {
+  const std::string& root = scene.root;
+  if (scene.views.empty()) return Status::Error(root + ": the scene has no views");
+  constexpr double kMinFovDeg = 0.1, kMaxFovDeg = 179.0, kPi = 3.14159265358979323846;
+  for (const View& v : scene.views) {
+    const Camera& c = v.camera;
+    for (const auto& [focal, side, axis] :
+         {std::make_tuple(c.fx, c.width, "horizontal"), std::make_tuple(c.fy, c.height, "vertical")}) {
+      const double fov = 2 * std::atan(side / (2 * focal)) * 180 / kPi;
+      if (!(focal > 0) || !(fov >= kMinFovDeg && fov <= kMaxFovDeg)) {
+        return Status::Error(root + ": view " + v.name + ": focal length " + Number(focal) +
+                             " px gives a " + axis + " field of view of " + Number(fov) +
+                             " degrees (expected " + Number(kMinFovDeg) + " to " +
+                             Number(kMaxFovDeg) + ")");
+      }
+    }
+    if (!(c.cx >= -c.width && c.cx <= 2.0 * c.width && c.cy >= -c.height && c.cy <= 2.0 * c.height)) {
+      return Status::Error(root + ": view " + v.name + ": principal point (" + Number(c.cx) + ", " +
+                           Number(c.cy) + ") lies far outside its " + std::to_string(c.width) +
+                           " x " + std::to_string(c.height) + " image");
+    }
+    if (!c.Center().allFinite()) {
+      return Status::Error(root + ": view " + v.name + ": camera centre is not finite");
+    }
+  }
+  // A camera 1000 times farther from the cameras' centre than their median distance; the centre
+  // is the per-axis median, which one wild camera cannot drag along.
+  Eigen::Vector3d centroid;
+  for (int axis = 0; axis < 3; ++axis) {
+    std::vector<double> values;
+    for (const View& v : scene.views) values.push_back(v.camera.Center()[axis]);
+    std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+    centroid[axis] = values[values.size() / 2];
+  }
+  std::vector<double> distances;
+  for (const View& v : scene.views) distances.push_back((v.camera.Center() - centroid).norm());
+  std::vector<double> sorted = distances;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double median = sorted[sorted.size() / 2];
+  for (size_t i = 0; i < scene.views.size(); ++i) {
+    if (!std::isfinite(distances[i]) || (median > 0 && distances[i] > 1000 * median)) {
+      return Status::Error(root + ": view " + scene.views[i].name + ": camera lies " +
+                           Number(distances[i]) + " from the cameras' centre, over 1000 times "
+                           "their median distance " + Number(median) + " (a corrupt pose?)");
+    }
+  }
+  if (scene.has_masks()) {
+    bool any_foreground = false;
+    for (const View& v : scene.views) {
+      const float* m = v.mask.data();
+      any_foreground = any_foreground || std::any_of(m, m + v.mask.size(), [](float x) {
+                         return x > 0.0f;
+                       });
+    }
+    if (!any_foreground) {
+      return Status::Error(root + ": every mask is empty (all background): nothing to reconstruct");
+    }
+  }
+  return Status::Ok();
+}
+
+Status LoadByLayout(const std::string& path, const SceneOptions& options, Scene* scene) {
   const bool colmap = DirectoryExists(JoinPath(path, "sparse"));
   const bool blender = FileExists(JoinPath(path, "transforms_train.json"));
   if (colmap) return LoadColmapScene(path, options, scene);
@@ -59,6 +130,16 @@ Status LoadScene(const std::string& path, const SceneOptions& options, Scene* sc
   return Status::Error(path +
                        ": not a scene (expected sparse/ for COLMAP or transforms_train.json "
                        "for Blender)");
+}
+
+}  // namespace
+
+Status LoadScene(const std::string& path, const SceneOptions& options, Scene* scene) {
+  if (options.downscale < 1) return Status::Error("--downscale must be >= 1");
+  if (options.max_width < 0) return Status::Error("--max_width must be >= 0");
+  if (!DirectoryExists(path)) return Status::Error(path + ": scene folder does not exist");
+  MGSR_RETURN_IF_ERROR(LoadByLayout(path, options, scene));
+  return ValidateViews(*scene);
 }
 
 Status LoadViewImages(const std::string& image_path, const std::string& mask_path,

@@ -297,6 +297,44 @@ TEST_F(SceneTest, BlenderWithoutTrainingFramesNamesTheFile) {
   ExpectLoadFails(dir_ + "/transforms_train.json: no training frames");
 }
 
+// Cameras no capture has, which trained to an empty mesh with exit 0 before.
+TEST_F(SceneTest, DegenerateCamerasAreRefused) {
+  const auto params = [this](std::vector<double> p) {
+    EditModel([&p](ColmapModel* m) { m->cameras[0].params = p; });
+  };
+  ColmapModel original;
+  ASSERT_TRUE(ReadColmapModel(dir_ + "/sparse/0", &original).ok());
+  const std::vector<double> good = original.cameras[0].params;
+  ASSERT_EQ(good.size(), 4u);  // PINHOLE fx fy cx cy
+  params({1e-12, 1e-12, good[2], good[3]});
+  ExpectLoadFails("focal length 1e-12 px gives a horizontal field of view of 180 degrees");
+  params({1e12, 1e12, good[2], good[3]});
+  ExpectLoadFails("field of view of 1.833e-09 degrees (expected 0.1 to 179)");
+  params({good[0], good[1], 1e6, good[3]});
+  ExpectLoadFails("principal point (1e+06, 16) lies far outside its 32 x 32 image");
+  params(good);
+  EditModel([](ColmapModel* m) { m->images[5].tvec = Eigen::Vector3d(1e308, 0, 0); });
+  ExpectLoadFails("view v005.png: camera lies");
+}
+
+TEST_F(SceneTest, AllEmptyMasksAreRefused) {
+  for (const auto& e : fs::directory_iterator(dir_ + "/masks"))
+    ASSERT_TRUE(WriteImage(e.path().string(), Image(32, 32, 1, 0.0f)).ok());
+  ExpectLoadFails("every mask is empty (all background): nothing to reconstruct");
+}
+
+TEST_F(SceneTest, BlenderFieldOfViewOfPiIsRefused) {
+  fs::remove_all(dir_ + "/sparse");
+  std::string json;
+  ASSERT_TRUE(ReadFileToString(dir_ + "/transforms_train.json", &json).ok());
+  nlohmann::json j = nlohmann::json::parse(json);
+  j["camera_angle_x"] = 3.141592653589793;
+  j.erase("fl_x");  // the focal length then comes from the angle
+  j.erase("fl_y");
+  ASSERT_TRUE(WriteStringToFileAtomic(dir_ + "/transforms_train.json", j.dump()).ok());
+  ExpectLoadFails("field of view of 180 degrees");
+}
+
 TEST_F(SceneTest, BlenderBadJsonAndNanMatrix) {
   fs::remove_all(dir_ + "/sparse");
   Scene scene;
