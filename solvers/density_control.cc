@@ -139,4 +139,13 @@ void ResetOpacity(SurfelModel* m, Adam* adam) {
   adam->ResetBlock("opacity_logits");
 }
 
+size_t DefaultPrimitiveBudget(const Scene& scene) {
+  size_t pixels = 0;
+  for (int i : scene.TrainIndices()) {
+    const Camera& c = scene.views[i].camera;
+    pixels = std::max(pixels, static_cast<size_t>(c.width) * static_cast<size_t>(c.height));
+  }
+  return kBudgetPerPixel * pixels;
+}
+
 }  // namespace mgsr

@@ -25,6 +25,7 @@
 #include "mgsr/eval/ground_truth.h"
 #include "mgsr/synth/ray_caster.h"
 #include "solvers/backdrop.h"
+#include "solvers/density_control.h"
 #include "solvers/mutual_boosted_solver.h"
 #include "solvers/surface_extraction.h"
 #include "solvers/trained_views.h"
@@ -59,8 +60,10 @@ DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");
 DEFINE_bool(auto_stop, true, "Stop each warm-up when its loss window flattens.");
 DEFINE_bool(bidirectional, false,
             "Ablation K: the supervising branch also learns from the supervision.");
-DEFINE_uint64(max_gaussians, 0, "Budget of 3DGS primitives (0: none).");
-DEFINE_uint64(max_surfels, 0, "Budget of 2DGS primitives (0: none).");
+DEFINE_int64(max_gaussians, -1,
+             "Budget of 3DGS primitives (-1: 4 per pixel of a training view, 0: none).");
+DEFINE_int64(max_surfels, -1,
+             "Budget of 2DGS primitives (-1: 4 per pixel of a training view, 0: none).");
 DEFINE_double(w_2d, 0.5, "Weight of the 2DGS loss in the mutual stage.");
 DEFINE_double(w_3d, 0.5, "Weight of the 3DGS loss in the mutual stage.");
 DEFINE_double(w_depth, 0.01, "Weight of the mutual depth loss.");
@@ -403,8 +406,8 @@ int main(int argc, char** argv) {
     return Fail("unknown --method '" + FLAGS_method + "' (mgsr, 2dgs, 3dgs or 3dgs-ref)");
   options.auto_stop = FLAGS_auto_stop;
   options.bidirectional = FLAGS_bidirectional;
-  options.max_gaussians = FLAGS_max_gaussians;
-  options.max_surfels = FLAGS_max_surfels;
+  if (FLAGS_max_gaussians < -1 || FLAGS_max_surfels < -1)
+    return Fail("--max_gaussians and --max_surfels must be -1 (from the scene), 0 (none) or a count");
   options.w_2d = FLAGS_w_2d;
   options.w_3d = FLAGS_w_3d;
   options.w_depth = FLAGS_w_depth;
@@ -517,6 +520,15 @@ int main(int argc, char** argv) {
   const std::string background_note =
       ChooseBackground(FLAGS_background, background_level, scene, &options);
   std::printf("background: %s\n", background_note.c_str());
+  const size_t scene_budget = mgsr::DefaultPrimitiveBudget(scene);
+  options.max_gaussians = FLAGS_max_gaussians < 0 ? scene_budget : FLAGS_max_gaussians;
+  options.max_surfels = FLAGS_max_surfels < 0 ? scene_budget : FLAGS_max_surfels;
+  const auto budget_text = [](size_t n) { return n == 0 ? std::string("none") : std::to_string(n); };
+  std::printf("budget: %s Gaussians, %s surfels%s\n", budget_text(options.max_gaussians).c_str(),
+              budget_text(options.max_surfels).c_str(),
+              FLAGS_max_gaussians < 0 || FLAGS_max_surfels < 0
+                  ? " (4 per pixel of a training view unless given)"
+                  : "");
 
   mgsr::MutualBoostedSolver solver(options, scene);
   if (FLAGS_resume) {
@@ -733,6 +745,9 @@ int main(int argc, char** argv) {
                               {"voxel_size", mgsr::SurfaceTsdfOptions(scene, surface).voxel_size},
                               {"pixel_footprint", mgsr::TrainingFootprint(scene)}}}};
   if (!colmap_metrics.is_null()) metrics["colmap"] = colmap_metrics;
+  metrics["budget"] = {{"gaussians", options.max_gaussians},
+                       {"surfels", options.max_surfels},
+                       {"from_scene", FLAGS_max_gaussians < 0 || FLAGS_max_surfels < 0}};
   metrics["background"] = {{"2d", options.background_2d},
                            {"3d", options.background_3d},
                            {"choice", background_note}};

@@ -78,6 +78,11 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
   EXPECT_NE(metrics.find("\"psnr_aligned\""), std::string::npos);
   EXPECT_NE(metrics.find("\"nc\""),
             std::string::npos);  // the synthetic scene has a ground-truth mesh
+  // Without --max_*, each branch's budget comes from the scene: 4 per pixel of a 32 x 32 view.
+  EXPECT_NE(r.output.find("budget: 4096 Gaussians, 4096 surfels"), std::string::npos) << r.output;
+  const nlohmann::json parsed = nlohmann::json::parse(metrics);
+  EXPECT_EQ(parsed["budget"]["gaussians"], 4096);
+  EXPECT_TRUE(parsed["budget"]["from_scene"].get<bool>());
   // mgsr_eval scores the run folder: NC, CD, PSNR, SSIM, time.
   const auto e =
       testing::RunCommand(kTools + "/mgsr_eval --run " + out + " --json " + out + "/eval.json");
