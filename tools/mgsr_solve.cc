@@ -579,6 +579,7 @@ int main(int argc, char** argv) {
   }
   g_solver = nullptr;
   std::printf("%s\n", summary.BriefReport().c_str());
+  std::fflush(stdout);  // the end of training shows at once, also when stdout is a file
   if (FLAGS_checkpoint_every > 0) {
     // The finished state: --resume then skips training and only rebuilds the outputs (e.g. a mesh
     // with other fusion settings).
@@ -587,6 +588,19 @@ int main(int argc, char** argv) {
   }
   s = log.Flush();
   if (!s.ok()) return fail(s.message());
+  // Ctrl-C while the outputs are written: the results so far are taken back and the finished
+  // state is kept, so --resume writes them without training again.
+  const auto stop_writing = [&]() {
+    out.Discard();
+    const mgsr::Status saved = solver.SaveCheckpoint(ckpt);
+    if (!saved.ok()) return fail(saved.message());
+    std::fprintf(stderr,
+                 "interrupted while writing the outputs: the results written so far are removed; "
+                 "the trained state is in %s: run again with --resume to write them\n",
+                 ckpt.c_str());
+    return 130;
+  };
+  if (g_interrupted) return stop_writing();
 
   // Models: only the branches this method trains (an untrained branch is its initialisation).
   if (options.train_2d) {
@@ -650,6 +664,7 @@ int main(int argc, char** argv) {
     s = write_render("depth2d", Colorize(sr.depth, dmin, dmax));
     if (s.ok()) s = write_render("normal2d", normal);
     if (!s.ok()) return fail(s.message());
+    if (g_interrupted) return stop_writing();
     // Depth error against ground-truth depth maps when the scene has them (synthetic scenes).
     mgsr::Image gt_depth;
     double err = 0;
@@ -683,6 +698,7 @@ int main(int argc, char** argv) {
   // --mesh_resolution_scale times their resolution), foreground and alpha >= 0.5, coloured by the
   // 3DGS transmitted (reflection-free) render (single-branch methods: that branch's depth and
   // colour).
+  if (g_interrupted) return stop_writing();
   mgsr::Timer mesh_timer;
   mgsr::SurfaceOptions surface;
   surface.resolution_scale = FLAGS_mesh_resolution_scale;
@@ -777,6 +793,7 @@ int main(int argc, char** argv) {
                        depth_after_warmup.path(), &metrics);
     if (!reported.ok()) std::fprintf(stderr, "warning: %s\n", reported.message().c_str());
   }
+  if (g_interrupted) return stop_writing();
   // Last: the manifest of every file this run wrote, so metrics.json vouches for the folder.
   metrics["files"] = out.Manifest();
   s = out.Write("metrics.json", metrics.dump(2) + "\n");

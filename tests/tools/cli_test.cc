@@ -175,6 +175,46 @@ TEST_F(CliTest, SolveThatCannotWriteLeavesNoResult) {
       << r.output;
 }
 
+// Ctrl-C once training is over (while models, renders and the mesh are written): whenever it
+// lands, the folder ends either finished (exit 0, metrics.json vouching for every file) or with no
+// result at all (exit 130, the finished state checkpointed), and --resume then writes the outputs.
+TEST_F(CliTest, CtrlCWhileWritingTheOutputsLeavesNoHalfResult) {
+  const std::string dir = Copy();
+  int interrupted = 0;
+  for (const char* delay : {"0", "0.02", "0.1", "0.3"}) {
+    const std::string out = dir + "/out_" + delay;
+    const std::string script =
+        kTools + "/mgsr_solve --workspace " + base_ + " --output " + out +
+        " --warmup_max_iterations 6 --warmup_min_iterations 0 --mutual_iterations 2 "
+        "--log_every 100 --eval_every 0 --checkpoint_every 0 > " + out + ".log 2>&1 & pid=\\$!; "
+        "until grep -q 'mutual: ' " + out + ".log 2>/dev/null || ! kill -0 \\$pid 2>/dev/null; "
+        "do sleep 0.005; done; sleep " + delay + "; kill -INT \\$pid 2>/dev/null; wait \\$pid; "
+        "echo exit=\\$?";
+    const auto r = testing::RunCommand("bash -c \"" + script + "\"");
+    std::string log;
+    ASSERT_TRUE(ReadFileToString(out + ".log", &log).ok());
+    if (r.output.find("exit=130") != std::string::npos) {
+      ++interrupted;
+      EXPECT_NE(log.find("interrupted while writing the outputs"), std::string::npos) << log;
+      for (const char* f : {"metrics.json", "mesh.ply", "point_cloud_2d.ply", "point_cloud_3d.ply",
+                            "renders"}) {
+        EXPECT_FALSE(fs::exists(out + "/" + f)) << delay << ": " << f;
+      }
+      const auto resumed = testing::RunCommand(
+          kTools + "/mgsr_solve --workspace " + base_ + " --output " + out +
+          " --warmup_max_iterations 6 --warmup_min_iterations 0 --mutual_iterations 2 "
+          "--log_every 100 --eval_every 0 --checkpoint_every 0 --resume");
+      ASSERT_EQ(resumed.exit_code, 0) << resumed.output;
+    } else {
+      ASSERT_NE(r.output.find("exit=0"), std::string::npos) << r.output << log;
+    }
+    std::string text;
+    ASSERT_TRUE(ReadFileToString(out + "/metrics.json", &text).ok()) << delay;
+    EXPECT_TRUE(VerifyOutputManifest(out, nlohmann::json::parse(text)).ok()) << delay;
+  }
+  EXPECT_GE(interrupted, 1) << "no signal landed while the outputs were written";
+}
+
 TEST_F(CliTest, SingleBranchMethodReportsAndWritesOnlyItsBranch) {
   const std::string out = Copy() + "/out";
   const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " +
