@@ -39,26 +39,23 @@ std::string Adam::Step(const std::vector<ParamBlock>& params, const std::vector<
     float* m = s.m.data();
     float* v = s.v.data();
     const int64_t n = static_cast<int64_t>(p.data->size());
-    // NaN and infinities are the floats whose exponent bits are all set: an integer test that
-    // vectorises, about a tenth of the update's cost.
+    // By rows and columns (the column's rate without a division per entry); NaN and infinities in
+    // the gradient, the floats whose exponent bits are all set, are caught in the same pass.
     uint32_t nonfinite_bits = 0;
+    const int64_t rows = n / width;
 #pragma omp parallel for schedule(static) reduction(| : nonfinite_bits) if (n > 100000)
-    for (int64_t i = 0; i < n; ++i) {
-      uint32_t bits;
-      std::memcpy(&bits, &gr[i], sizeof(bits));
-      nonfinite_bits |= (bits & 0x7f800000u) == 0x7f800000u;
+    for (int64_t r = 0; r < rows; ++r) {
+      for (int c = 0; c < width; ++c) {
+        const int64_t i = r * width + c;
+        uint32_t bits;
+        std::memcpy(&bits, &gr[i], sizeof(bits));
+        nonfinite_bits |= (bits & 0x7f800000u) == 0x7f800000u;
+        m[i] = b1 * m[i] + (1 - b1) * gr[i];
+        v[i] = b2 * v[i] + (1 - b2) * gr[i] * gr[i];
+        x[i] -= lr[c] * (m[i] * c1) / (std::sqrt(v[i] * c2) + e);
+      }
     }
-    if (nonfinite_bits != 0) {
-      if (nonfinite.empty()) nonfinite = p.name;
-      --s.step;
-      continue;
-    }
-#pragma omp parallel for schedule(static) if (n > 100000)
-    for (int64_t i = 0; i < n; ++i) {
-      m[i] = b1 * m[i] + (1 - b1) * gr[i];
-      v[i] = b2 * v[i] + (1 - b2) * gr[i] * gr[i];
-      x[i] -= lr[i % width] * (m[i] * c1) / (std::sqrt(v[i] * c2) + e);
-    }
+    if (nonfinite_bits != 0 && nonfinite.empty()) nonfinite = p.name;
   }
   return nonfinite;
 }

@@ -26,8 +26,8 @@ class Adam {
       std::function<void(const std::string& name, int width, std::vector<float>* rates)>;
 
   // One update of every block. Returns the name of the first block whose gradient holds a NaN or
-  // an infinity (its update is skipped so the parameters stay as they were), or "" when all are
-  // finite.
+  // an infinity ("" when all are finite): the caller stops, since that block's parameters and
+  // moments are no longer finite either.
   std::string Step(const std::vector<ParamBlock>& params, const std::vector<ParamBlock>& grads,
             const LearningRates& learning_rates);
   // Mirror the model's row operations.
