@@ -110,6 +110,9 @@ DEFINE_int32(checkpoint_every, 500,
              "Write OUTPUT/checkpoints/latest.ckpt every N iterations (0: only on Ctrl-C).");
 DEFINE_bool(resume, false,
             "Continue from OUTPUT/checkpoints/latest.ckpt (same options and scene).");
+DEFINE_bool(check, false,
+            "Only load and check the scene (and with --resume the checkpoint), print what was "
+            "found and exit: 0 when a run could start. Writes nothing; --output is optional.");
 DEFINE_bool(overwrite, false,
             "Replace a previous run in --output (its results, checkpoints and log); without it "
             "a non-empty output folder is refused.");
@@ -385,8 +388,12 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "error: --masks goes with --images (a workspace has its own masks/)\n");
     return 2;
   }
-  if (FLAGS_output.empty()) {
+  if (FLAGS_output.empty() && !(FLAGS_check && !FLAGS_resume)) {
     std::fprintf(stderr, "error: --output is required\n");
+    return 2;
+  }
+  if (FLAGS_check && !FLAGS_images.empty()) {
+    std::fprintf(stderr, "error: --check goes with --workspace (--images would run colmap)\n");
     return 2;
   }
   mgsr::SolverOptions options;
@@ -459,7 +466,7 @@ int main(int argc, char** argv) {
   const std::string ckpt = mgsr::JoinPath(ckpt_dir, "latest.ckpt");
   if (FLAGS_resume && !mgsr::FileExists(ckpt)) return Fail(ckpt + ": no checkpoint to resume from");
   mgsr::OutputFolder out;
-  {
+  if (!FLAGS_check) {
     const mgsr::Status opened = mgsr::OutputFolder::Open(
         FLAGS_output,
         FLAGS_resume      ? mgsr::OutputMode::kResume
@@ -535,6 +542,11 @@ int main(int argc, char** argv) {
     s = solver.LoadCheckpoint(ckpt);
     if (!s.ok()) return fail(s.message());
     std::printf("resuming from %s\n", ckpt.c_str());
+  }
+  if (FLAGS_check) {
+    std::printf("check: the scene%s can be trained\n",
+                FLAGS_resume ? " and the checkpoint" : "");
+    return 0;
   }
   // The previous run's results go only now that the scene and the checkpoint are accepted.
   s = out.Prepare();

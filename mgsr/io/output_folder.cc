@@ -59,6 +59,7 @@ Status OutputFolder::Prepare() {
 }
 
 Status OutputFolder::ClearResults() const {
+  if (dir_.empty()) return Status::Ok();  // never opened: nothing of ours to clear
   // metrics.json goes first (it leads ResultNames), so an interrupted clean-up never leaves a
   // manifest without its files.
   for (const std::string& name : ResultNames()) MGSR_RETURN_IF_ERROR(RemovePath(Path(name)));
@@ -95,6 +96,7 @@ nlohmann::json OutputFolder::Manifest() const {
 }
 
 void OutputFolder::Discard() {
+  if (dir_.empty()) return;
   // Best effort: the run is failing already, and its own error is the one to report.
   for (const Entry& e : written_) (void)RemovePath(Path(e.name));
   written_.clear();

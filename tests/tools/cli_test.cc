@@ -215,6 +215,22 @@ TEST_F(CliTest, CtrlCWhileWritingTheOutputsLeavesNoHalfResult) {
   EXPECT_GE(interrupted, 1) << "no signal landed while the outputs were written";
 }
 
+// --check loads and validates without training or writing anything.
+TEST_F(CliTest, CheckLoadsTheSceneAndWritesNothing) {
+  const std::string dir = Copy();
+  auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --check");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("check: the scene can be trained"), std::string::npos) << r.output;
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --check --output " + dir +
+                          "/out");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_FALSE(fs::exists(dir + "/out"));
+  ASSERT_TRUE(WriteStringToFileAtomic(dir + "/split.txt", "# none\n").ok());
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --check");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(r.output.rfind("error: " + dir + "/split.txt: lists no test views", 0), 0u) << r.output;
+}
+
 TEST_F(CliTest, SingleBranchMethodReportsAndWritesOnlyItsBranch) {
   const std::string out = Copy() + "/out";
   const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " +
