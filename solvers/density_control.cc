@@ -145,7 +145,7 @@ size_t DefaultPrimitiveBudget(const Scene& scene) {
     const Camera& c = scene.views[i].camera;
     pixels = std::max(pixels, static_cast<size_t>(c.width) * static_cast<size_t>(c.height));
   }
-  return kBudgetPerPixel * pixels;
+  return std::max(kMinBudget, kBudgetPerPixel * pixels);
 }
 
 }  // namespace mgsr

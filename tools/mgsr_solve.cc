@@ -61,9 +61,11 @@ DEFINE_bool(auto_stop, true, "Stop each warm-up when its loss window flattens.")
 DEFINE_bool(bidirectional, false,
             "Ablation K: the supervising branch also learns from the supervision.");
 DEFINE_int64(max_gaussians, -1,
-             "Budget of 3DGS primitives (-1: 4 per pixel of a training view, 0: none).");
+             "Budget of 3DGS primitives (-1: 4 per pixel of a training view, at least 500,000; "
+             "0: none).");
 DEFINE_int64(max_surfels, -1,
-             "Budget of 2DGS primitives (-1: 4 per pixel of a training view, 0: none).");
+             "Budget of 2DGS primitives (-1: 4 per pixel of a training view, at least 500,000; "
+             "0: none).");
 DEFINE_double(w_2d, 0.5, "Weight of the 2DGS loss in the mutual stage.");
 DEFINE_double(w_3d, 0.5, "Weight of the 3DGS loss in the mutual stage.");
 DEFINE_double(w_depth, 0.01, "Weight of the mutual depth loss.");
@@ -534,7 +536,7 @@ int main(int argc, char** argv) {
   std::printf("budget: %s Gaussians, %s surfels%s\n", budget_text(options.max_gaussians).c_str(),
               budget_text(options.max_surfels).c_str(),
               FLAGS_max_gaussians < 0 || FLAGS_max_surfels < 0
-                  ? " (4 per pixel of a training view unless given)"
+                  ? " (4 per pixel of a training view, at least 500,000, unless given)"
                   : "");
 
   mgsr::MutualBoostedSolver solver(options, scene);
