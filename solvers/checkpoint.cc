@@ -50,9 +50,9 @@ std::string ViewFingerprint(const View& v) {
   return Sha256Hex(text);
 }
 
-template <typename Block>
-bool AllFinite(const Block& values) {
-  for (float x : values) {
+template <typename Values>
+bool AllFinite(const Values& values) {
+  for (const auto x : values) {
     if (!std::isfinite(x)) return false;
   }
   return true;
@@ -336,11 +336,8 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
                          ", next iteration " + std::to_string(next) + ", SH degree " +
                          std::to_string(sh) + " out of range)");
   }
-  for (const std::vector<double>* window : {&w2, &w3}) {
-    for (double x : *window) {
-      if (!std::isfinite(x)) return Status::Error(path + ": corrupt checkpoint (NaN in a loss window)");
-    }
-  }
+  if (!AllFinite(w2) || !AllFinite(w3))
+    return Status::Error(path + ": corrupt checkpoint (NaN in a loss window)");
   // Everything read: commit.
   stage_ = stage == 0 ? Stage::kWarmup : Stage::kMutual;
   next_iteration_ = next;

@@ -287,9 +287,10 @@ class ProgressLog : public mgsr::IterationCallback {
         expected_(expected_total),
         train_2d_(train_2d),
         train_3d_(train_3d) {
-    // A resumed run continues the log; a missing or empty one starts with its header.
-    const bool header = !append || !mgsr::FileExists(csv_path) || std::ifstream(csv_path).peek() ==
-                                                                      std::ifstream::traits_type::eof();
+    // A resumed run continues the log; a missing or empty one (peek fails alike) starts with its
+    // header.
+    const bool header =
+        !append || std::ifstream(csv_path).peek() == std::ifstream::traits_type::eof();
     csv_.open(csv_path, append ? std::ios::app : std::ios::trunc);
     if (header) csv_ << "stage,iteration,branch,loss,gaussians,surfels,seconds\n";
   }

@@ -97,8 +97,8 @@ nlohmann::json OutputFolder::Manifest() const {
 
 void OutputFolder::Discard() {
   if (dir_.empty()) return;
-  // Best effort: the run is failing already, and its own error is the one to report.
-  for (const Entry& e : written_) (void)RemovePath(Path(e.name));
+  // Best effort: the run is failing already, and its own error is the one to report. Everything
+  // a run records lies under ResultNames(), so clearing those takes back what it wrote.
   written_.clear();
   (void)ClearResults();
 }
