@@ -161,7 +161,14 @@ inline void IntersectRow(const Surfel& s, F16 px, float py, float min_power, I16
   h->rho2d = kSurfelFilterInvSquare * (h->dxm * h->dxm + h->dym * h->dym) + s.low_pass;
   h->splat_branch = h->rho3d <= h->rho2d;
   const F16 rho = simd::Min(h->rho3d, h->rho2d);
-  h->z = s.tw[0] * h->u + s.tw[1] * h->v + s.tw[2];
+  // Depth: where the ray meets the disk's plane in the splat branch; the centre's depth where the
+  // screen low-pass draws the surfel (as 2DGS's own rasterizer; MGSR's copy takes the plane there
+  // too, reference 3.3). Off the disk that intersection is unbounded: for a nearly edge-on surfel it
+  // lies thousands of units away, and those depths made the 2DGS branch's single-iteration loss
+  // spikes (up to 4.6e6) through the depth TV and distortion terms; with disks started tangent to
+  // the surface (every silhouette disk edge-on) they cost the 2DGS-only method 10 dB.
+  h->z = simd::Select(h->splat_branch, s.tw[0] * h->u + s.tw[1] * h->v + s.tw[2],
+                      simd::Splat(s.tw[2]));
   const F16 power = -0.5f * rho;
   // (The row itself is within the radius: callers skip rows with |m_y - y| > radius.)
   h->in =
@@ -186,6 +193,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
     EnsureImage(im, W, H, 1);
   out->final_t.resize(npix);
   out->depth_sum.resize(npix);
+  out->weight_sum.resize(npix);
   out->m1.resize(npix);
   out->m2.resize(npix);
   out->m_ref.resize(npix);
@@ -218,6 +226,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
       aC1,
       aC2,
       aDs,
+      aWs,
       aN0,
       aN1,
       aN2,
@@ -268,6 +277,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
         simd::Store(st[aC1] + k, simd::Load(st[aC1] + k) + w * s.c[1]);
         simd::Store(st[aC2] + k, simd::Load(st[aC2] + k) + w * s.c[2]);
         simd::Store(st[aDs] + k, simd::Load(st[aDs] + k) + w * h.z);
+        simd::Store(st[aWs] + k, simd::Load(st[aWs] + k) + w);
         simd::Store(st[aN0] + k, simd::Load(st[aN0] + k) + w * s.n[0]);
         simd::Store(st[aN1] + k, simd::Load(st[aN1] + k) + w * s.n[1]);
         simd::Store(st[aN2] + k, simd::Load(st[aN2] + k) + w * s.n[2]);
@@ -309,11 +319,15 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
           out->normal_world.plane(c)[pix] = nw[c];
         }
         out->alpha.plane(0)[pix] = A;
-        out->depth.plane(0)[pix] = A >= kMinDepthAlpha ? st[aDs][k] / A : 0.0f;
+        // Normalised by the summed weights rather than 1 - T: equal in exact arithmetic, but a
+        // faint pixel's 1 - T loses most of its digits (alpha 0.005: 2e-5 relative), which would
+        // put one surfel's depth off its own z.
+        out->depth.plane(0)[pix] = A >= kMinDepthAlpha ? st[aDs][k] / st[aWs][k] : 0.0f;
         out->median_depth.plane(0)[pix] = st[aZmed][k];
         out->distortion.plane(0)[pix] = st[aDist][k];
         out->final_t[pix] = T;
         out->depth_sum[pix] = st[aDs][k];
+        out->weight_sum[pix] = st[aWs][k];
         out->m1[pix] = st[aM1][k];
         out->m2[pix] = st[aM2][k];
         out->m_ref[pix] = st[aMref][k];
@@ -408,9 +422,10 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
           float ds_grad = 0;
           const float A = 1.0f - r.final_t[pix];
           if (!g.depth.empty() && A >= kMinDepthAlpha) {
-            const float gD = g.depth.plane(0)[pix];
-            ds_grad = gD / A;
-            a_grad -= gD * r.depth_sum[pix] / (A * A);
+            // Depth = D / sum w (= D / A, see the forward pass).
+            const float gD = g.depth.plane(0)[pix], ws = r.weight_sum[pix];
+            ds_grad = gD / ws;
+            a_grad -= gD * r.depth_sum[pix] / (ws * ws);
           }
           for (int c = 0; c < 3; ++c) {
             st[aGc0 + c][k] = gc[c];
@@ -518,12 +533,13 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
           gmx += drho2d * h.dxm;
           gmy += drho2d * h.dym;
           glow += simd::Masked(~h.splat_branch, drho);
-          // z = T_w . (u, v, 1) in both branches.
+          // z = T_w . (u, v, 1) in the splat branch, T_w,z in the low-pass branch.
           const F16 dzv = simd::Masked(valid, dz);
-          du += dzv * s.tw[0];
-          dv += dzv * s.tw[1];
-          gTw0 += dzv * h.u;
-          gTw1 += dzv * h.v;
+          const F16 dzs = simd::Masked(h.splat_branch, dzv);
+          du += dzs * s.tw[0];
+          dv += dzs * s.tw[1];
+          gTw0 += dzs * h.u;
+          gTw1 += dzs * h.v;
           gTw2 += dzv;
           // (u, v) = (p_x, p_y) / p_z, p = k x l, k = x T_w - T_u, l = y T_w - T_v.
           const F16 safe_p2 = simd::Select(valid, h.p2, simd::Splat(1.0f));

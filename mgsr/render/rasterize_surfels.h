@@ -53,7 +53,9 @@ struct SurfelRender {
   Image median_depth;
   Image distortion;
   // Kept for the backward pass.
-  std::vector<float> final_t, depth_sum, m1, m2, m_ref;  // m1, m2 relative to m_ref (see .cc)
+  // weight_sum = sum of the blend weights = 1 - final_t, but without the cancellation of 1 - T
+  // where the alpha is small: the expected depth is depth_sum / weight_sum.
+  std::vector<float> final_t, depth_sum, weight_sum, m1, m2, m_ref;  // m1, m2: see .cc
   std::vector<uint32_t> last, median_index;              // 1 + index within the tile list (0: none)
 };
 

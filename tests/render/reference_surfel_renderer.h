@@ -115,7 +115,9 @@ ReferenceSurfelRender RenderSurfelsReference(const Model& m, const Camera& cam, 
           const double area = 2 * std::abs(s.M.determinant()) / std::pow(s.M(2, 2), 3);
           if (area < 1) rho2d -= 2 * std::log(std::max(area, 1e-6));
         }
-        const double z = s.M(2, 0) * u + s.M(2, 1) * v + s.M(2, 2);
+        // Depth: where the ray meets the plane on the disk, the centre's depth where the screen
+        // low-pass draws the surfel.
+        const double z = rho3d <= rho2d ? s.M(2, 0) * u + s.M(2, 1) * v + s.M(2, 2) : s.M(2, 2);
         if (z < near) continue;
         const double G = std::exp(-0.5 * std::min(rho3d, rho2d));
         const double a = std::min(0.99, s.o * G);
