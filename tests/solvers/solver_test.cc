@@ -500,6 +500,36 @@ TEST(MutualBoostedSolverTest, ANonFiniteValueStopsTheRun) {
   EXPECT_NE(s.message().find("the last checkpoint is the last good state"), std::string::npos);
 }
 
+// As mgsr_solve runs it: a checkpoint every 5 iterations (stop, save, continue). The NaN that
+// appears after iteration 7 stops the run at 8, before any checkpoint can hold it; the file on
+// disk is still iteration 5's state, loads (its validation refuses non-finite values), and a
+// fresh solver finishes the run from it.
+TEST(MutualBoostedSolverTest, ANonFiniteValueLeavesTheLastGoodCheckpoint) {
+  const std::string dir = testing::ScratchDir();
+  const Scene scene = TinyScene(dir + "/scene");
+  SolverOptions o = TinyOptions();
+  o.warmup_max_iterations = 20;
+  const std::string ckpt = dir + "/run.ckpt";
+  MutualBoostedSolver solver(o, scene);
+  StopAt stop(&solver, Stage::kWarmup, 5);
+  PoisonAt poison(&solver, 7);
+  solver.AddCallback(&stop);
+  solver.AddCallback(&poison);
+  SolveSummary summary;
+  Status s = solver.Solve(&summary);
+  ASSERT_EQ(s.message().rfind("interrupted", 0), 0u) << s.message();
+  ASSERT_TRUE(solver.SaveCheckpoint(ckpt).ok());
+  s = solver.Solve(&summary);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.message().rfind("non-finite", 0), 0u) << s.message();
+  MutualBoostedSolver resumed(o, scene);
+  ASSERT_TRUE(resumed.LoadCheckpoint(ckpt).ok());
+  SolveSummary finished;
+  ASSERT_TRUE(resumed.Solve(&finished).ok());
+  EXPECT_EQ(finished.warmup_iterations_2d, 20);
+  for (float x : resumed.surfels().opacity_logits) ASSERT_TRUE(std::isfinite(x));
+}
+
 // The mean prior fixes the gauge: a gradient that pushes every view's gain down alike (the scene
 // could absorb it) moves the gains without it and barely with it; one view's own deviation stays.
 TEST(ExposureModelTest, MeanPriorHoldsTheAverageTransformAtIdentity) {
