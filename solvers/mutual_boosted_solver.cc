@@ -227,6 +227,7 @@ SurfelRenderOptions MutualBoostedSolver::SurfelOptions(const Camera& camera) con
   o.background[0] = o.background[1] = o.background[2] = bg;
   o.low_pass = options_.surfel_area_preserving_low_pass ? SurfelLowPass::kAreaPreserving
                                                         : SurfelLowPass::kReference;
+  o.filter_sigma = options_.surfel_filter_sigma;
   return o;
 }
 

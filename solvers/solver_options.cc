@@ -72,6 +72,8 @@ Status SolverOptions::Validate() const {
   if (!(auto_stop_range >= 0)) return Status::Error("--auto_stop_range must be >= 0");
   if (sh_degree < 0 || sh_degree > 3) return Status::Error("--sh_degree must be in [0, 3]");
   if (sh_interval < 1) return Status::Error("--sh_interval must be >= 1");
+  if (!(surfel_filter_sigma >= 0.01f && surfel_filter_sigma <= 2.0f))
+    return Status::Error("--surfel_filter_sigma must be in [0.01, 2] pixels");
   for (double w : {w_2d, w_3d, w_depth, lambda_normal, lambda_distortion}) {
     if (!(w >= 0) || !std::isfinite(w))
       return Status::Error("loss weights must be finite and >= 0");
@@ -149,6 +151,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"background_2d", Text(background_2d)},
           {"background_3d", Text(background_3d)},
           {"surfel_area_preserving_low_pass", Text(surfel_area_preserving_low_pass)},
+          {"surfel_filter_sigma", Text(surfel_filter_sigma)},
           {"surfel_orientation_from_points", Text(surfel_orientation_from_points)},
           {"exposure", ExposureModeName(exposure)},
           {"exposure_lr", Text(exposure_lr)},

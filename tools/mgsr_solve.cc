@@ -51,6 +51,9 @@ DEFINE_string(mutual_mode, "alternate", "alternate (the paper) | joint (the auth
 DEFINE_string(surfel_low_pass, "reference",
               "2DGS screen low-pass floor: reference (2DGS: full opacity) | area (its opacity "
               "scaled by the surfel's projected area: no silhouette dilation).");
+DEFINE_double(surfel_filter_sigma, -1,
+              "Sigma of the 2DGS screen low-pass in pixels (-1: the reference's 0.707). Smaller "
+              "dilates silhouettes less, which pulls the surface in less.");
 DEFINE_string(surfel_init, "neighbours",
               "Initial 2DGS disk orientation: neighbours (in the plane of each initial point's 16 "
               "nearest points) | random (the reference).");
@@ -406,6 +409,8 @@ int main(int argc, char** argv) {
   if (FLAGS_surfel_low_pass != "area" && FLAGS_surfel_low_pass != "reference")
     return Fail("--surfel_low_pass must be area or reference");
   options.surfel_area_preserving_low_pass = FLAGS_surfel_low_pass == "area";
+  if (FLAGS_surfel_filter_sigma != -1)
+    options.surfel_filter_sigma = static_cast<float>(FLAGS_surfel_filter_sigma);
   if (FLAGS_surfel_init != "neighbours" && FLAGS_surfel_init != "random")
     return Fail("--surfel_init must be neighbours or random");
   options.surfel_orientation_from_points = FLAGS_surfel_init == "neighbours";
@@ -744,6 +749,7 @@ int main(int argc, char** argv) {
                             {"method", FLAGS_method},
                             {"mutual_mode", options.mutual_mode},
                             {"surfel_low_pass", FLAGS_surfel_low_pass},
+                            {"surfel_filter_sigma", options.surfel_filter_sigma},
                             {"surfel_init", FLAGS_surfel_init},
                             {"seconds",
                              {{"load", load_seconds},

@@ -73,7 +73,8 @@ void SurfelGradients::ResizeAndZero(const SurfelModel& model) {
   mean2d.assign(2 * model.size(), 0.0f);
 }
 
-void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, ProjectedSurfels* out) {
+void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, ProjectedSurfels* out,
+                    float filter_sigma) {
   const Eigen::Matrix3d Kd = Intrinsics(cam).cast<double>();
   const int n = static_cast<int>(m.size());
   out->Resize(n);
@@ -85,7 +86,7 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
   const int tiles_y = (cam.height + kTileSize - 1) / kTileSize;
   const int Kc = m.sh_coeffs();
   const int degree = std::min(sh_degree, m.max_sh_degree);
-  const float min_radius = 3.0f * std::sqrt(0.5f);  // 3 sigma of the low-pass filter
+  const float min_radius = 3.0f * filter_sigma;  // 3 sigma of the low-pass filter
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     out->radius[i] = 0;

@@ -16,7 +16,8 @@
 namespace mgsr {
 
 constexpr float kSurfelNear = 0.2f, kSurfelFar = 100.0f;
-constexpr float kSurfelFilterInvSquare = 2.0f;  // low-pass screen Gaussian of sigma sqrt(2)/2 px
+// The reference's screen low-pass: a Gaussian of sigma sqrt(2)/2 px (rho2d = 2 |d|^2).
+constexpr float kReferenceSurfelFilterSigma = 0.70710678f;
 
 struct ProjectedSurfels {
   // N x 9: rows T_u - m_x T_w, T_v - m_y T_w, T_w. Centring on the screen centre m keeps the
@@ -49,8 +50,9 @@ struct SurfelGradients {
   void ResizeAndZero(const SurfelModel& model);
 };
 
+// filter_sigma: the screen low-pass's sigma in pixels; the screen radius is at least 3 of them.
 void ProjectSurfels(const SurfelModel& model, const Camera& camera, int sh_degree,
-                    ProjectedSurfels* out);
+                    ProjectedSurfels* out, float filter_sigma = kReferenceSurfelFilterSigma);
 
 void ProjectSurfelsBackward(const SurfelModel& model, const Camera& camera, int sh_degree,
                             const ProjectedSurfels& projected,

@@ -81,11 +81,13 @@ void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, std::vect
   }
 }
 
-// The low-pass floor's offset c of rho2d (see rasterize_surfels.h): e^{-c/2} = min(1, 2 |det J|)
-// with det J = det M / T_w2^3. `dc` receives d c / d M (row-major over the stored rows, which
-// differ from M by row operations that keep its determinant) where c > 0 and not clamped.
+// The low-pass floor's offset c of rho2d (see rasterize_surfels.h): e^{-c/2} = min(1, |det J| / s^2)
+// with det J = det M / T_w2^3 and s the filter's sigma (inv_square = 1 / s^2). `dc` receives
+// d c / d M (row-major over the stored rows, which differ from M by row operations that keep its
+// determinant) where c > 0 and not clamped.
 constexpr float kMinFilterArea = 1e-6f;  // below: the filter adds nothing visible (c is capped)
-inline float LowPassOffset(const float tu[3], const float tv[3], const float tw[3], float dc[9]) {
+inline float LowPassOffset(const float tu[3], const float tv[3], const float tw[3],
+                           float inv_square, float dc[9]) {
   const float cof[9] = {tv[1] * tw[2] - tv[2] * tw[1], tv[2] * tw[0] - tv[0] * tw[2],
                         tv[0] * tw[1] - tv[1] * tw[0], tw[1] * tu[2] - tw[2] * tu[1],
                         tw[2] * tu[0] - tw[0] * tu[2], tw[0] * tu[1] - tw[1] * tu[0],
@@ -93,7 +95,7 @@ inline float LowPassOffset(const float tu[3], const float tv[3], const float tw[
                         tu[0] * tv[1] - tu[1] * tv[0]};
   const float det = tu[0] * cof[0] + tu[1] * cof[1] + tu[2] * cof[2];
   const float z = tw[2];
-  const float area = kSurfelFilterInvSquare * std::abs(det) / (z * z * z);
+  const float area = inv_square * std::abs(det) / (z * z * z);
   if (dc != nullptr) std::fill(dc, dc + 9, 0.0f);
   if (!(area < 1.0f)) return 0.0f;
   if (!(area > kMinFilterArea)) return -2.0f * std::log(kMinFilterArea);
@@ -108,7 +110,8 @@ inline float LowPassOffset(const float tu[3], const float tv[3], const float tw[
 struct Surfel {
   float tu[3], tv[3], tw[3], mx, my, rad, op, n[3], c[3];
   float low_pass = 0;  // c: added to rho2d
-  Surfel(const float* f, int n_, int j) {
+  float inv_square;    // 1 / sigma^2 of the screen low-pass
+  Surfel(const float* f, int n_, int j, float inv_square_) : inv_square(inv_square_) {
     for (int q = 0; q < 3; ++q) {
       tu[q] = f[(kTu0 + q) * n_ + j];
       tv[q] = f[(kTv0 + q) * n_ + j];
@@ -158,7 +161,7 @@ inline void IntersectRow(const Surfel& s, F16 px, float py, float min_power, I16
   h->dxm = s.mx - px;
   h->dym = simd::Splat(s.my - py);
   h->rho3d = h->u * h->u + h->v * h->v;
-  h->rho2d = kSurfelFilterInvSquare * (h->dxm * h->dxm + h->dym * h->dym) + s.low_pass;
+  h->rho2d = s.inv_square * (h->dxm * h->dxm + h->dym * h->dym) + s.low_pass;
   h->splat_branch = h->rho3d <= h->rho2d;
   const F16 rho = simd::Min(h->rho3d, h->rho2d);
   // Depth: where the ray meets the disk's plane in the splat branch; the centre's depth where the
@@ -205,6 +208,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   const Eigen::Matrix3f Rt = o.camera.R.transpose().cast<float>();
   const F16 lanes = simd::Lanes();
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
+  const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
 
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int tile = 0; tile < bins.num_tiles(); ++tile) {
@@ -250,9 +254,9 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
         for (int k = 0; k < kTilePixels; ++k) any += st[aLive][k];
         if (any == 0) break;
       }
-      Surfel s(f, n, j);
+      Surfel s(f, n, j, inv_square);
       if (!(s.op > kMinAlpha)) continue;
-      if (area_preserving) s.low_pass = LowPassOffset(s.tu, s.tv, s.tw, nullptr);
+      if (area_preserving) s.low_pass = LowPassOffset(s.tu, s.tv, s.tw, s.inv_square, nullptr);
       const float min_power = std::log(kMinAlpha / s.op);
       int ya, yb;
       BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
@@ -351,6 +355,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
   const F16 lanes = simd::Lanes();
   constexpr float kDmDzScale = kSurfelFar * kSurfelNear / (kSurfelFar - kSurfelNear);
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
+  const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
 
   scratch->entry_grads.resize(bins.ids.size() * kGradStride);
   scratch->tile_used.assign(bins.num_tiles(), 0);
@@ -447,7 +452,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
         }
       }
       for (int j = max_last - 1; j >= 0; --j) {
-        Surfel s(f, n, j);
+        Surfel s(f, n, j, inv_square);
         if (!(s.op >
               kMinAlpha)) {  // invisible everywhere: no gradient (the row must still be written)
           std::fill(tg + static_cast<size_t>(j) * kGradStride,
@@ -455,7 +460,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
           continue;
         }
         float dlow[9] = {};
-        if (area_preserving) s.low_pass = LowPassOffset(s.tu, s.tv, s.tw, dlow);
+        if (area_preserving) s.low_pass = LowPassOffset(s.tu, s.tv, s.tw, s.inv_square, dlow);
         const float min_power = std::log(kMinAlpha / s.op);
         int ya, yb;
         BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
@@ -529,7 +534,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
           // rho = min(rho3d, rho2d): the splat branch moves (u, v), the low-pass branch the centre.
           F16 du = simd::Masked(h.splat_branch, 2.0f * h.u * drho);
           F16 dv = simd::Masked(h.splat_branch, 2.0f * h.v * drho);
-          const F16 drho2d = simd::Masked(~h.splat_branch, drho) * (2.0f * kSurfelFilterInvSquare);
+          const F16 drho2d = simd::Masked(~h.splat_branch, drho) * (2.0f * s.inv_square);
           gmx += drho2d * h.dxm;
           gmy += drho2d * h.dym;
           glow += simd::Masked(~h.splat_branch, drho);

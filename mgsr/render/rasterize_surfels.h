@@ -42,6 +42,11 @@ struct SurfelRenderOptions {
   int sh_degree = 3;
   float background[3] = {0, 0, 0};
   SurfelLowPass low_pass = SurfelLowPass::kReference;
+  // The screen low-pass Gaussian's sigma in pixels (rho2d = |m - pixel|^2 / sigma^2). Smaller
+  // dilates silhouettes less: every footprint is at least this wide, so an edge-on disk at a
+  // silhouette draws the object's outline about a sigma too far out, and the fit pulls the surface
+  // in to compensate (README, surface accuracy).
+  float filter_sigma = kReferenceSurfelFilterSigma;
 };
 
 struct SurfelRender {

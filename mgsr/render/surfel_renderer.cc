@@ -6,7 +6,7 @@ namespace mgsr {
 
 void SurfelRenderer::Forward(const SurfelModel& model, const SurfelRenderOptions& options,
                              SurfelRender* out) {
-  ProjectSurfels(model, options.camera, options.sh_degree, &projected_);
+  ProjectSurfels(model, options.camera, options.sh_degree, &projected_, options.filter_sigma);
   BinPrimitives(projected_.rects, projected_.depth.data(), options.camera.width,
                 options.camera.height, &bins_);
   RasterizeSurfels(projected_, bins_, options, out, &scratch_);

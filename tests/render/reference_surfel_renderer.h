@@ -37,7 +37,9 @@ struct ReferenceSurfelRender {
 // (SurfelLowPass::kAreaPreserving); false: the reference's full-opacity floor.
 template <typename Model>
 ReferenceSurfelRender RenderSurfelsReference(const Model& m, const Camera& cam, int sh_degree,
-                                             const double bg[3], bool area_preserving) {
+                                             const double bg[3], bool area_preserving,
+                                             double filter_sigma = 0.70710678118654752) {
+  const double inv_square = 1 / (filter_sigma * filter_sigma);
   struct S {
     Eigen::Matrix3d M;  // rows T_u, T_v, T_w
     Eigen::Vector2d center;
@@ -77,7 +79,7 @@ ReferenceSurfelRender RenderSurfelsReference(const Model& m, const Camera& cam, 
     const double hy =
         std::sqrt(std::max(1e-4, s.center.y() * s.center.y() - f.dot(Tv.cwiseProduct(Tv))));
     // The renderer computes the radius in float; ceil() agrees away from integers.
-    s.radius = std::ceil(std::max(std::max(hx, hy), 3 * std::sqrt(0.5)));
+    s.radius = std::ceil(std::max(std::max(hx, hy), 3 * filter_sigma));
     s.o = 1 / (1 + std::exp(-static_cast<double>(m.opacity_logits[i])));
     ReferenceShColor(std::min(sh_degree, m.max_sh_degree), &m.sh[i * m.sh_coeffs() * 3],
                      (p - cam.Center()).normalized(), s.c.data());
@@ -109,10 +111,10 @@ ReferenceSurfelRender RenderSurfelsReference(const Model& m, const Camera& cam, 
         if (p.z() == 0) continue;
         const double u = p.x() / p.z(), v = p.y() / p.z();
         const double rho3d = u * u + v * v;
-        double rho2d = 2 * ((s.center.x() - px) * (s.center.x() - px) +
-                            (s.center.y() - py) * (s.center.y() - py));
+        double rho2d = inv_square * ((s.center.x() - px) * (s.center.x() - px) +
+                                     (s.center.y() - py) * (s.center.y() - py));
         if (area_preserving) {
-          const double area = 2 * std::abs(s.M.determinant()) / std::pow(s.M(2, 2), 3);
+          const double area = inv_square * std::abs(s.M.determinant()) / std::pow(s.M(2, 2), 3);
           if (area < 1) rho2d -= 2 * std::log(std::max(area, 1e-6));
         }
         // Depth: where the ray meets the plane on the disk, the centre's depth where the screen

@@ -46,13 +46,17 @@ TEST(SurfelRendererTest, TiledRenderMatchesTheReference) {
     // Odd seeds: the reference's full-opacity low-pass floor; even: the area-preserving one.
     const SurfelLowPass low_pass =
         seed % 2 == 1 ? SurfelLowPass::kReference : SurfelLowPass::kAreaPreserving;
+    // Seeds 5 and 6: a narrower screen low-pass than the reference's.
+    const float sigma = seed >= 5 ? 0.25f : kReferenceSurfelFilterSigma;
     const Camera cam = testing::RenderTestCamera(40, 36);
     const SurfelModel m = RandomSurfels(30, seed);
     SurfelRenderer renderer;
     SurfelRender out;
-    renderer.Forward(m, Options(cam, low_pass), &out);
-    const auto ref = testing::RenderSurfelsReference(m, cam, 3, bg,
-                                                     low_pass == SurfelLowPass::kAreaPreserving);
+    SurfelRenderOptions o = Options(cam, low_pass);
+    o.filter_sigma = sigma;
+    renderer.Forward(m, o, &out);
+    const auto ref = testing::RenderSurfelsReference(
+        m, cam, 3, bg, low_pass == SurfelLowPass::kAreaPreserving, sigma);
     EXPECT_LT(testing::MaxAbsDiff(out.color, ref.color), 1e-5) << seed;
     EXPECT_LT(testing::MaxAbsDiff(out.alpha, ref.alpha), 1e-5) << seed;
     EXPECT_LT(testing::MaxAbsDiff(out.normal, ref.normal), 1e-5) << seed;
@@ -79,8 +83,10 @@ TEST(SurfelRendererTest, TiledRenderMatchesTheReference) {
 // differences of the double-precision reference.
 void CheckGradients(const SurfelModel& m, const Camera& cam, const char* label,
                     bool expect_most_checked,
-                    SurfelLowPass low_pass = SurfelLowPass::kAreaPreserving) {
-  const SurfelRenderOptions o = Options(cam, low_pass);
+                    SurfelLowPass low_pass = SurfelLowPass::kAreaPreserving,
+                    float filter_sigma = kReferenceSurfelFilterSigma) {
+  SurfelRenderOptions o = Options(cam, low_pass);
+  o.filter_sigma = filter_sigma;
   const double bg[3] = {0.2, 0.5, 0.7};
   SurfelRenderer renderer;
   SurfelRender out;
@@ -103,8 +109,8 @@ void CheckGradients(const SurfelModel& m, const Camera& cam, const char* label,
     SurfelGradients analytic;
     renderer.Backward(m, o, out, grad, &analytic);
     auto loss = [&](const testing::SurfelModelD& md) {
-      const auto r = testing::RenderSurfelsReference(md, cam, 3, bg,
-                                                     low_pass == SurfelLowPass::kAreaPreserving);
+      const auto r = testing::RenderSurfelsReference(
+          md, cam, 3, bg, low_pass == SurfelLowPass::kAreaPreserving, filter_sigma);
       const std::vector<double>* buf[] = {&r.color,        &r.depth,  &r.alpha,     &r.normal,
                                           &r.normal_world, &r.median, &r.distortion};
       double l = 0;
@@ -183,6 +189,19 @@ TEST(SurfelRendererGradientTest, AreaPreservingLowPassMatchesNumericDifferentiat
   SurfelModel m = RandomSurfels(8, 13, 0.02, 0.06);
   for (size_t i = 0; i < m.size(); ++i) m.opacity_logits[i] = 2.0f;
   CheckGradients(m, testing::RenderTestCamera(), "area-preserving low-pass", false);
+}
+
+// A narrower screen low-pass (sigma 0.3 px, both floors): the filter's width enters rho2d, the
+// area-preserving floor's opacity and the screen radius.
+TEST(SurfelRendererGradientTest, NarrowLowPassMatchesNumericDifferentiation) {
+  SurfelModel m = RandomSurfels(8, 13, 0.02, 0.06);
+  for (size_t i = 0; i < m.size(); ++i) m.opacity_logits[i] = 2.0f;
+  CheckGradients(m, testing::RenderTestCamera(), "narrow area-preserving low-pass", false,
+                 SurfelLowPass::kAreaPreserving, 0.3f);
+  SurfelModel tiny = RandomSurfels(6, 12, 0.002, 0.004);
+  for (size_t i = 0; i < tiny.size(); ++i) tiny.opacity_logits[i] = 2.0f;
+  CheckGradients(tiny, testing::RenderTestCamera(), "narrow low-pass", false,
+                 SurfelLowPass::kReference, 0.3f);
 }
 
 TEST(SurfelRendererGeometryTest, FlatSplatFacingTheCamera) {

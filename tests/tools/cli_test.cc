@@ -292,6 +292,11 @@ TEST_F(CliTest, SolveRejectsBadOptions) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_EQ(r.output, "error: --surfel_low_pass must be area or reference\n");
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --surfel_filter_sigma 0");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("--surfel_filter_sigma must be in [0.01, 2] pixels"), std::string::npos)
+      << r.output;
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
                           " --output /tmp/x --surfel_init pca");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_EQ(r.output, "error: --surfel_init must be neighbours or random\n");
