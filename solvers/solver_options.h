@@ -69,11 +69,12 @@ struct SolverOptions {
   // primitives.
   float background_2d = 1.0f, background_3d = 0.0f;
   // The 2DGS screen low-pass floor (mgsr/render/rasterize_surfels.h): the reference's
-  // full-opacity one, or area-preserving (edge-on and sub-pixel surfels do not dilate silhouettes).
-  bool surfel_area_preserving_low_pass = false;
-  // Its sigma in pixels (the reference: sqrt(2)/2). It dilates silhouettes by about a sigma, and
-  // the fit pulls the surface in by as much: README, surface accuracy.
-  float surfel_filter_sigma = 0.70710678f;
+  // full-opacity one, or area-preserving (edge-on and sub-pixel surfels do not dilate silhouettes),
+  // and its sigma in pixels: the reference's sqrt(2)/2, or by default 0.29, the spread of the
+  // pixel's own box. A wide full-opacity floor draws every silhouette about a sigma too far out,
+  // and the fit pulls the surface in by as much (README, surface accuracy).
+  bool surfel_area_preserving_low_pass = true;
+  float surfel_filter_sigma = 0.29f;
   // Initial 2DGS disk orientation: in the plane of each initial point's nearest neighbours
   // (mgsr/model/init_from_points.h), or the reference's random rotation. Small disks get almost no
   // orientation gradient from the photos (the screen low-pass makes them look alike at any tilt),

@@ -48,12 +48,12 @@ DEFINE_int32(test_every, 8,
              "Without a split file, every Nth image (by name) is held out (0: none).");
 DEFINE_uint64(seed, 0, "Seed for every random choice.");
 DEFINE_string(mutual_mode, "alternate", "alternate (the paper) | joint (the authors' code).");
-DEFINE_string(surfel_low_pass, "reference",
-              "2DGS screen low-pass floor: reference (2DGS: full opacity) | area (its opacity "
-              "scaled by the surfel's projected area: no silhouette dilation).");
-DEFINE_double(surfel_filter_sigma, -1,
-              "Sigma of the 2DGS screen low-pass in pixels (-1: the reference's 0.707). Smaller "
-              "dilates silhouettes less, which pulls the surface in less.");
+DEFINE_string(surfel_low_pass, "area",
+              "2DGS screen low-pass floor: area (its opacity scaled by the surfel's projected "
+              "area: no silhouette dilation) | reference (2DGS: full opacity).");
+DEFINE_double(surfel_filter_sigma, 0.29,
+              "Sigma of the 2DGS screen low-pass in pixels (the reference: 0.707). Wider dilates "
+              "silhouettes more, which pulls the surface in.");
 DEFINE_string(surfel_init, "neighbours",
               "Initial 2DGS disk orientation: neighbours (in the plane of each initial point's 16 "
               "nearest points) | random (the reference).");
@@ -409,8 +409,7 @@ int main(int argc, char** argv) {
   if (FLAGS_surfel_low_pass != "area" && FLAGS_surfel_low_pass != "reference")
     return Fail("--surfel_low_pass must be area or reference");
   options.surfel_area_preserving_low_pass = FLAGS_surfel_low_pass == "area";
-  if (FLAGS_surfel_filter_sigma != -1)
-    options.surfel_filter_sigma = static_cast<float>(FLAGS_surfel_filter_sigma);
+  options.surfel_filter_sigma = static_cast<float>(FLAGS_surfel_filter_sigma);
   if (FLAGS_surfel_init != "neighbours" && FLAGS_surfel_init != "random")
     return Fail("--surfel_init must be neighbours or random");
   options.surfel_orientation_from_points = FLAGS_surfel_init == "neighbours";

@@ -2,9 +2,10 @@
 // small synthetic scene, scored by mgsr_solve itself against the scene's exact mesh. Today's
 // surfaces still lie up to a pixel footprint inside the truth (README, surface accuracy); the
 // bounds catch a regression of the kind the exact metric was built to see (a convention slip of
-// the pixel centre, the depth sign, the fusion's truncation, surfels initialised at random
-// orientations again: mesh -0.99 px, median depth -1.30 px), and the exact-depth ceiling must sit
-// on the surface.
+// the pixel centre, the depth sign, the fusion's truncation, the reference's wide full-opacity
+// screen low-pass again: mesh -1.26 to -1.35 px, median depth -1.60 px at this length), and the
+// exact-depth ceiling must sit on the surface. 600 iterations are short of convergence (the mesh
+// is deeper than after a full run); trajectories differ by about 0.1 px between builds.
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
@@ -35,11 +36,11 @@ TEST(SurfaceOffsetTest, ShortRunLiesWithinAFootprintOfTheTruth) {
   const double mesh_px = m["mesh"]["signed_offset_median_px"].get<double>();
   const double ceiling_px = m["mesh"]["ceiling"]["signed_offset_median_px"].get<double>();
   const double depth_px = m["depth"]["end"]["median"]["median_px"].get<double>();
-  // Measured (seed 5, disks initialised in the plane of their neighbours): mesh -0.50 px, median
-  // depth +0.02 px, ceiling +0.07 px.
-  EXPECT_GT(mesh_px, -0.85) << r.output;
+  // Measured (seed 5, the defaults: area-preserving low-pass of sigma 0.29 px, disks initialised
+  // in the plane of their neighbours): mesh -0.98 px, median depth -0.63 px, ceiling +0.07 px.
+  EXPECT_GT(mesh_px, -1.2) << r.output;
   EXPECT_LT(mesh_px, 0.5) << r.output;
-  EXPECT_GT(depth_px, -0.8) << r.output;
+  EXPECT_GT(depth_px, -1.1) << r.output;
   EXPECT_LT(depth_px, 0.8) << r.output;
   EXPECT_LT(std::abs(ceiling_px), 0.25) << r.output;
 }
