@@ -11,24 +11,16 @@
 #include <string>
 #include <vector>
 
-#include "test_util.h"
+#include "tools/short_surfel_run.h"
 
 namespace mgsr {
 namespace {
 
-const std::string kTools = MGSR_TOOLS_DIR;
-
 TEST(LossSpikeTest, FarCamerasGiveNoSingleIterationSpikes) {
   const std::string dir = testing::ScratchDir();
-  const auto synth = testing::RunCommand(kTools + "/mgsr_synth --output " + dir +
-                                         "/scene --width 64 --height 64 --num_views 24 "
-                                         "--distance 12");
-  ASSERT_EQ(synth.exit_code, 0) << synth.output;
-  const auto r = testing::RunCommand(
-      kTools + "/mgsr_solve --workspace " + dir + "/scene --output " + dir +
-      "/out --method 2dgs --warmup_max_iterations 600 --warmup_min_iterations 0 "
-      "--mutual_iterations 0 --auto_stop=false --eval_every 0 --checkpoint_every 0");
-  ASSERT_EQ(r.exit_code, 0) << r.output;
+  testing::CommandResult r;
+  ASSERT_NO_FATAL_FAILURE(testing::ShortSurfelRun(
+      dir, "--width 64 --height 64 --num_views 24 --distance 12", &r));
   // log.csv: stage,iteration,branch,loss,gaussians,surfels,seconds
   std::ifstream in(dir + "/out/log.csv");
   std::string line;

@@ -12,24 +12,16 @@
 #include <string>
 
 #include "mgsr/io/file_util.h"
-#include "test_util.h"
+#include "tools/short_surfel_run.h"
 
 namespace mgsr {
 namespace {
 
-const std::string kTools = MGSR_TOOLS_DIR;
-
 TEST(SurfaceOffsetTest, ShortRunLiesWithinAFootprintOfTheTruth) {
   const std::string dir = testing::ScratchDir();
-  const auto synth = testing::RunCommand(kTools + "/mgsr_synth --output " + dir +
-                                         "/scene --width 64 --height 64 --num_views 24 "
-                                         "--seed 5 --mirror 0.3");
-  ASSERT_EQ(synth.exit_code, 0) << synth.output;
-  const auto r = testing::RunCommand(
-      kTools + "/mgsr_solve --workspace " + dir + "/scene --output " + dir +
-      "/out --method 2dgs --warmup_max_iterations 600 --warmup_min_iterations 0 "
-      "--mutual_iterations 0 --auto_stop=false --eval_every 0 --checkpoint_every 0");
-  ASSERT_EQ(r.exit_code, 0) << r.output;
+  testing::CommandResult r;
+  ASSERT_NO_FATAL_FAILURE(testing::ShortSurfelRun(
+      dir, "--width 64 --height 64 --num_views 24 --seed 5 --mirror 0.3", &r));
   std::string text;
   ASSERT_TRUE(ReadFileToString(dir + "/out/metrics.json", &text).ok());
   const nlohmann::json m = nlohmann::json::parse(text);
