@@ -74,7 +74,8 @@ Status SolverOptions::Validate() const {
   if (sh_interval < 1) return Status::Error("--sh_interval must be >= 1");
   if (!(surfel_filter_sigma >= 0.01f && surfel_filter_sigma <= 2.0f))
     return Status::Error("--surfel_filter_sigma must be in [0.01, 2] pixels");
-  for (double w : {w_2d, w_3d, w_depth, lambda_normal, lambda_distortion}) {
+  for (double w : {w_2d, w_3d, w_depth, lambda_normal, lambda_distortion, depth_tv_warmup_2d,
+                   depth_tv_mutual_2d, transmitted_tv_3d, depth_tv_3d}) {
     if (!(w >= 0) || !std::isfinite(w))
       return Status::Error("loss weights must be finite and >= 0");
   }

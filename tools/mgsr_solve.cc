@@ -74,6 +74,10 @@ DEFINE_double(w_3d, 0.5, "Weight of the 3DGS loss in the mutual stage.");
 DEFINE_double(w_depth, 0.01, "Weight of the mutual depth loss.");
 DEFINE_double(lambda_l1, 0.8, "Render loss: lambda L1 + (1 - lambda) D-SSIM.");
 DEFINE_double(lambda_normal, 0.05, "Weight of the normal consistency and normal TV terms.");
+DEFINE_double(depth_tv_warmup_2d, 1.0,
+              "Weight of the 2DGS branch's edge-aware depth TV in its warm-up.");
+DEFINE_double(depth_tv_mutual_2d, 0.05,
+              "Weight of the 2DGS branch's edge-aware depth TV in the mutual stage.");
 DEFINE_double(lambda_distortion, -1,
               "Weight of the 2DGS depth-distortion term (-1: the default of SolverOptions).");
 DEFINE_double(
@@ -427,6 +431,8 @@ int main(int argc, char** argv) {
   options.w_depth = FLAGS_w_depth;
   options.lambda_l1 = FLAGS_lambda_l1;
   options.lambda_normal = FLAGS_lambda_normal;
+  options.depth_tv_warmup_2d = FLAGS_depth_tv_warmup_2d;
+  options.depth_tv_mutual_2d = FLAGS_depth_tv_mutual_2d;
   if (FLAGS_lambda_distortion >= 0) {
     options.lambda_distortion = FLAGS_lambda_distortion;
   } else if (FLAGS_lambda_distortion != -1) {
