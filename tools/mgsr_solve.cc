@@ -73,7 +73,8 @@ DEFINE_double(w_2d, 0.5, "Weight of the 2DGS loss in the mutual stage.");
 DEFINE_double(w_3d, 0.5, "Weight of the 3DGS loss in the mutual stage.");
 DEFINE_double(w_depth, 0.01, "Weight of the mutual depth loss.");
 DEFINE_double(lambda_l1, 0.8, "Render loss: lambda L1 + (1 - lambda) D-SSIM.");
-DEFINE_double(lambda_normal, 0.05, "Weight of the normal consistency and normal TV terms.");
+DEFINE_double(lambda_normal, 2.0,
+              "Weight of the normal consistency and normal TV terms (the reference: 0.05).");
 DEFINE_double(depth_tv_warmup_2d, 1.0,
               "Weight of the 2DGS branch's edge-aware depth TV in its warm-up.");
 DEFINE_double(depth_tv_mutual_2d, 0.05,
