@@ -3,12 +3,11 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include "mgsr/core/timer.h"
-#include "mgsr/loss/edge_aware_tv_loss.h"
-#include "mgsr/loss/mutual_depth_loss.h"
-#include "mgsr/loss/normal_consistency_loss.h"
+#include "mgsr/loss/loss_registry.h"
 #include "mgsr/loss/render_loss.h"
 #include "mgsr/model/init_from_points.h"
 #include "solvers/exposure_fit.h"
@@ -151,24 +150,55 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   exposure_2d_.Reset(static_cast<int>(scene.views.size()), options.exposure, train_);
 }
 
-std::unique_ptr<LossTerm> MutualBoostedSolver::PhotoLoss(int view, Branch branch,
-                                                         ExposureCompensatedLoss** wrapped) {
-  auto render =
-      std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, options_.lambda_l1);
-  *wrapped = nullptr;
-  if (options_.exposure == ExposureMode::kOff) return render;
-  auto term = std::make_unique<ExposureCompensatedLoss>(std::move(render),
-                                                        ExposureFor(branch).transform(view));
-  *wrapped = term.get();
-  return term;
+Status MutualBoostedSolver::BuildProblems() {
+  if (problems_built_) return Status::Ok();
+  for (const LossSpec& row : options_.LossTable()) {
+    Status status;
+    std::unique_ptr<LossTerm> term = LossRegistry::Get().Create(row.term, row.config, &status);
+    if (term == nullptr) return status.WithContext("loss row " + LossSpecId(row) + ": ");
+    StageProblem& sp = ProblemFor(row.branch, row.stage);
+    if (row.exposure && options_.exposure != ExposureMode::kOff) {
+      auto wrapped = std::make_unique<ExposureCompensatedLoss>(std::move(term));
+      sp.exposure_terms.push_back(wrapped.get());
+      term = std::move(wrapped);
+    }
+    sp.problem.AddTerm(std::move(term), row.weight, row.branch, row.name);
+    sp.rows.push_back(row);
+  }
+  problems_built_ = true;
+  return Status::Ok();
 }
 
-void MutualBoostedSolver::StepExposure(int view, Branch branch,
-                                       const ExposureCompensatedLoss* wrapped) {
-  if (wrapped == nullptr) return;
-  ExposureFor(branch).Step(view, wrapped->parameter_gradient(), options_.exposure_lr,
-                           options_.exposure_prior, options_.exposure_offset_prior,
-                           options_.exposure_mean_prior);
+double MutualBoostedSolver::EvaluateLoss(Branch branch, Stage stage, int view, int it,
+                                         const RenderBuffers& in, const Targets& t,
+                                         RenderGradients* grad) {
+  StageProblem& sp = ProblemFor(branch, stage);
+  for (size_t i = 0; i < sp.rows.size(); ++i)
+    sp.problem.SetWeight(i, it >= sp.rows[i].first_iteration ? sp.rows[i].weight : 0.0);
+  for (ExposureCompensatedLoss* e : sp.exposure_terms)
+    e->set_transform(ExposureFor(branch).transform(view));
+  if (!sp.checked) {
+    // Once per branch and stage: every row's inputs and targets exist (a custom row may ask for a
+    // buffer this branch does not render, or a target this stage does not have).
+    const Status s = sp.problem.Check(branch, in, t);
+    if (!s.ok()) {
+      step_error_ = s.WithContext(std::string(branch == Branch::kSurfels2D ? "2DGS" : "3DGS") +
+                                  " " + StageName(stage) + " loss row ");
+      return std::numeric_limits<double>::quiet_NaN();
+    }
+    sp.checked = true;
+  }
+  std::vector<Problem::TermValue>& terms = last_terms_[branch == Branch::kSurfels2D ? 0 : 1];
+  const double loss = sp.problem.Evaluate(branch, in, t, grad, &terms);
+  if (!sp.exposure_terms.empty()) {
+    ColorTransform gradient{};
+    for (const ExposureCompensatedLoss* e : sp.exposure_terms) {
+      for (int k = 0; k < kColorTransformSize; ++k) gradient[k] += e->parameter_gradient()[k];
+    }
+    ExposureFor(branch).Step(view, gradient, options_.exposure_lr, options_.exposure_prior,
+                             options_.exposure_offset_prior, options_.exposure_mean_prior);
+  }
+  return loss;
 }
 
 void MutualBoostedSolver::FitExposures() {
@@ -206,7 +236,8 @@ int MutualBoostedSolver::NextView() {
 
 void MutualBoostedSolver::Notify(Stage stage, int iteration, Branch branch, double loss) {
   IterationInfo info{stage,           iteration,          branch, loss, gaussians_.size(),
-                     surfels_.size(), Now() - start_time_};
+                     surfels_.size(), Now() - start_time_,
+                     last_terms_[branch == Branch::kSurfels2D ? 0 : 1]};
   for (IterationCallback* c : callbacks_) (*c)(info);
 }
 
@@ -246,45 +277,11 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
   SurfelRender render;
   surfel_renderer_.Forward(surfels_, ro, &render);
 
-  // The 2DGS loss of the stage (reference 1.3 warm-up, 1.5 mutual).
-  Problem p;
-  ExposureCompensatedLoss* exposure_term = nullptr;
+  // The 2DGS loss of the stage (the loss table; the paper's: reference 1.3 warm-up, 1.5 mutual).
   Targets t;
+  t.image = &targets_[view].gt_2d;
   t.mask = v.mask.empty() ? nullptr : &v.mask;
-  if (stage == Stage::kWarmup) {
-    const double ln = it > o.normal_from_iteration ? o.lambda_normal : 0.0;
-    t.image = &targets_[view].gt_2d;
-    p.AddTerm(PhotoLoss(view, Branch::kSurfels2D, &exposure_term), 1.0, Branch::kSurfels2D);
-    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kImage),
-              o.depth_tv_warmup_2d, Branch::kSurfels2D);
-    p.AddTerm(std::make_unique<NormalConsistencyLoss>(), ln, Branch::kSurfels2D);
-    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kImage), ln,
-              Branch::kSurfels2D);
-    p.AddTerm(std::make_unique<DistortionLoss>(),
-              it > o.distortion_from_iteration ? o.lambda_distortion : 0.0, Branch::kSurfels2D);
-  } else {
-    t.image = &targets_[view].gt_2d;
-    t.transmitted = transmitted;
-    const double w = o.w_2d;
-    if (o.exposure == ExposureMode::kOff) {
-      p.AddTerm(std::make_unique<MutualRenderLoss>(o.mutual_transmitted_weight,
-                                                   o.mutual_image_weight, o.lambda_l1),
-                w, Branch::kSurfels2D);
-    } else {
-      // The two halves of the mutual render loss: the transmitted image is already at the
-      // scene's neutral exposure, only the photo needs the view's transform.
-      p.AddTerm(std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kTransmitted, o.lambda_l1),
-                w * o.mutual_transmitted_weight, Branch::kSurfels2D);
-      p.AddTerm(PhotoLoss(view, Branch::kSurfels2D, &exposure_term), w * o.mutual_image_weight,
-                Branch::kSurfels2D);
-    }
-    p.AddTerm(std::make_unique<NormalConsistencyLoss>(), w * o.lambda_normal, Branch::kSurfels2D);
-    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kNormal, TargetKind::kTransmitted),
-              w * o.lambda_normal, Branch::kSurfels2D);
-    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kTransmitted),
-              w * o.depth_tv_mutual_2d, Branch::kSurfels2D);
-    p.AddTerm(std::make_unique<DistortionLoss>(), w * o.lambda_distortion, Branch::kSurfels2D);
-  }
+  t.transmitted = stage == Stage::kMutual ? transmitted : nullptr;
   RenderBuffers in;
   in.camera = &v.camera;
   in.Set(Buffer::kColor, &render.color);
@@ -294,8 +291,8 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
   in.Set(Buffer::kMedianDepth, &render.median_depth);
   in.Set(Buffer::kDistortion, &render.distortion);
   RenderGradients g;
-  const double loss = p.Evaluate(Branch::kSurfels2D, in, t, &g);
-  StepExposure(view, Branch::kSurfels2D, exposure_term);
+  const double loss = EvaluateLoss(Branch::kSurfels2D, stage, view, it, in, t, &g);
+  if (!step_error_.ok()) return loss;
   SurfelRenderGrad rg;
   MoveGradients(&g, &rg);
   SurfelGradients grads;
@@ -315,23 +312,11 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it,
   GaussianRender render;
   gaussian_renderer_.Forward(gaussians_, ro, &render);
 
-  // The 3DGS loss of the stage (reference 1.4 warm-up, 1.5 mutual).
-  Problem p;
-  ExposureCompensatedLoss* exposure_term = nullptr;
+  // The 3DGS loss of the stage (the loss table; the paper's: reference 1.4 warm-up, 1.5 mutual).
   Targets t;
   t.image = &targets_[view].gt_3d;
   t.mask = v.mask.empty() ? nullptr : &v.mask;
-  if (stage == Stage::kWarmup) {
-    p.AddTerm(PhotoLoss(view, Branch::kGaussians3D, &exposure_term), 1.0, Branch::kGaussians3D);
-    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kTransmitted, TargetKind::kImage),
-              o.transmitted_tv_3d, Branch::kGaussians3D);
-    p.AddTerm(std::make_unique<EdgeAwareTvLoss>(Buffer::kDepth, TargetKind::kImage), o.depth_tv_3d,
-              Branch::kGaussians3D);
-  } else {
-    t.other_depth = surfel_depth;
-    p.AddTerm(PhotoLoss(view, Branch::kGaussians3D, &exposure_term), o.w_3d, Branch::kGaussians3D);
-    p.AddTerm(std::make_unique<MutualDepthLoss>(false), o.w_depth, Branch::kGaussians3D);
-  }
+  t.other_depth = stage == Stage::kMutual ? surfel_depth : nullptr;
   RenderBuffers in;
   in.camera = &v.camera;
   in.Set(Buffer::kColor, &render.color);
@@ -341,8 +326,8 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it,
   in.Set(Buffer::kDepth, &render.depth);
   in.Set(Buffer::kAlpha, &render.alpha);
   RenderGradients g;
-  const double loss = p.Evaluate(Branch::kGaussians3D, in, t, &g);
-  StepExposure(view, Branch::kGaussians3D, exposure_term);
+  const double loss = EvaluateLoss(Branch::kGaussians3D, stage, view, it, in, t, &g);
+  if (!step_error_.ok()) return loss;
   GaussianRenderGrad rg;
   MoveGradients(&g, &rg);
   GaussianGradients grads;
@@ -377,6 +362,7 @@ void MutualBoostedSolver::BackpropIntoSurfels(int view, int it, SurfelRender* re
 }
 
 Status MutualBoostedSolver::CheckFinite(Branch branch, int iteration, double loss) const {
+  if (!step_error_.ok()) return step_error_;
   if (std::isfinite(loss) && nonfinite_block_.empty()) return Status::Ok();
   const std::string where = std::string(branch == Branch::kSurfels2D ? "2DGS" : "3DGS") + " " +
                             (stage_ == Stage::kWarmup ? "warm-up" : "mutual") + " iteration " +
@@ -392,6 +378,7 @@ Status MutualBoostedSolver::CheckFinite(Branch branch, int iteration, double los
 
 Status MutualBoostedSolver::Solve(SolveSummary* summary) {
   MGSR_RETURN_IF_ERROR(options_.Validate());
+  MGSR_RETURN_IF_ERROR(BuildProblems());
   if (train_.empty()) return Status::Error("the scene has no training views");
   if (gaussians_.size() == 0) return Status::Error("the scene has no initial points");
   stop_requested_ = 0;

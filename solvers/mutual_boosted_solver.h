@@ -27,8 +27,6 @@
 
 namespace mgsr {
 
-enum class Stage { kWarmup, kMutual };
-
 // What an iteration callback sees (Ceres' IterationSummary).
 struct IterationInfo {
   Stage stage;
@@ -37,6 +35,9 @@ struct IterationInfo {
   double loss;
   size_t num_gaussians, num_surfels;
   double seconds;  // since Solve started
+  // The loss table's active rows for this step: label, weight and unweighted value (the loss is
+  // the sum of weight x value).
+  std::vector<Problem::TermValue> terms;
 };
 
 class IterationCallback {
@@ -109,10 +110,24 @@ class MutualBoostedSolver {
   ExposureModel& ExposureFor(Branch b) {
     return options_.exposure_per_branch && b == Branch::kSurfels2D ? exposure_2d_ : exposure_3d_;
   }
-  // The render loss against the photo, behind the view's colour transform when compensation is
-  // on (then *wrapped points at the term, to read its parameter gradient after evaluation).
-  std::unique_ptr<LossTerm> PhotoLoss(int view, Branch branch, ExposureCompensatedLoss** wrapped);
-  void StepExposure(int view, Branch branch, const ExposureCompensatedLoss* wrapped);
+  // One Problem per branch and stage, built from the loss table once, when Solve first runs.
+  struct StageProblem {
+    Problem problem;
+    std::vector<LossSpec> rows;  // parallel to problem.entries()
+    // The rows behind the view's colour transform (exposure compensation on).
+    std::vector<ExposureCompensatedLoss*> exposure_terms;
+    bool checked = false;  // inputs and targets checked against the first render
+  };
+  Status BuildProblems();
+  StageProblem& ProblemFor(Branch b, Stage s) {
+    return problems_[b == Branch::kSurfels2D ? 0 : 1][s == Stage::kWarmup ? 0 : 1];
+  }
+  // The branch's loss of the stage on one view's render: rows switched on by iteration, the
+  // view's colour transform set and stepped with the gradient of its rows. Fills the gradient
+  // buffers and the branch's per-row breakdown; a row whose inputs or targets are missing stops
+  // the run (step_error_, returned by CheckFinite).
+  double EvaluateLoss(Branch branch, Stage stage, int view, int iteration, const RenderBuffers& in,
+                      const Targets& targets, RenderGradients* grad);
   // Ceres fit of every training view's transform against the current renders.
   void FitExposures();
   void Notify(Stage stage, int iteration, Branch branch, double loss);
@@ -140,6 +155,10 @@ class MutualBoostedSolver {
   AutoStop stop_2d_, stop_3d_;
   SolveSummary summary_;
   std::string nonfinite_block_;  // of the last step, for CheckFinite
+  Status step_error_;            // of the last step, for CheckFinite
+  StageProblem problems_[2][2];  // [2DGS, 3DGS][warm-up, mutual]
+  bool problems_built_ = false;
+  std::vector<Problem::TermValue> last_terms_[2];  // [2DGS, 3DGS], for Notify
   volatile std::sig_atomic_t stop_requested_ = 0;
 };
 

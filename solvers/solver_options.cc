@@ -79,6 +79,7 @@ Status SolverOptions::Validate() const {
     if (!(w >= 0) || !std::isfinite(w))
       return Status::Error("loss weights must be finite and >= 0");
   }
+  MGSR_RETURN_IF_ERROR(CheckLossTable(LossTable()));
   if (!(exposure_lr >= 0) || !std::isfinite(exposure_lr))
     return Status::Error("--exposure_lr must be finite and >= 0");
   if (!(exposure_prior >= 0) || !std::isfinite(exposure_prior))
@@ -162,6 +163,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"exposure_per_branch", Text(exposure_per_branch)},
           {"exposure_fit_at_mutual", Text(exposure_fit_at_mutual)},
           {"max_init_points", Text(static_cast<double>(max_init_points))},
+          {"losses", LossTableToJson(LossTable()).dump()},
           {"seed", std::to_string(seed)}};
 }
 

@@ -11,6 +11,7 @@
 
 #include "mgsr/core/status.h"
 #include "mgsr/loss/exposure_compensation.h"
+#include "solvers/loss_table.h"
 
 namespace mgsr {
 
@@ -56,6 +57,10 @@ struct SolverOptions {
   double depth_tv_3d = 0.05;
   double w_2d = 0.5, w_3d = 0.5, w_depth = 0.01;
   double mutual_transmitted_weight = 0.2, mutual_image_weight = 0.8;
+  // The loss table (solvers/loss_table.h). Empty: the paper's, built from the weights above when
+  // the solver starts (so presets and the weight flags apply); otherwise exactly these rows.
+  std::vector<LossSpec> losses;
+  std::vector<LossSpec> LossTable() const { return losses.empty() ? PaperLossTable(*this) : losses; }
   // Density control.
   BranchSchedule schedule_2d{500, 15000, 100, 3000, 0.05f};
   BranchSchedule schedule_3d{50, 2500, 20, 500, 0.005f};

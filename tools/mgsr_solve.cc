@@ -22,6 +22,7 @@
 #include "mgsr/io/output_folder.h"
 #include "mgsr/io/ply.h"
 #include "mgsr/io/scene.h"
+#include "mgsr/loss/loss_registry.h"
 #include "mgsr/eval/ground_truth.h"
 #include "mgsr/synth/ray_caster.h"
 #include "solvers/backdrop.h"
@@ -79,6 +80,11 @@ DEFINE_double(depth_tv_warmup_2d, 1.0,
               "Weight of the 2DGS branch's edge-aware depth TV in its warm-up.");
 DEFINE_double(depth_tv_mutual_2d, 0.05,
               "Weight of the 2DGS branch's edge-aware depth TV in the mutual stage.");
+DEFINE_string(loss_config, "",
+              "JSON file that changes rows of the loss table or adds rows (solvers/loss_table.h; "
+              "--list_losses prints the terms and the table).");
+DEFINE_bool(list_losses, false,
+            "Print the registered loss terms and the loss table these options give, then exit.");
 DEFINE_double(lambda_distortion, -1,
               "Weight of the 2DGS depth-distortion term (-1: the default of SolverOptions).");
 DEFINE_double(
@@ -300,7 +306,7 @@ class ProgressLog : public mgsr::IterationCallback {
     const bool header =
         !append || std::ifstream(csv_path).peek() == std::ifstream::traits_type::eof();
     csv_.open(csv_path, append ? std::ios::app : std::ios::trunc);
-    if (header) csv_ << "stage,iteration,branch,loss,gaussians,surfels,seconds\n";
+    if (header) csv_ << "stage,iteration,branch,loss,gaussians,surfels,seconds,terms\n";
   }
   // The rows so far reach the disk (at every checkpoint, so a killed run loses none it resumes
   // from); an error names the file.
@@ -313,7 +319,12 @@ class ProgressLog : public mgsr::IterationCallback {
     const bool is2d = i.branch == mgsr::Branch::kSurfels2D;
     const char* stage = i.stage == mgsr::Stage::kWarmup ? "warmup" : "mutual";
     csv_ << stage << "," << i.iteration << "," << (is2d ? "2dgs" : "3dgs") << "," << i.loss << ","
-         << i.num_gaussians << "," << i.num_surfels << "," << i.seconds << "\n";
+         << i.num_gaussians << "," << i.num_surfels << "," << i.seconds << ",";
+    // The loss table's active rows: name=weight x value, separated by ';'.
+    for (size_t k = 0; k < i.terms.size(); ++k) {
+      csv_ << (k ? ";" : "") << i.terms[k].name << "=" << i.terms[k].weight * i.terms[k].value;
+    }
+    csv_ << "\n";
     (is2d ? loss_2d_ : loss_3d_) = i.loss;
     ++steps_;
     if (i.iteration % every_ == 0 && is2d != train_3d_) {
@@ -383,6 +394,32 @@ std::string ChooseBackground(const std::string& flag, double level, const mgsr::
   return "reference (2DGS white, 3DGS black)";
 }
 
+// --list_losses: the registry's terms with the buffers they read, then the table.
+void PrintLosses(const mgsr::SolverOptions& options) {
+  std::printf("Registered loss terms (name: differentiated inputs [constant inputs]):\n");
+  for (const std::string& name : mgsr::LossRegistry::Get().Names()) {
+    mgsr::Status status;
+    const auto term = mgsr::LossRegistry::Get().Create(name, nlohmann::json::object(), &status);
+    std::string inputs, constants;
+    if (term != nullptr) {
+      for (mgsr::Buffer b : term->Inputs()) inputs += std::string(" ") + mgsr::BufferName(b);
+      for (mgsr::Buffer b : term->ConstantInputs())
+        constants += std::string(" ") + mgsr::BufferName(b);
+    }
+    std::printf("  %-20s%s%s\n", name.c_str(), inputs.c_str(),
+                constants.empty() ? "" : (" [" + constants.substr(1) + "]").c_str());
+  }
+  std::printf("\nThe loss table of these options (--loss_config FILE changes or adds rows):\n");
+  std::printf("  %-6s %-7s %-20s %-19s %10s %6s  %s\n", "branch", "stage", "name", "term", "weight",
+              "from", "config");
+  for (const mgsr::LossSpec& r : options.LossTable()) {
+    std::printf("  %-6s %-7s %-20s %-19s %10.4g %6d  %s%s\n", mgsr::BranchName(r.branch),
+                mgsr::StageName(r.stage), r.name.c_str(), r.term.c_str(), r.weight,
+                std::max(1, r.first_iteration), r.config.dump().c_str(),
+                r.exposure ? " (behind the view's colour transform)" : "");
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -391,15 +428,16 @@ int main(int argc, char** argv) {
       "fast|paper] "
       "[options]");
   gflags::ParseCommandLineFlags(&argc, &argv, true);
-  if (FLAGS_workspace.empty() == FLAGS_images.empty()) {
+  const bool listing = FLAGS_list_losses;  // needs no scene
+  if (!listing && FLAGS_workspace.empty() == FLAGS_images.empty()) {
     std::fprintf(stderr, "error: give either --workspace or --images\n");
     return 2;
   }
-  if (!FLAGS_masks.empty() && FLAGS_images.empty()) {
+  if (!listing && !FLAGS_masks.empty() && FLAGS_images.empty()) {
     std::fprintf(stderr, "error: --masks goes with --images (a workspace has its own masks/)\n");
     return 2;
   }
-  if (FLAGS_output.empty() && !(FLAGS_check && !FLAGS_resume)) {
+  if (!listing && FLAGS_output.empty() && !(FLAGS_check && !FLAGS_resume)) {
     std::fprintf(stderr, "error: --output is required\n");
     return 2;
   }
@@ -470,8 +508,17 @@ int main(int argc, char** argv) {
     const mgsr::Status b = ParseBackground(FLAGS_background, &background_level);
     if (!b.ok()) return Fail(b.message());
   }
+  if (!FLAGS_loss_config.empty()) {
+    options.losses = options.LossTable();
+    const mgsr::Status l = mgsr::ApplyLossConfigFile(FLAGS_loss_config, &options.losses);
+    if (!l.ok()) return Fail(l.message());
+  }
   const mgsr::Status valid = options.Validate();
   if (!valid.ok()) return Fail(valid.message());
+  if (listing) {
+    PrintLosses(options);
+    return 0;
+  }
   if (FLAGS_resume && FLAGS_overwrite) {
     std::fprintf(stderr, "error: --resume and --overwrite exclude each other\n");
     return 2;
@@ -757,6 +804,7 @@ int main(int argc, char** argv) {
                             {"surfel_low_pass", FLAGS_surfel_low_pass},
                             {"surfel_filter_sigma", options.surfel_filter_sigma},
                             {"surfel_init", FLAGS_surfel_init},
+                            {"losses", mgsr::LossTableToJson(options.LossTable())["losses"]},
                             {"seconds",
                              {{"load", load_seconds},
                               {"warmup", summary.warmup_seconds},

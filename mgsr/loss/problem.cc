@@ -2,8 +2,10 @@
 
 namespace mgsr {
 
-void Problem::AddTerm(std::unique_ptr<LossTerm> term, double weight, Branch branch) {
-  entries_.push_back({std::move(term), weight, branch});
+void Problem::AddTerm(std::unique_ptr<LossTerm> term, double weight, Branch branch,
+                      std::string label) {
+  if (label.empty()) label = term->Name();
+  entries_.push_back({std::move(term), weight, branch, std::move(label)});
 }
 
 bool Problem::SetWeight(const std::string& name, Branch branch, double weight) {
@@ -19,7 +21,8 @@ bool Problem::SetWeight(const std::string& name, Branch branch, double weight) {
 Status Problem::Check(Branch branch, const RenderBuffers& in, const Targets& targets) const {
   for (const Entry& e : entries_) {
     if (e.branch != branch || e.weight == 0) continue;
-    MGSR_RETURN_IF_ERROR(e.term->Check(in, targets));
+    const Status s = e.term->Check(in, targets);
+    if (!s.ok()) return s.WithContext(e.label + ": ");
   }
   return Status::Ok();
 }
@@ -33,7 +36,7 @@ double Problem::Evaluate(Branch branch, const RenderBuffers& in, const Targets& 
     if (e.branch != branch || e.weight == 0) continue;
     const double v = e.term->Evaluate(in, targets, e.weight, grad);
     total += e.weight * v;
-    if (breakdown != nullptr) breakdown->push_back({e.term->Name(), e.weight, v});
+    if (breakdown != nullptr) breakdown->push_back({e.label, e.weight, v});
   }
   return total;
 }

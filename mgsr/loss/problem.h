@@ -22,16 +22,20 @@ class Problem {
     std::unique_ptr<LossTerm> term;
     double weight;
     Branch branch;
+    std::string label;  // the breakdown's name for the entry (default: the term's name)
   };
   struct TermValue {
     std::string name;
     double weight, value;  // value unweighted
   };
 
-  void AddTerm(std::unique_ptr<LossTerm> term, double weight, Branch branch);
+  void AddTerm(std::unique_ptr<LossTerm> term, double weight, Branch branch,
+               std::string label = "");
   // Changes the weight of the first entry whose term name matches (schedules switch terms on and
   // off).
   bool SetWeight(const std::string& name, Branch branch, double weight);
+  // Changes the weight of entry `index` (in the order added).
+  void SetWeight(size_t index, double weight) { entries_.at(index).weight = weight; }
   const std::vector<Entry>& entries() const { return entries_; }
 
   // Checks every active term of the branch against the buffers and targets.

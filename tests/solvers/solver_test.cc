@@ -10,12 +10,15 @@
 #include "mgsr/eval/image_metrics.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/scene.h"
+#include "mgsr/loss/loss_registry.h"
+#include "mgsr/loss/loss_util.h"
 #include "mgsr/core/sha256.h"
 #include "mgsr/model/activations.h"
 #include "solvers/adam.h"
 #include "solvers/auto_stop.h"
 #include "solvers/density_control.h"
 #include "solvers/exposure_fit.h"
+#include "solvers/loss_table.h"
 #include "solvers/mutual_boosted_solver.h"
 #include "test_util.h"
 
@@ -771,6 +774,126 @@ TEST(CheckpointTest, OneAndTwoThreadsGiveIdenticalModels) {
   ASSERT_TRUE(two.Solve(&s2).ok());
   omp_set_num_threads(saved);
   ExpectSameModels(one, two);
+}
+
+}  // namespace
+}  // namespace mgsr
+
+namespace mgsr {
+namespace {
+
+// A term a researcher might add: the mean accumulated opacity (pulls the render transparent).
+class MeanAlphaLoss : public LossTermImpl<MeanAlphaLoss> {
+ public:
+  std::string Name() const override { return "test_mean_alpha"; }
+  std::vector<Buffer> Inputs() const override { return {Buffer::kAlpha}; }
+  Status Check(const RenderBuffers& in, const Targets&) const override {
+    return RequireImage(Name(), "alpha", in.Get(Buffer::kAlpha));
+  }
+  template <typename T>
+  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>&, double scale,
+                 RenderGradientsT<T>* grad) const {
+    const ImageT<T>& a = *in.Get(Buffer::kAlpha);
+    double sum = 0;
+    for (size_t i = 0; i < a.size(); ++i) sum += a.data()[i];
+    if (grad != nullptr) {
+      T* g = grad->Get(Buffer::kAlpha, a).data();
+      for (size_t i = 0; i < a.size(); ++i) g[i] += static_cast<T>(scale / a.size());
+    }
+    return sum / a.size();
+  }
+};
+
+double MeanSurfelAlpha(MutualBoostedSolver* solver, const Scene& scene) {
+  double sum = 0;
+  for (int i : scene.TrainIndices()) {
+    SurfelRender r;
+    solver->RenderSurfels(scene.views[i].camera, &r);
+    for (size_t k = 0; k < r.alpha.size(); ++k) sum += r.alpha.data()[k] / r.alpha.size();
+  }
+  return sum / scene.TrainIndices().size();
+}
+
+// A new term trains through a row of the loss table: it is switched on at its first iteration, its
+// value shows in the per-row breakdown, the breakdown sums to the loss, and it changes the model.
+TEST(LossTableSolverTest, ANewTermTrainsThroughARow) {
+  LossRegistry::Get().Register("test_mean_alpha", [](const nlohmann::json&, Status*) {
+    return std::make_unique<MeanAlphaLoss>();
+  });
+  const Scene scene = TinyScene(testing::ScratchDir());
+  SolverOptions plain = TinyOptions();
+  plain.warmup_max_iterations = 80;
+  plain.mutual_iterations = 10;
+  SolverOptions with = plain;
+  with.losses = with.LossTable();
+  ASSERT_TRUE(ApplyLossConfig(nlohmann::json::parse(R"({"losses": [{"branch": "2d",
+      "stage": "both", "name": "thin", "term": "test_mean_alpha", "weight": 0.5,
+      "first_iteration": 30}]})"),
+                              "test", &with.losses)
+                  .ok());
+  MutualBoostedSolver a(plain, scene), b(with, scene);
+  Recorder rec;
+  b.AddCallback(&rec);
+  SolveSummary sa, sb;
+  ASSERT_TRUE(a.Solve(&sa).ok());
+  ASSERT_TRUE(b.Solve(&sb).ok());
+  int with_row = 0;
+  for (const IterationInfo& i : rec.calls) {
+    if (i.branch != Branch::kSurfels2D) continue;
+    double sum = 0;
+    bool has = false;
+    for (const Problem::TermValue& t : i.terms) {
+      sum += t.weight * t.value;
+      has = has || t.name == "thin";
+    }
+    EXPECT_NEAR(sum, i.loss, 1e-6 * std::abs(i.loss)) << i.iteration;
+    // "both" gives the mutual row the same first iteration, which 10 mutual ones do not reach.
+    const bool expected = i.stage == Stage::kWarmup && i.iteration >= 30;
+    EXPECT_EQ(has, expected) << StageName(i.stage) << " " << i.iteration;
+    with_row += has;
+  }
+  EXPECT_EQ(with_row, 51);
+  EXPECT_LT(MeanSurfelAlpha(&b, scene), MeanSurfelAlpha(&a, scene) - 0.01);
+}
+
+// The paper's table written out as rows trains exactly as the default (empty) table.
+TEST(LossTableSolverTest, TheExplicitPaperTableEqualsTheDefault) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  SolverOptions o = TinyOptions();
+  o.warmup_max_iterations = 40;
+  o.mutual_iterations = 10;
+  SolverOptions explicit_table = o;
+  explicit_table.losses = PaperLossTable(o);
+  MutualBoostedSolver a(o, scene), b(explicit_table, scene);
+  SolveSummary sa, sb;
+  ASSERT_TRUE(a.Solve(&sa).ok());
+  ASSERT_TRUE(b.Solve(&sb).ok());
+  ExpectSameModels(a, b);
+}
+
+// A row whose inputs the branch does not render, or whose target the stage does not have, stops
+// the run at its first step with the row's name.
+TEST(LossTableSolverTest, ARowTheBranchCannotFeedStopsTheRunNamingIt) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  const std::vector<std::pair<std::string, std::string>> rows = {
+      {R"({"branch": "2d", "stage": "warmup", "name": "refl", "term": "l1",
+          "config": {"buffer": "reflected"}, "weight": 1})",
+       "2DGS warmup loss row refl: "},
+      {R"({"branch": "3d", "stage": "warmup", "name": "vs_depth", "term": "mutual_depth",
+          "weight": 1})",
+       "3DGS warmup loss row vs_depth: "},
+  };
+  for (const auto& [row, expected] : rows) {
+    SolverOptions o = TinyOptions();
+    o.warmup_max_iterations = 5;
+    o.losses = o.LossTable();
+    ASSERT_TRUE(ApplyLossConfig({{"losses", {nlohmann::json::parse(row)}}}, "test", &o.losses).ok());
+    MutualBoostedSolver solver(o, scene);
+    SolveSummary summary;
+    const Status s = solver.Solve(&summary);
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.message().find(expected), std::string::npos) << s.message();
+  }
 }
 
 }  // namespace

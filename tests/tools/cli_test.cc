@@ -7,6 +7,8 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
 
 #include "mgsr/io/colmap_model.h"
 #include "mgsr/io/file_util.h"
@@ -479,6 +481,68 @@ TEST_F(CliTest, PhotoPipelineBadInput) {
                           " --output " + dir + "/out");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_EQ(r.output, "error: give either --workspace or --images\n");
+}
+
+}  // namespace
+}  // namespace mgsr
+
+namespace mgsr {
+namespace {
+
+TEST_F(CliTest, LossConfigChangesTheTableAndTheLogShowsEachRow) {
+  // --list_losses needs no scene.
+  auto r = testing::RunCommand(kTools + "/mgsr_solve --list_losses --lambda_normal 0.5");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("normal_consistency   normal depth [alpha]"), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("2d     warmup  normal_consistency   normal_consistency         0.5"),
+            std::string::npos)
+      << r.output;
+  const std::string dir = Copy();
+  {
+    std::ofstream(dir + "/losses.json")
+        << R"({"losses": [{"branch": "3d", "stage": "warmup", "name": "depth_tv", "weight": 0},
+              {"branch": "3d", "stage": "warmup", "name": "tran_l1", "term": "l1",
+               "config": {"buffer": "transmitted", "target": "image"}, "weight": 0.01}]})";
+  }
+  // A bad row: one line naming the file and the row, nothing written.
+  {
+    std::ofstream(dir + "/bad.json")
+        << R"({"losses": [{"branch": "3d", "stage": "warmup", "name": "x", "term": "l2",
+              "weight": 1}]})";
+  }
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
+                          "/bad_out --loss_config " + dir + "/bad.json");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.output.rfind("error: " + dir + "/bad.json: loss row 3d/warmup/x: unknown loss term "
+                                             "'l2'",
+                           0),
+            0u)
+      << r.output;
+  EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
+  EXPECT_FALSE(fs::exists(dir + "/bad_out"));
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
+                          "/out --warmup_max_iterations 20 --warmup_min_iterations 0 "
+                          "--mutual_iterations 4 --checkpoint_every 0 --loss_config " + dir +
+                          "/losses.json");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::ifstream log(dir + "/out/log.csv");
+  std::string header, line, warm_3d;
+  std::getline(log, header);
+  EXPECT_EQ(header, "stage,iteration,branch,loss,gaussians,surfels,seconds,terms");
+  while (std::getline(log, line)) {
+    if (line.rfind("warmup,10,3dgs,", 0) == 0) warm_3d = line;
+  }
+  // The 3DGS warm-up rows: the photo, the transmitted TV, the new row; depth_tv is switched off.
+  EXPECT_NE(warm_3d.find(",photo="), std::string::npos) << warm_3d;
+  EXPECT_NE(warm_3d.find(";transmitted_tv="), std::string::npos) << warm_3d;
+  EXPECT_NE(warm_3d.find(";tran_l1="), std::string::npos) << warm_3d;
+  EXPECT_EQ(warm_3d.find("depth_tv"), std::string::npos) << warm_3d;
+  std::string metrics;
+  ASSERT_TRUE(ReadFileToString(dir + "/out/metrics.json", &metrics).ok());
+  const nlohmann::json m = nlohmann::json::parse(metrics);
+  ASSERT_TRUE(m["losses"].is_array());
+  EXPECT_EQ(m["losses"].size(), 17u);  // the paper's 16 rows and the new one
 }
 
 }  // namespace
