@@ -97,7 +97,49 @@ std::string OptimizeAndControlDensity(const SolverOptions& o, const BranchSchedu
   return "";
 }
 
+// Keeps the strongest of the callbacks' requests: abort over terminate over continue.
+void Request(CallbackReturnType r, CallbackReturnType* kept) {
+  if (r == CallbackReturnType::kAbort || *kept == CallbackReturnType::kAbort) {
+    *kept = CallbackReturnType::kAbort;
+  } else if (r == CallbackReturnType::kTerminateSuccessfully) {
+    *kept = r;
+  }
+}
+
 }  // namespace
+
+const char* TerminationTypeName(TerminationType type) {
+  switch (type) {
+    case TerminationType::kNotRun:
+      return "not run";
+    case TerminationType::kFinished:
+      return "finished";
+    case TerminationType::kInterrupted:
+      return "interrupted";
+    case TerminationType::kUserSuccess:
+      return "ended by a callback";
+    case TerminationType::kUserAbort:
+      return "aborted by a callback";
+    case TerminationType::kFailure:
+      return "failed";
+  }
+  return "?";
+}
+
+std::string SolveSummary::FullReport() const {
+  std::ostringstream s;
+  s << "MGSR solve: " << TerminationTypeName(termination_type)
+    << (message.empty() ? "" : " (" + message + ")") << "\n"
+    << "  warm-up 2DGS   " << warmup_iterations_2d << " iterations"
+    << (auto_stopped_2d ? ", auto-stopped" : "") << ", final loss " << final_loss_2d << "\n"
+    << "  warm-up 3DGS   " << warmup_iterations_3d << " iterations"
+    << (auto_stopped_3d ? ", auto-stopped" : "") << ", final loss " << final_loss_3d << "\n"
+    << "  mutual         " << mutual_iterations << " iterations\n"
+    << "  time           warm-up " << warmup_seconds << " s, mutual " << mutual_seconds
+    << " s (exposure fit " << exposure_fit_seconds << " s)\n"
+    << "  primitives     " << num_surfels << " surfels, " << num_gaussians << " Gaussians\n";
+  return s.str();
+}
 
 std::string SolveSummary::BriefReport() const {
   std::ostringstream s;
@@ -238,7 +280,12 @@ void MutualBoostedSolver::Notify(Stage stage, int iteration, Branch branch, doub
   IterationInfo info{stage,           iteration,          branch, loss, gaussians_.size(),
                      surfels_.size(), Now() - start_time_,
                      last_terms_[branch == Branch::kSurfels2D ? 0 : 1]};
-  for (IterationCallback* c : callbacks_) (*c)(info);
+  for (IterationCallback* c : callbacks_) Request((*c)(info), &callback_request_);
+}
+
+void MutualBoostedSolver::NotifyIterationEnd(Stage stage, int iteration) {
+  for (IterationCallback* c : callbacks_)
+    Request(c->OnIterationEnd(*this, stage, iteration), &callback_request_);
 }
 
 GaussianRenderOptions MutualBoostedSolver::GaussianOptions(const Camera& camera) const {
@@ -377,6 +424,56 @@ Status MutualBoostedSolver::CheckFinite(Branch branch, int iteration, double los
 }
 
 Status MutualBoostedSolver::Solve(SolveSummary* summary) {
+  summary_.message.clear();
+  const Status s = Run();
+  if (!s.ok()) {
+    if (summary_.termination_type != TerminationType::kUserAbort)
+      summary_.termination_type = TerminationType::kFailure;
+    summary_.message = s.message();
+  }
+  summary_.num_gaussians = gaussians_.size();
+  summary_.num_surfels = surfels_.size();
+  *summary = summary_;
+  return s;
+}
+
+bool MutualBoostedSolver::EndIteration(Stage stage, int iteration, bool last, Status* status) {
+  NotifyIterationEnd(stage, iteration);
+  const std::string where =
+      std::string(stage == Stage::kWarmup ? "warm-up" : "mutual") + " iteration " +
+      std::to_string(iteration);
+  const CallbackReturnType request = callback_request_;
+  callback_request_ = CallbackReturnType::kContinue;
+  if (request == CallbackReturnType::kAbort) {
+    summary_.termination_type = TerminationType::kUserAbort;
+    *status = Status::Error("aborted by an iteration callback after " + where);
+    return true;
+  }
+  if (request == CallbackReturnType::kTerminateSuccessfully) {
+    finished_ = true;
+    summary_.termination_type = TerminationType::kUserSuccess;
+    summary_.message = "after " + where;
+    *status = Status::Ok();
+    return true;
+  }
+  if (stop_requested_ && !last) {
+    summary_.termination_type = TerminationType::kInterrupted;
+    summary_.message = "after " + where;
+    *status = Status::Ok();
+    return true;
+  }
+  return false;
+}
+
+Status MutualBoostedSolver::Run() {
+  callback_request_ = CallbackReturnType::kContinue;
+  if (finished_) {
+    // A finished run (a checkpoint of one) stays finished, also when a callback ended it early.
+    if (summary_.termination_type == TerminationType::kNotRun)
+      summary_.termination_type = TerminationType::kFinished;
+    sh_degree_ = options_.sh_degree;
+    return Status::Ok();
+  }
   MGSR_RETURN_IF_ERROR(options_.Validate());
   MGSR_RETURN_IF_ERROR(BuildProblems());
   if (train_.empty()) return Status::Error("the scene has no training views");
@@ -385,12 +482,7 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
   start_time_ = Now() - summary_.warmup_seconds - summary_.mutual_seconds;
   const SolverOptions& o = options_;
   SolveSummary& sum = summary_;
-  auto interrupted = [&]() {
-    *summary = sum;
-    return Status::Error("interrupted at " +
-                         std::string(stage_ == Stage::kWarmup ? "warm-up" : "mutual") +
-                         " iteration " + std::to_string(next_iteration_ - 1));
-  };
+  Status ended;
 
   // Warm-up: the branches step in turn; each stops on its own.
   Timer warmup;
@@ -431,7 +523,7 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
     }
     ++next_iteration_;
     sum.warmup_seconds = warmup_before + warmup.ElapsedSeconds();
-    if (stop_requested_) return interrupted();
+    if (EndIteration(Stage::kWarmup, it, false, &ended)) return ended;
   }
   sh_degree_ = o.sh_degree;
 
@@ -521,12 +613,11 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
     sum.mutual_iterations = it;
     ++next_iteration_;
     sum.mutual_seconds = mutual_before + mutual.ElapsedSeconds();
-    if (stop_requested_ && next_iteration_ <= o.mutual_iterations) return interrupted();
+    if (EndIteration(Stage::kMutual, it, next_iteration_ > o.mutual_iterations, &ended))
+      return ended;
   }
   finished_ = true;
-  sum.num_gaussians = gaussians_.size();
-  sum.num_surfels = surfels_.size();
-  *summary = sum;
+  sum.termination_type = TerminationType::kFinished;
   return Status::Ok();
 }
 

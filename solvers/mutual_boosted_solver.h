@@ -40,13 +40,44 @@ struct IterationInfo {
   std::vector<Problem::TermValue> terms;
 };
 
+class MutualBoostedSolver;
+
+// What a callback asks of the solver (Ceres' CallbackReturnType). Anything but kContinue takes
+// effect at the end of the current iteration (after every branch of it has stepped), so the state
+// Solve returns with is always one a checkpoint can hold and a later Solve can continue from.
+enum class CallbackReturnType {
+  kContinue,
+  kAbort,                  // Solve returns an error (termination kUserAbort)
+  kTerminateSuccessfully,  // Solve returns the run as finished (termination kUserSuccess)
+};
+
 class IterationCallback {
  public:
   virtual ~IterationCallback() = default;
-  virtual void operator()(const IterationInfo& info) = 0;
+  // After each branch's step.
+  virtual CallbackReturnType operator()(const IterationInfo& info) = 0;
+  // After each whole iteration (every branch of it stepped), when the solver's state is at an
+  // iteration boundary: what a checkpoint written now continues from.
+  virtual CallbackReturnType OnIterationEnd(const MutualBoostedSolver& /*solver*/, Stage /*stage*/,
+                                            int /*iteration*/) {
+    return CallbackReturnType::kContinue;
+  }
 };
 
+// Why Solve returned (Ceres' TerminationType).
+enum class TerminationType {
+  kNotRun,
+  kFinished,     // every stage ran to its end (warm-ups by auto-stop or their cap)
+  kInterrupted,  // RequestStop(): at an iteration boundary; Solve again to continue
+  kUserSuccess,  // a callback ended the run early; it counts as finished
+  kUserAbort,    // a callback aborted the run
+  kFailure,      // invalid options or loss table, a non-finite loss or gradient
+};
+const char* TerminationTypeName(TerminationType type);
+
 struct SolveSummary {
+  TerminationType termination_type = TerminationType::kNotRun;
+  std::string message;  // why it ended, one line
   int warmup_iterations_2d = 0, warmup_iterations_3d = 0, mutual_iterations = 0;
   bool auto_stopped_2d = false, auto_stopped_3d = false;
   double warmup_seconds = 0, mutual_seconds = 0;
@@ -54,6 +85,13 @@ struct SolveSummary {
   size_t num_gaussians = 0, num_surfels = 0;
   double final_loss_2d = 0, final_loss_3d = 0;
   std::string BriefReport() const;
+  // Several lines: termination, iterations and time per stage, counts, final losses.
+  std::string FullReport() const;
+  // Finished, by the schedule or by a callback: the models are the run's result.
+  bool IsFinished() const {
+    return termination_type == TerminationType::kFinished ||
+           termination_type == TerminationType::kUserSuccess;
+  }
 };
 
 class MutualBoostedSolver {
@@ -61,11 +99,12 @@ class MutualBoostedSolver {
   MutualBoostedSolver(const SolverOptions& options, const Scene& scene);
 
   void AddCallback(IterationCallback* callback) { callbacks_.push_back(callback); }
-  // Runs (or continues, after LoadCheckpoint or an interruption) to the end. Returns an error
-  // whose message starts with "interrupted" when RequestStop() was called; the state is then at
-  // an iteration boundary and can be saved.
+  // Runs (or continues, after LoadCheckpoint or an interruption) to the end. OK when it finished
+  // or was interrupted (summary->termination_type says which; an interrupted state is at an
+  // iteration boundary and can be saved and continued); an error, also in summary->message, on
+  // failure or a callback's abort.
   Status Solve(SolveSummary* summary);
-  // Asks Solve to stop after the current iteration (safe from a signal handler or a callback).
+  // Asks Solve to return after the current iteration (safe from a signal handler or a callback).
   void RequestStop() { stop_requested_ = 1; }
 
   // Everything needed to continue exactly: models, optimiser states, density statistics, the
@@ -130,7 +169,16 @@ class MutualBoostedSolver {
                       const Targets& targets, RenderGradients* grad);
   // Ceres fit of every training view's transform against the current renders.
   void FitExposures();
+  // Calls the callbacks; what they ask is kept in callback_request_ for the iteration's end.
   void Notify(Stage stage, int iteration, Branch branch, double loss);
+  void NotifyIterationEnd(Stage stage, int iteration);
+  // At the end of each iteration (the state at a boundary): the callbacks' OnIterationEnd, then
+  // their requests and RequestStop(). True when Run must return (with *status); `last`: the run's
+  // final iteration, where a stop request has nothing left to interrupt.
+  bool EndIteration(Stage stage, int iteration, bool last, Status* status);
+  // Solve's body; Solve fills the summary's termination from it.
+  Status Run();
+  CallbackReturnType callback_request_ = CallbackReturnType::kContinue;
 
   SolverOptions options_;
   const Scene& scene_;

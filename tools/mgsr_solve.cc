@@ -26,6 +26,7 @@
 #include "mgsr/eval/ground_truth.h"
 #include "mgsr/synth/ray_caster.h"
 #include "solvers/backdrop.h"
+#include "solvers/checkpoint_callback.h"
 #include "solvers/density_control.h"
 #include "solvers/mutual_boosted_solver.h"
 #include "solvers/surface_extraction.h"
@@ -143,33 +144,16 @@ void OnSigint(int) {
   if (g_solver != nullptr) g_solver->RequestStop();
 }
 
-// Requests a stop every `every` iterations so the caller can write a checkpoint and continue.
-class PeriodicStop : public mgsr::IterationCallback {
- public:
-  PeriodicStop(mgsr::MutualBoostedSolver* solver, int every) : solver_(solver), every_(every) {}
-  void operator()(const mgsr::IterationInfo& i) override {
-    if (every_ <= 0 || (i.iteration == last_ && i.stage == stage_)) return;
-    last_ = i.iteration;
-    stage_ = i.stage;
-    if (++count_ % every_ == 0) solver_->RequestStop();
-  }
-
- private:
-  mgsr::MutualBoostedSolver* solver_;
-  int every_, count_ = 0, last_ = -1;
-  mgsr::Stage stage_ = mgsr::Stage::kWarmup;
-};
-
 // Test-view PSNR of the 3DGS composite every N iterations (after a 3DGS step, when the renderer's
 // state is free to reuse).
 class TestEvaluation : public mgsr::IterationCallback {
  public:
   TestEvaluation(mgsr::MutualBoostedSolver* solver, const mgsr::Scene& scene, int every)
       : solver_(solver), scene_(scene), every_(every) {}
-  void operator()(const mgsr::IterationInfo& i) override {
-    if (every_ <= 0 || i.branch != mgsr::Branch::kGaussians3D || i.iteration % every_ != 0) return;
+  mgsr::CallbackReturnType operator()(const mgsr::IterationInfo& i) override {
+    if (every_ <= 0 || i.branch != mgsr::Branch::kGaussians3D || i.iteration % every_ != 0) return mgsr::CallbackReturnType::kContinue;
     const auto test = scene_.TestIndices();
-    if (test.empty()) return;
+    if (test.empty()) return mgsr::CallbackReturnType::kContinue;
     double psnr = 0;
     for (int v : test) {
       mgsr::GaussianRender r;
@@ -181,6 +165,7 @@ class TestEvaluation : public mgsr::IterationCallback {
                 i.stage == mgsr::Stage::kWarmup ? "warmup" : "mutual", i.iteration,
                 psnr / test.size(), test.size());
     std::fflush(stdout);
+    return mgsr::CallbackReturnType::kContinue;
   }
 
  private:
@@ -210,10 +195,10 @@ class DepthAfterWarmup : public mgsr::IterationCallback {
   DepthAfterWarmup(mgsr::MutualBoostedSolver* solver, const mgsr::SolverOptions& options,
                    const mgsr::Scene& scene, const mgsr::RayCaster* ground_truth, std::string path)
       : solver_(solver), options_(options), scene_(scene), gt_(ground_truth), path_(std::move(path)) {}
-  void operator()(const mgsr::IterationInfo& i) override {
+  mgsr::CallbackReturnType operator()(const mgsr::IterationInfo& i) override {
     if (gt_ == nullptr || done_ || i.stage != mgsr::Stage::kMutual ||
         i.branch != mgsr::Branch::kSurfels2D || i.iteration != 1)
-      return;
+      return mgsr::CallbackReturnType::kContinue;
     done_ = true;
     const mgsr::SurfaceDepthReport r = mgsr::MeasureSurfaceDepth(solver_, options_, scene_, *gt_);
     std::printf("%s\n%s\n", DepthLine("depth after warm-up (train views): expected", r.expected).c_str(),
@@ -222,6 +207,7 @@ class DepthAfterWarmup : public mgsr::IterationCallback {
                               {"median", mgsr::DepthErrorToJson(r.median)}};
     const mgsr::Status s = mgsr::WriteStringToFileAtomic(path_, j.dump(2) + "\n");
     if (!s.ok()) std::fprintf(stderr, "warning: %s\n", s.message().c_str());
+    return mgsr::CallbackReturnType::kContinue;
   }
   const std::string& path() const { return path_; }
 
@@ -315,7 +301,7 @@ class ProgressLog : public mgsr::IterationCallback {
     if (!csv_) return mgsr::Status::Error(path_ + ": cannot write the training log");
     return mgsr::Status::Ok();
   }
-  void operator()(const mgsr::IterationInfo& i) override {
+  mgsr::CallbackReturnType operator()(const mgsr::IterationInfo& i) override {
     const bool is2d = i.branch == mgsr::Branch::kSurfels2D;
     const char* stage = i.stage == mgsr::Stage::kWarmup ? "warmup" : "mutual";
     csv_ << stage << "," << i.iteration << "," << (is2d ? "2dgs" : "3dgs") << "," << i.loss << ","
@@ -338,6 +324,7 @@ class ProgressLog : public mgsr::IterationCallback {
                   gaussians.c_str(), i.seconds, eta);
       std::fflush(stdout);
     }
+    return mgsr::CallbackReturnType::kContinue;
   }
 
  private:
@@ -624,8 +611,9 @@ int main(int argc, char** argv) {
   solver.AddCallback(&log);
   TestEvaluation evaluation(&solver, scene, FLAGS_eval_every);
   solver.AddCallback(&evaluation);
-  PeriodicStop periodic(&solver, FLAGS_checkpoint_every);
-  solver.AddCallback(&periodic);
+  // A checkpoint every --checkpoint_every iterations, the log flushed with it.
+  mgsr::CheckpointCallback checkpointer(ckpt, FLAGS_checkpoint_every, [&log] { return log.Flush(); });
+  solver.AddCallback(&checkpointer);
   mgsr::GroundTruthGeometry ground_truth;
   s = mgsr::FindGroundTruth(scene.root, &ground_truth);
   if (!s.ok()) std::fprintf(stderr, "warning: ground truth not used: %s\n", s.message().c_str());
@@ -637,18 +625,16 @@ int main(int argc, char** argv) {
   g_solver = &solver;
   std::signal(SIGINT, OnSigint);
   mgsr::SolveSummary summary;
-  while (true) {
-    s = solver.Solve(&summary);
-    if (s.ok()) break;
-    if (s.message().rfind("interrupted", 0) != 0) return fail(s.message());
-    mgsr::Status saved = solver.SaveCheckpoint(ckpt);
-    if (saved.ok()) saved = log.Flush();
-    if (!saved.ok()) return fail(saved.message());
-    if (g_interrupted) {
-      std::fprintf(stderr, "%s: checkpoint written to %s; run again with --resume to continue\n",
-                   s.message().c_str(), ckpt.c_str());
-      return 130;
-    }
+  s = solver.Solve(&summary);
+  if (!s.ok()) return fail(checkpointer.status().ok() ? s.message() : checkpointer.status().message());
+  if (summary.termination_type == mgsr::TerminationType::kInterrupted) {
+    // Ctrl-C: the state is at an iteration boundary; keep it.
+    s = solver.SaveCheckpoint(ckpt);
+    if (s.ok()) s = log.Flush();
+    if (!s.ok()) return fail(s.message());
+    std::fprintf(stderr, "interrupted %s: checkpoint written to %s; run again with --resume to "
+                 "continue\n", summary.message.c_str(), ckpt.c_str());
+    return 130;
   }
   g_solver = nullptr;
   std::printf("%s\n", summary.BriefReport().c_str());

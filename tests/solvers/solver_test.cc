@@ -16,6 +16,7 @@
 #include "mgsr/model/activations.h"
 #include "solvers/adam.h"
 #include "solvers/auto_stop.h"
+#include "solvers/checkpoint_callback.h"
 #include "solvers/density_control.h"
 #include "solvers/exposure_fit.h"
 #include "solvers/loss_table.h"
@@ -115,7 +116,10 @@ TEST(DensityControlTest, ClonesSplitsPrunesAndKeepsTheBudget) {
 
 class Recorder : public IterationCallback {
  public:
-  void operator()(const IterationInfo& i) override { calls.push_back(i); }
+  CallbackReturnType operator()(const IterationInfo& i) override {
+    calls.push_back(i);
+    return CallbackReturnType::kContinue;
+  }
   std::vector<IterationInfo> calls;
 };
 
@@ -299,8 +303,9 @@ class StopAt : public IterationCallback {
  public:
   StopAt(MutualBoostedSolver* solver, Stage stage, int iteration)
       : solver_(solver), stage_(stage), iteration_(iteration) {}
-  void operator()(const IterationInfo& i) override {
+  CallbackReturnType operator()(const IterationInfo& i) override {
     if (i.stage == stage_ && i.iteration == iteration_) solver_->RequestStop();
+    return CallbackReturnType::kContinue;
   }
 
  private:
@@ -340,9 +345,11 @@ TEST(CheckpointTest, InterruptedAndResumedRunEqualsAnUninterruptedOne) {
       StopAt stop(&first, stage, at);
       first.AddCallback(&stop);
       SolveSummary s1;
-      const Status interrupted = first.Solve(&s1);
-      ASSERT_FALSE(interrupted.ok());
-      EXPECT_EQ(interrupted.message().rfind("interrupted", 0), 0u) << interrupted.message();
+      ASSERT_TRUE(first.Solve(&s1).ok());
+      EXPECT_EQ(s1.termination_type, TerminationType::kInterrupted);
+      EXPECT_EQ(s1.message, std::string("after ") +
+                                (stage == Stage::kWarmup ? "warm-up" : "mutual") +
+                                " iteration " + std::to_string(at));
       const std::string ckpt = dir + "/run.ckpt";
       ASSERT_TRUE(first.SaveCheckpoint(ckpt).ok());
       // A fresh solver (a new process, in practice) continues from the file.
@@ -403,7 +410,8 @@ TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
   StopAt stop(&writer, Stage::kWarmup, 6);
   writer.AddCallback(&stop);
   SolveSummary summary;
-  ASSERT_FALSE(writer.Solve(&summary).ok());  // interrupted, with Adam steps taken
+  ASSERT_TRUE(writer.Solve(&summary).ok());  // interrupted, with Adam steps taken
+  ASSERT_EQ(summary.termination_type, TerminationType::kInterrupted);
   const std::string ckpt = dir + "/ok.ckpt";
   ASSERT_TRUE(writer.SaveCheckpoint(ckpt).ok());
   std::string data;
@@ -476,11 +484,12 @@ TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
 class PoisonAt : public IterationCallback {
  public:
   PoisonAt(MutualBoostedSolver* solver, int iteration) : solver_(solver), iteration_(iteration) {}
-  void operator()(const IterationInfo& i) override {
+  CallbackReturnType operator()(const IterationInfo& i) override {
     if (i.stage == Stage::kWarmup && i.iteration == iteration_ &&
         i.branch == Branch::kGaussians3D) {
       for (float& x : solver_->mutable_surfels()->opacity_logits) x = std::nanf("");
     }
+    return CallbackReturnType::kContinue;
   }
 
  private:
@@ -520,7 +529,8 @@ TEST(MutualBoostedSolverTest, ANonFiniteValueLeavesTheLastGoodCheckpoint) {
   solver.AddCallback(&poison);
   SolveSummary summary;
   Status s = solver.Solve(&summary);
-  ASSERT_EQ(s.message().rfind("interrupted", 0), 0u) << s.message();
+  ASSERT_TRUE(s.ok()) << s.message();
+  ASSERT_EQ(summary.termination_type, TerminationType::kInterrupted);
   ASSERT_TRUE(solver.SaveCheckpoint(ckpt).ok());
   s = solver.Solve(&summary);
   ASSERT_FALSE(s.ok());
@@ -715,11 +725,12 @@ namespace {
 class Snapshots : public IterationCallback {
  public:
   explicit Snapshots(const MutualBoostedSolver* s) : solver_(s) {}
-  void operator()(const IterationInfo& i) override {
-    if (i.stage != Stage::kMutual) return;
+  CallbackReturnType operator()(const IterationInfo& i) override {
+    if (i.stage != Stage::kMutual) return CallbackReturnType::kContinue;
     branches.push_back(i.branch);
     gaussian_means.push_back(solver_->gaussians().means);
     surfel_means.push_back(solver_->surfels().means);
+    return CallbackReturnType::kContinue;
   }
   std::vector<Branch> branches;
   std::vector<std::vector<float>> gaussian_means, surfel_means;
@@ -894,6 +905,107 @@ TEST(LossTableSolverTest, ARowTheBranchCannotFeedStopsTheRunNamingIt) {
     ASSERT_FALSE(s.ok());
     EXPECT_NE(s.message().find(expected), std::string::npos) << s.message();
   }
+}
+
+}  // namespace
+}  // namespace mgsr
+
+namespace mgsr {
+namespace {
+
+// Returns `request` at one step.
+class RequestAt : public IterationCallback {
+ public:
+  RequestAt(Stage stage, int iteration, Branch branch, CallbackReturnType request)
+      : stage_(stage), iteration_(iteration), branch_(branch), request_(request) {}
+  CallbackReturnType operator()(const IterationInfo& i) override {
+    const bool here = i.stage == stage_ && i.iteration == iteration_ && i.branch == branch_;
+    return here ? request_ : CallbackReturnType::kContinue;
+  }
+
+ private:
+  Stage stage_;
+  int iteration_;
+  Branch branch_;
+  CallbackReturnType request_;
+};
+
+// Ceres-style control: a callback ends the run successfully or aborts it, at the end of the
+// iteration (the other branch of it still steps), and the summary says which.
+TEST(MutualBoostedSolverTest, ACallbackEndsOrAbortsTheRunAtTheIterationsEnd) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  SolverOptions o = TinyOptions();
+  o.warmup_max_iterations = 30;
+  {
+    MutualBoostedSolver solver(o, scene);
+    RequestAt end(Stage::kWarmup, 10, Branch::kSurfels2D,
+                  CallbackReturnType::kTerminateSuccessfully);
+    solver.AddCallback(&end);
+    SolveSummary summary;
+    ASSERT_TRUE(solver.Solve(&summary).ok());
+    EXPECT_EQ(summary.termination_type, TerminationType::kUserSuccess);
+    EXPECT_TRUE(summary.IsFinished());
+    EXPECT_EQ(summary.warmup_iterations_2d, 10);
+    EXPECT_EQ(summary.warmup_iterations_3d, 10);
+    EXPECT_EQ(summary.mutual_iterations, 0);
+    EXPECT_NE(summary.FullReport().find("ended by a callback (after warm-up iteration 10)"),
+              std::string::npos)
+        << summary.FullReport();
+    // A finished run stays finished.
+    SolveSummary again;
+    ASSERT_TRUE(solver.Solve(&again).ok());
+    EXPECT_EQ(again.warmup_iterations_2d, 10);
+  }
+  {
+    MutualBoostedSolver solver(o, scene);
+    RequestAt abort(Stage::kWarmup, 5, Branch::kSurfels2D, CallbackReturnType::kAbort);
+    solver.AddCallback(&abort);
+    SolveSummary summary;
+    const Status s = solver.Solve(&summary);
+    ASSERT_FALSE(s.ok());
+    EXPECT_EQ(s.message(), "aborted by an iteration callback after warm-up iteration 5");
+    EXPECT_EQ(summary.termination_type, TerminationType::kUserAbort);
+    EXPECT_FALSE(summary.IsFinished());
+    EXPECT_EQ(summary.warmup_iterations_3d, 5);
+  }
+}
+
+// CheckpointCallback writes at iteration boundaries: a fresh solver continued from the last file
+// it wrote ends with the models of the uninterrupted run.
+TEST(CheckpointTest, CheckpointCallbackWritesResumableStates) {
+  const std::string dir = testing::ScratchDir();
+  const Scene scene = TinyScene(dir + "/scene");
+  SolverOptions o = TinyOptions();
+  o.warmup_max_iterations = 30;
+  o.mutual_iterations = 10;
+  const std::string ckpt = dir + "/run.ckpt";
+  MutualBoostedSolver full(o, scene);
+  int saves = 0;
+  CheckpointCallback checkpointer(ckpt, 7, [&saves] {
+    ++saves;
+    return Status::Ok();
+  });
+  full.AddCallback(&checkpointer);
+  SolveSummary s_full;
+  ASSERT_TRUE(full.Solve(&s_full).ok());
+  EXPECT_EQ(s_full.termination_type, TerminationType::kFinished);
+  // 30 warm-up and 10 mutual iterations: written after 7, 14, ..., 35 (warm-up 30 ends at 30).
+  EXPECT_EQ(checkpointer.checkpoints_written(), 5);
+  EXPECT_EQ(saves, 5);
+  MutualBoostedSolver resumed(o, scene);
+  ASSERT_TRUE(resumed.LoadCheckpoint(ckpt).ok());
+  SolveSummary s;
+  ASSERT_TRUE(resumed.Solve(&s).ok());
+  ExpectSameModels(full, resumed);
+  // A write that fails aborts the run and says why.
+  MutualBoostedSolver failing(o, scene);
+  CheckpointCallback bad(dir + "/no/such/dir/run.ckpt", 3);
+  failing.AddCallback(&bad);
+  ASSERT_FALSE(failing.Solve(&s).ok());
+  EXPECT_EQ(s.termination_type, TerminationType::kUserAbort);
+  EXPECT_FALSE(bad.status().ok());
+  EXPECT_NE(bad.status().message().find("no/such/dir"), std::string::npos)
+      << bad.status().message();
 }
 
 }  // namespace
