@@ -17,6 +17,7 @@
 #include "mgsr/core/subprocess.h"
 #include "mgsr/core/timer.h"
 #include "mgsr/io/file_util.h"
+#include "tools/tool_flags.h"
 
 DEFINE_string(output, "", "Report folder (created): README.md, results.csv, charts/, contact/.");
 DEFINE_string(work, "", "Folder for the generated scenes/ and runs/ (default: the report folder).");
@@ -120,10 +121,13 @@ int Fail(const std::string& message) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  gflags::SetUsageMessage("mgsr_bench --output DIR [--quick] [--scenes a,b] [--methods x,y]");
   std::string command = "mgsr_bench";
   for (int i = 1; i < argc; ++i) command += std::string(" ") + argv[i];
-  gflags::ParseCommandLineFlags(&argc, &argv, true);
+  mgsr_tools::ParseToolFlags(
+      "mgsr_bench --output DIR [--quick] [--scenes a,b] [--methods x,y]",
+      {{"What to run", {"scenes", "methods", "quick", "size", "views", "solve_flags", "timeout"}},
+       {"Output", {"output", "work", "title", "report_only", "nc_threshold"}}},
+      &argc, &argv);
   if (FLAGS_output.empty()) return Fail("--output is required");
   if (!(FLAGS_timeout > 0)) return Fail("--timeout must be > 0");
   const std::string tools = ToolDir();

@@ -22,6 +22,7 @@
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
 #include "mgsr/io/ply.h"
+#include "tools/tool_flags.h"
 
 DEFINE_string(mesh, "", "Predicted mesh (PLY).");
 DEFINE_string(gt, "", "Ground-truth mesh or point cloud (PLY).");
@@ -243,10 +244,14 @@ int EvaluateRun(nlohmann::json* report) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  gflags::SetUsageMessage(
+  mgsr_tools::ParseToolFlags(
       "mgsr_eval --mesh pred.ply --gt gt.ply | --renders DIR --gt_images DIR | --run DIR [--gt "
-      "gt.ply]  [--json out.json]");
-  gflags::ParseCommandLineFlags(&argc, &argv, true);
+      "gt.ply]  [--json out.json]",
+      {{"What to score", {"run", "mesh", "gt", "gt_visible", "renders", "gt_images"}},
+       {"Mesh metrics", {"samples", "fscore_threshold", "pixel_footprint", "seed"}},
+       {"Image metrics", {"background"}},
+       {"Output", {"json"}}},
+      &argc, &argv);
   const bool run_mode = !FLAGS_run.empty();
   const bool mesh_mode = !run_mode && (!FLAGS_mesh.empty() || !FLAGS_gt.empty());
   const bool image_mode = !FLAGS_renders.empty() || !FLAGS_gt_images.empty();

@@ -32,6 +32,7 @@
 #include "solvers/surface_extraction.h"
 #include "solvers/trained_views.h"
 #include "tools/colmap_flags.h"
+#include "tools/tool_flags.h"
 
 DEFINE_string(workspace, "",
               "COLMAP workspace (images/, sparse/0/) or Blender folder (transforms_*.json).");
@@ -410,11 +411,29 @@ void PrintLosses(const mgsr::SolverOptions& options) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  gflags::SetUsageMessage(
+  mgsr_tools::ParseToolFlags(
       "mgsr_solve (--workspace DIR | --images DIR [--masks DIR]) --output DIR [--preset "
-      "fast|paper] "
-      "[options]");
-  gflags::ParseCommandLineFlags(&argc, &argv, true);
+      "fast|paper] [options]",
+      {{"Input", {"workspace", "images", "masks", "downscale", "max_width", "test_every",
+                  "background"}},
+       {"Photos to cameras (with --images)", {"colmap", "per_image_cameras", "camera_model",
+                                              "exhaustive_max_images", "max_image_size"}},
+       {"Output and run control", {"output", "overwrite", "resume", "check", "checkpoint_every",
+                                   "log_every", "eval_every"}},
+       {"Method and schedule", {"preset", "method", "mutual_mode", "warmup_max_iterations",
+                                "warmup_min_iterations", "mutual_iterations", "auto_stop",
+                                "auto_stop_window", "auto_stop_range", "bidirectional", "seed"}},
+       {"Losses", {"loss_config", "list_losses", "lambda_l1", "lambda_normal",
+                   "lambda_distortion", "depth_tv_warmup_2d", "depth_tv_mutual_2d", "w_2d",
+                   "w_3d", "w_depth", "mutual_transmitted_weight"}},
+       {"Exposure compensation", {"exposure", "exposure_lr", "exposure_prior",
+                                  "exposure_offset_prior", "exposure_mean_prior",
+                                  "exposure_per_branch", "exposure_fit"}},
+       {"Primitives", {"max_gaussians", "max_surfels", "surfel_low_pass", "surfel_filter_sigma",
+                       "surfel_init"}},
+       {"Mesh", {"mesh_depth", "mesh_color", "voxel_size", "mesh_resolution_scale",
+                 "tsdf_truncation"}}},
+      &argc, &argv);
   const bool listing = FLAGS_list_losses;  // needs no scene
   if (!listing && FLAGS_workspace.empty() == FLAGS_images.empty()) {
     std::fprintf(stderr, "error: give either --workspace or --images\n");

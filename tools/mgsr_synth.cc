@@ -6,6 +6,7 @@
 
 #include "mgsr/core/timer.h"
 #include "mgsr/synth/synthetic_scene.h"
+#include "tools/tool_flags.h"
 
 DEFINE_string(output, "", "Folder to write the scene into (created).");
 DEFINE_string(shape, "sphere",
@@ -34,8 +35,15 @@ DEFINE_bool(masks, true, "Write masks/ and RGBA photos; false: RGB photos on gre
 DEFINE_bool(constant_light_copy, false, "Also render images_constant/ under one fixed light.");
 
 int main(int argc, char** argv) {
-  gflags::SetUsageMessage("mgsr_synth --output DIR [--shape sphere] [--num_views 48] ...");
-  gflags::ParseCommandLineFlags(&argc, &argv, true);
+  mgsr_tools::ParseToolFlags(
+      "mgsr_synth --output DIR [--shape sphere] [--num_views 48] ...",
+      {{"Output", {"output", "text", "masks", "constant_light_copy"}},
+       {"Object", {"shape", "detail", "specular", "shininess", "mirror", "num_points"}},
+       {"Cameras and photos", {"num_views", "width", "height", "distance", "test_every",
+                               "supersampling", "pose_noise_deg", "pose_noise_rel"}},
+       {"Light", {"varying_light", "exposure_stops"}},
+       {"Randomness", {"seed"}}},
+      &argc, &argv);
   if (FLAGS_output.empty()) {
     std::fprintf(stderr, "error: --output is required\n");
     return 2;
