@@ -52,6 +52,31 @@ Adam::LearningRates Rates(const SolverOptions& o, int step, double extent) {
   };
 }
 
+// A branch's render as the buffers its loss terms read.
+RenderBuffers SurfelBuffers(const Camera& camera, const SurfelRender& r) {
+  RenderBuffers in;
+  in.camera = &camera;
+  in.Set(Buffer::kColor, &r.color);
+  in.Set(Buffer::kDepth, &r.depth);
+  in.Set(Buffer::kAlpha, &r.alpha);
+  in.Set(Buffer::kNormal, &r.normal_world);
+  in.Set(Buffer::kMedianDepth, &r.median_depth);
+  in.Set(Buffer::kDistortion, &r.distortion);
+  return in;
+}
+
+RenderBuffers GaussianBuffers(const Camera& camera, const GaussianRender& r) {
+  RenderBuffers in;
+  in.camera = &camera;
+  in.Set(Buffer::kColor, &r.color);
+  in.Set(Buffer::kTransmitted, &r.tran);
+  in.Set(Buffer::kReflected, &r.ref);
+  in.Set(Buffer::kWeight, &r.weight);
+  in.Set(Buffer::kDepth, &r.depth);
+  in.Set(Buffer::kAlpha, &r.alpha);
+  return in;
+}
+
 void MoveGradients(RenderGradients* g, GaussianRenderGrad* out) {
   out->color = std::move(g->images[static_cast<int>(Buffer::kColor)]);
   out->tran = std::move(g->images[static_cast<int>(Buffer::kTransmitted)]);
@@ -329,14 +354,7 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
   t.image = &targets_[view].gt_2d;
   t.mask = v.mask.empty() ? nullptr : &v.mask;
   t.transmitted = stage == Stage::kMutual ? transmitted : nullptr;
-  RenderBuffers in;
-  in.camera = &v.camera;
-  in.Set(Buffer::kColor, &render.color);
-  in.Set(Buffer::kDepth, &render.depth);
-  in.Set(Buffer::kAlpha, &render.alpha);
-  in.Set(Buffer::kNormal, &render.normal_world);
-  in.Set(Buffer::kMedianDepth, &render.median_depth);
-  in.Set(Buffer::kDistortion, &render.distortion);
+  const RenderBuffers in = SurfelBuffers(v.camera, render);
   RenderGradients g;
   const double loss = EvaluateLoss(Branch::kSurfels2D, stage, view, it, in, t, &g);
   if (!step_error_.ok()) return loss;
@@ -364,14 +382,7 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it,
   t.image = &targets_[view].gt_3d;
   t.mask = v.mask.empty() ? nullptr : &v.mask;
   t.other_depth = stage == Stage::kMutual ? surfel_depth : nullptr;
-  RenderBuffers in;
-  in.camera = &v.camera;
-  in.Set(Buffer::kColor, &render.color);
-  in.Set(Buffer::kTransmitted, &render.tran);
-  in.Set(Buffer::kReflected, &render.ref);
-  in.Set(Buffer::kWeight, &render.weight);
-  in.Set(Buffer::kDepth, &render.depth);
-  in.Set(Buffer::kAlpha, &render.alpha);
+  const RenderBuffers in = GaussianBuffers(v.camera, render);
   RenderGradients g;
   const double loss = EvaluateLoss(Branch::kGaussians3D, stage, view, it, in, t, &g);
   if (!step_error_.ok()) return loss;
@@ -559,26 +570,28 @@ Status MutualBoostedSolver::Run() {
       sum.final_loss_2d = StepSurfels(view, Stage::kMutual, schedule_it, &target);
       MGSR_RETURN_IF_ERROR(CheckFinite(Branch::kSurfels2D, it, sum.final_loss_2d));
       if (o.bidirectional) {
-        // d L_2D / d C_tran: the render loss is symmetric in its two images, so it is the gradient
-        // of the same loss with the roles swapped (the 2DGS render as the target). Pixels forced to
-        // white are constants.
-        RenderLoss swapped(Buffer::kColor, TargetKind::kImage, o.lambda_l1);
-        RenderBuffers in;
-        in.Set(Buffer::kColor, &target);
+        // d L_2D / d C_tran from the loss table's rows that differentiate the transmitted target,
+        // at the 2DGS render the loss compared. Pixels forced to the background are constants.
+        const View& v = scene_.views[view];
         Targets t;
-        t.image = &s2.color;
-        RenderGradients d;
-        swapped.Evaluate(in, t, o.w_2d * o.mutual_transmitted_weight, &d);
-        Image dt = std::move(d.images[static_cast<int>(Buffer::kColor)]);
-        if (!mask.empty()) {
-          for (int c = 0; c < 3; ++c) {
-            for (size_t i = 0; i < dt.plane_size(); ++i) {
-              if (mask.plane(0)[i] == 0.0f) dt.plane(c)[i] = 0.0f;
+        t.image = &targets_[view].gt_2d;
+        t.mask = v.mask.empty() ? nullptr : &v.mask;
+        t.transmitted = &target;
+        TargetGradients d;
+        ProblemFor(Branch::kSurfels2D, Stage::kMutual)
+            .problem.EvaluateTargetGradient(Branch::kSurfels2D, SurfelBuffers(v.camera, s2), t, &d);
+        Image dt = std::move(d.transmitted);
+        if (!dt.empty()) {
+          if (!mask.empty()) {
+            for (int c = 0; c < 3; ++c) {
+              for (size_t i = 0; i < dt.plane_size(); ++i) {
+                if (mask.plane(0)[i] == 0.0f) dt.plane(c)[i] = 0.0f;
+              }
             }
           }
+          // The Gaussian renderer still holds g's forward state (the 2DGS step does not use it).
+          BackpropIntoGaussians(view, it, &g, std::move(dt));
         }
-        // The Gaussian renderer still holds g's forward state (the 2DGS step does not use it).
-        BackpropIntoGaussians(view, it, &g, std::move(dt));
       }
       Notify(Stage::kMutual, it, Branch::kSurfels2D, sum.final_loss_2d);
     }
@@ -591,22 +604,19 @@ Status MutualBoostedSolver::Run() {
       sum.final_loss_3d = StepGaussians(view, Stage::kMutual, schedule_it, &s.depth);
       MGSR_RETURN_IF_ERROR(CheckFinite(Branch::kGaussians3D, it, sum.final_loss_3d));
       if (o.bidirectional) {
-        // d L_Z / d Z2D for L_Z = mean((D / max D - Z / max Z)^2), maxima held constant. The surfel
-        // renderer still holds the forward state of `s` (the 3DGS step does not use it).
-        float max_d = 0, max_z = 0;
-        for (size_t i = 0; i < s.depth.size(); ++i) {
-          max_d = std::max(max_d, g3.depth.data()[i]);
-          max_z = std::max(max_z, s.depth.data()[i]);
-        }
-        if (max_d > 0 && max_z > 0) {
-          Image dz(s.depth.width(), s.depth.height(), 1);
-          const float scale = static_cast<float>(o.w_depth * 2.0 / s.depth.size());
-          for (size_t i = 0; i < dz.size(); ++i) {
-            const float r = g3.depth.data()[i] / max_d - s.depth.data()[i] / max_z;
-            dz.data()[i] = -scale * r / max_z;
-          }
-          BackpropIntoSurfels(view, it, &s, std::move(dz));
-        }
+        // d L_3D / d Z2D from the rows that differentiate the 2DGS depth (the mutual depth loss),
+        // at the 3DGS render the loss compared. The surfel renderer still holds the forward state
+        // of `s` (the 3DGS step does not use it).
+        const View& v = scene_.views[view];
+        Targets t;
+        t.image = &targets_[view].gt_3d;
+        t.mask = v.mask.empty() ? nullptr : &v.mask;
+        t.other_depth = &s.depth;
+        TargetGradients d;
+        ProblemFor(Branch::kGaussians3D, Stage::kMutual)
+            .problem.EvaluateTargetGradient(Branch::kGaussians3D, GaussianBuffers(v.camera, g3), t,
+                                            &d);
+        if (!d.other_depth.empty()) BackpropIntoSurfels(view, it, &s, std::move(d.other_depth));
       }
       Notify(Stage::kMutual, it, Branch::kGaussians3D, sum.final_loss_3d);
     }

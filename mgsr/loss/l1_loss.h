@@ -16,6 +16,17 @@ class L1Loss : public LossTermImpl<L1Loss> {
     return std::string("l1(") + BufferName(buffer_) + ", " + TargetName(target_) + ")";
   }
   std::vector<Buffer> Inputs() const override { return {buffer_}; }
+  std::vector<OtherBranchTarget> TargetInputs() const override {
+    if (target_ == TargetKind::kTransmitted) return {OtherBranchTarget::kTransmitted};
+    return {};
+  }
+  // Symmetric in the buffer and the target: the swapped gradient.
+  template <typename T>
+  void TargetGradient(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+                      TargetGradientsT<T>* grad) const {
+    if (target_ == TargetKind::kTransmitted)
+      SwappedTransmittedGradient(*this, buffer_, in, t, scale, grad);
+  }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
     MGSR_RETURN_IF_ERROR(RequireImage(Name(), BufferName(buffer_), in.Get(buffer_)));
     return RequireImage(Name(), TargetName(target_), SelectTarget(t, target_), in.Get(buffer_),

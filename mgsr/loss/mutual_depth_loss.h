@@ -18,6 +18,30 @@ class MutualDepthLoss : public LossTermImpl<MutualDepthLoss> {
   explicit MutualDepthLoss(bool masked = false) : masked_(masked) {}
   std::string Name() const override { return masked_ ? "mutual_depth(masked)" : "mutual_depth"; }
   std::vector<Buffer> Inputs() const override { return {Buffer::kDepth}; }
+  std::vector<OtherBranchTarget> TargetInputs() const override {
+    return {OtherBranchTarget::kDepth};
+  }
+  // d L_Z / d Z = -2 gamma r / (n max Z), both maxima held constant.
+  template <typename T>
+  void TargetGradient(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+                      TargetGradientsT<T>* grad) const {
+    const ImageT<T>& D = *in.Get(Buffer::kDepth);
+    const ImageT<T>& Z = *t.other_depth;
+    T max_d = 0, max_z = 0;
+    for (size_t i = 0; i < D.size(); ++i) {
+      max_d = std::max(max_d, D.data()[i]);
+      max_z = std::max(max_z, Z.data()[i]);
+    }
+    if (!(max_d > T(0)) || !(max_z > T(0))) return;
+    ImageT<T> g(Z.width(), Z.height(), 1);
+    const T c = static_cast<T>(2 * scale / static_cast<double>(D.size()));
+    for (size_t i = 0; i < D.size(); ++i) {
+      const T gamma = masked_ ? t.mask->data()[i] : T(1);
+      const T r = D.data()[i] / max_d - Z.data()[i] / max_z;
+      g.data()[i] = -c * gamma * r / max_z;
+    }
+    grad->Add(OtherBranchTarget::kDepth, std::move(g));
+  }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
     MGSR_RETURN_IF_ERROR(RequireImage(Name(), "depth", in.Get(Buffer::kDepth),
                                       static_cast<const Image*>(nullptr), 1));

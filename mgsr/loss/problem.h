@@ -44,6 +44,11 @@ class Problem {
   // buffer.
   double Evaluate(Branch branch, const RenderBuffers& in, const Targets& targets,
                   RenderGradients* grad, std::vector<TermValue>* breakdown = nullptr) const;
+  // Bidirectional supervision: the weighted sum of d term / d target over the branch's active
+  // terms that differentiate the other branch's renders (LossTerm::TargetInputs); `grad` is
+  // cleared first.
+  void EvaluateTargetGradient(Branch branch, const RenderBuffers& in, const Targets& targets,
+                              TargetGradients* grad) const;
 
  private:
   std::vector<Entry> entries_;

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <string>
+#include <utility>
 
 #include "mgsr/core/camera.h"
 #include "mgsr/core/image.h"
@@ -64,11 +65,35 @@ struct RenderGradientsT {
   }
 };
 
+// The targets that are the other branch's renders: what bidirectional supervision differentiates.
+enum class OtherBranchTarget {
+  kTransmitted,  // Targets::transmitted (the 3DGS C_tran, for the 2DGS branch)
+  kDepth,        // Targets::other_depth (the 2DGS depth, for the 3DGS branch)
+};
+
+// Gradients with respect to those targets (empty until a term adds to them).
+template <typename T>
+struct TargetGradientsT {
+  ImageT<T> transmitted, other_depth;
+
+  // Adds `g` into the gradient of `target` (moved in when that is still empty).
+  void Add(OtherBranchTarget target, ImageT<T> g) {
+    ImageT<T>& into = target == OtherBranchTarget::kTransmitted ? transmitted : other_depth;
+    if (into.empty()) {
+      into = std::move(g);
+      return;
+    }
+    for (size_t i = 0; i < into.size(); ++i) into.data()[i] += g.data()[i];
+  }
+};
+
 using RenderBuffers = RenderBuffersT<float>;
 using RenderBuffersD = RenderBuffersT<double>;
 using Targets = TargetsT<float>;
 using TargetsD = TargetsT<double>;
 using RenderGradients = RenderGradientsT<float>;
 using RenderGradientsD = RenderGradientsT<double>;
+using TargetGradients = TargetGradientsT<float>;
+using TargetGradientsD = TargetGradientsT<double>;
 
 }  // namespace mgsr

@@ -20,6 +20,17 @@ class RenderLoss : public LossTermImpl<RenderLoss> {
     return std::string("render(") + BufferName(buffer_) + ", " + TargetName(target_) + ")";
   }
   std::vector<Buffer> Inputs() const override { return {buffer_}; }
+  std::vector<OtherBranchTarget> TargetInputs() const override {
+    if (target_ == TargetKind::kTransmitted) return {OtherBranchTarget::kTransmitted};
+    return {};
+  }
+  // Symmetric in the buffer and the target: the swapped gradient.
+  template <typename T>
+  void TargetGradient(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+                      TargetGradientsT<T>* grad) const {
+    if (target_ == TargetKind::kTransmitted)
+      SwappedTransmittedGradient(*this, buffer_, in, t, scale, grad);
+  }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
     return l1_.Check(in, t);
   }
@@ -51,6 +62,14 @@ class MutualRenderLoss : public LossTermImpl<MutualRenderLoss> {
         wi_(image_weight) {}
   std::string Name() const override { return "mutual_render"; }
   std::vector<Buffer> Inputs() const override { return {Buffer::kColor}; }
+  std::vector<OtherBranchTarget> TargetInputs() const override {
+    return {OtherBranchTarget::kTransmitted};
+  }
+  template <typename T>
+  void TargetGradient(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+                      TargetGradientsT<T>* grad) const {
+    vs_transmitted_.TargetGradient(in, t, scale * wt_, grad);
+  }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
     MGSR_RETURN_IF_ERROR(vs_transmitted_.Check(in, t));
     return vs_image_.Check(in, t);

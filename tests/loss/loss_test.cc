@@ -113,6 +113,62 @@ TEST(LossGradientTest, EveryTermMatchesNumericDifferentiation) {
       {1.3, 0.1, -0.05, 0.02, 0.8, 0.1, -0.1, 0.05, 1.1, 0.03, -0.02, 0.05}));
 }
 
+// Bidirectional supervision: a term's gradient with respect to the other branch's renders it
+// declares (LossTerm::TargetInputs), against central differences. The mutual depth holds max Z
+// constant, so its argmax pixel is skipped as above.
+void ExpectTargetGradientMatchesNumeric(const LossTerm& term) {
+  SCOPED_TRACE(term.Name());
+  Fixture f(3);
+  TargetGradientsD grad;
+  const double scale = 1.3;
+  term.EvaluateTargetGradient(f.in, f.targets, scale, &grad);
+  ASSERT_FALSE(term.TargetInputs().empty());
+  for (OtherBranchTarget which : term.TargetInputs()) {
+    const bool tran = which == OtherBranchTarget::kTransmitted;
+    ImageD& x = tran ? f.transmitted : f.other_depth;
+    const ImageD& g = tran ? grad.transmitted : grad.other_depth;
+    ASSERT_EQ(g.size(), x.size());
+    const size_t argmax = std::max_element(x.data(), x.data() + x.size()) - x.data();
+    int nonzero = 0;
+    for (size_t i = 0; i < x.size(); ++i) {
+      if (!tran && i == argmax) continue;
+      const double keep = x.data()[i], h = 1e-6;
+      x.data()[i] = keep + h;
+      const double vp = term.Evaluate(f.in, f.targets, 1.0, nullptr);
+      x.data()[i] = keep - h;
+      const double vm = term.Evaluate(f.in, f.targets, 1.0, nullptr);
+      x.data()[i] = keep;
+      const double numeric = scale * (vp - vm) / (2 * h);
+      EXPECT_NEAR(g.data()[i], numeric, 1e-6 + 1e-5 * std::abs(numeric))
+          << (tran ? "transmitted" : "other depth") << "[" << i << "]";
+      nonzero += std::abs(numeric) > 1e-9;
+    }
+    EXPECT_GT(nonzero, 0);
+  }
+}
+
+TEST(LossGradientTest, TargetGradientsMatchNumericDifferentiation) {
+  ExpectTargetGradientMatchesNumeric(L1Loss(Buffer::kColor, TargetKind::kTransmitted));
+  ExpectTargetGradientMatchesNumeric(DssimLoss(Buffer::kColor, TargetKind::kTransmitted));
+  ExpectTargetGradientMatchesNumeric(RenderLoss(Buffer::kColor, TargetKind::kTransmitted, 0.8));
+  ExpectTargetGradientMatchesNumeric(MutualRenderLoss(0.3, 0.7, 0.8));
+  ExpectTargetGradientMatchesNumeric(MutualDepthLoss(false));
+  ExpectTargetGradientMatchesNumeric(MutualDepthLoss(true));
+  // Constants stay constants: the photo, and the TV's guide even when it is the transmitted image.
+  EXPECT_TRUE(L1Loss(Buffer::kColor, TargetKind::kImage).TargetInputs().empty());
+  EXPECT_TRUE(EdgeAwareTvLoss(Buffer::kDepth, TargetKind::kTransmitted).TargetInputs().empty());
+  // Every registered term, as configured against the transmitted image where it can be: what it
+  // declares matches.
+  for (const std::string& name : LossRegistry::Get().Names()) {
+    Status status;
+    for (const char* config : {"{}", R"({"target": "transmitted"})"}) {
+      auto term = LossRegistry::Get().Create(name, nlohmann::json::parse(config), &status);
+      if (term != nullptr && !term->TargetInputs().empty())
+        ExpectTargetGradientMatchesNumeric(*term);
+    }
+  }
+}
+
 // The colour transform's own parameters: analytic against central differences, with and without
 // a mask, through the full render loss (L1 + D-SSIM).
 TEST(LossGradientTest, ExposureParametersMatchNumericDifferentiation) {
