@@ -8,7 +8,6 @@
 
 #include "mgsr/core/timer.h"
 #include "mgsr/loss/loss_registry.h"
-#include "mgsr/loss/render_loss.h"
 #include "mgsr/model/init_from_points.h"
 #include "solvers/exposure_fit.h"
 
@@ -342,6 +341,20 @@ void MutualBoostedSolver::RenderSurfels(const Camera& camera, SurfelRender* out)
   surfel_renderer_.Forward(surfels_, SurfelOptions(camera), out);
 }
 
+Targets MutualBoostedSolver::LossTargets(Branch branch, int view, const Image* other) const {
+  const View& v = scene_.views[view];
+  Targets t;
+  t.mask = v.mask.empty() ? nullptr : &v.mask;
+  if (branch == Branch::kSurfels2D) {
+    t.image = &targets_[view].gt_2d;
+    t.transmitted = other;
+  } else {
+    t.image = &targets_[view].gt_3d;
+    t.other_depth = other;
+  }
+  return t;
+}
+
 double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Image* transmitted) {
   const View& v = scene_.views[view];
   const SolverOptions& o = options_;
@@ -350,10 +363,8 @@ double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Ima
   surfel_renderer_.Forward(surfels_, ro, &render);
 
   // The 2DGS loss of the stage (the loss table; the paper's: reference 1.3 warm-up, 1.5 mutual).
-  Targets t;
-  t.image = &targets_[view].gt_2d;
-  t.mask = v.mask.empty() ? nullptr : &v.mask;
-  t.transmitted = stage == Stage::kMutual ? transmitted : nullptr;
+  const Targets t =
+      LossTargets(Branch::kSurfels2D, view, stage == Stage::kMutual ? transmitted : nullptr);
   const RenderBuffers in = SurfelBuffers(v.camera, render);
   RenderGradients g;
   const double loss = EvaluateLoss(Branch::kSurfels2D, stage, view, it, in, t, &g);
@@ -378,10 +389,8 @@ double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it,
   gaussian_renderer_.Forward(gaussians_, ro, &render);
 
   // The 3DGS loss of the stage (the loss table; the paper's: reference 1.4 warm-up, 1.5 mutual).
-  Targets t;
-  t.image = &targets_[view].gt_3d;
-  t.mask = v.mask.empty() ? nullptr : &v.mask;
-  t.other_depth = stage == Stage::kMutual ? surfel_depth : nullptr;
+  const Targets t =
+      LossTargets(Branch::kGaussians3D, view, stage == Stage::kMutual ? surfel_depth : nullptr);
   const RenderBuffers in = GaussianBuffers(v.camera, render);
   RenderGradients g;
   const double loss = EvaluateLoss(Branch::kGaussians3D, stage, view, it, in, t, &g);
@@ -572,14 +581,11 @@ Status MutualBoostedSolver::Run() {
       if (o.bidirectional) {
         // d L_2D / d C_tran from the loss table's rows that differentiate the transmitted target,
         // at the 2DGS render the loss compared. Pixels forced to the background are constants.
-        const View& v = scene_.views[view];
-        Targets t;
-        t.image = &targets_[view].gt_2d;
-        t.mask = v.mask.empty() ? nullptr : &v.mask;
-        t.transmitted = &target;
         TargetGradients d;
         ProblemFor(Branch::kSurfels2D, Stage::kMutual)
-            .problem.EvaluateTargetGradient(Branch::kSurfels2D, SurfelBuffers(v.camera, s2), t, &d);
+            .problem.EvaluateTargetGradient(
+                Branch::kSurfels2D, SurfelBuffers(scene_.views[view].camera, s2),
+                LossTargets(Branch::kSurfels2D, view, &target), &d);
         Image dt = std::move(d.transmitted);
         if (!dt.empty()) {
           if (!mask.empty()) {
@@ -607,15 +613,11 @@ Status MutualBoostedSolver::Run() {
         // d L_3D / d Z2D from the rows that differentiate the 2DGS depth (the mutual depth loss),
         // at the 3DGS render the loss compared. The surfel renderer still holds the forward state
         // of `s` (the 3DGS step does not use it).
-        const View& v = scene_.views[view];
-        Targets t;
-        t.image = &targets_[view].gt_3d;
-        t.mask = v.mask.empty() ? nullptr : &v.mask;
-        t.other_depth = &s.depth;
         TargetGradients d;
         ProblemFor(Branch::kGaussians3D, Stage::kMutual)
-            .problem.EvaluateTargetGradient(Branch::kGaussians3D, GaussianBuffers(v.camera, g3), t,
-                                            &d);
+            .problem.EvaluateTargetGradient(
+                Branch::kGaussians3D, GaussianBuffers(scene_.views[view].camera, g3),
+                LossTargets(Branch::kGaussians3D, view, &s.depth), &d);
         if (!d.other_depth.empty()) BackpropIntoSurfels(view, it, &s, std::move(d.other_depth));
       }
       Notify(Stage::kMutual, it, Branch::kGaussians3D, sum.final_loss_3d);

@@ -130,6 +130,10 @@ class MutualBoostedSolver {
   struct ViewTargets {
     Image gt_2d, gt_3d;  // ground truth on each branch's background
   };
+  // What a branch's loss terms compare with on a view: the photo on the branch's background, the
+  // mask, and `other`, the other branch's render in the mutual stage (the 3DGS transmitted image
+  // for the 2DGS branch, the 2DGS depth for the 3DGS branch; null in the warm-up).
+  Targets LossTargets(Branch branch, int view, const Image* other) const;
   double StepSurfels(int view, Stage stage, int iteration, const Image* transmitted_target);
   // An error naming the branch, iteration and block when the last step's loss or gradient was not
   // finite (NaN or inf): the run stops before a bad state can reach a checkpoint.
