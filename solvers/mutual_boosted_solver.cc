@@ -51,74 +51,27 @@ Adam::LearningRates Rates(const SolverOptions& o, int step, double extent) {
   };
 }
 
-// A branch's render as the buffers its loss terms read.
-RenderBuffers SurfelBuffers(const Camera& camera, const SurfelRender& r) {
-  RenderBuffers in;
-  in.camera = &camera;
-  in.Set(Buffer::kColor, &r.color);
-  in.Set(Buffer::kDepth, &r.depth);
-  in.Set(Buffer::kAlpha, &r.alpha);
-  in.Set(Buffer::kNormal, &r.normal_world);
-  in.Set(Buffer::kMedianDepth, &r.median_depth);
-  in.Set(Buffer::kDistortion, &r.distortion);
-  return in;
+// What the mutual stage hands a learning branch from the supervising one (reference 1.5): the
+// buffer, the target it fills, and whether pixels outside the mask are forced to the learner's
+// background (the transmitted colour is; the depth is not).
+struct MutualSupervision {
+  Buffer buffer;
+  OtherBranchTarget target;
+  bool background_outside_mask;
+};
+
+MutualSupervision SupervisionFor(Branch learner) {
+  if (learner == Branch::kSurfels2D) return {Buffer::kTransmitted, OtherBranchTarget::kTransmitted, true};
+  return {Buffer::kDepth, OtherBranchTarget::kDepth, false};
 }
 
-RenderBuffers GaussianBuffers(const Camera& camera, const GaussianRender& r) {
-  RenderBuffers in;
-  in.camera = &camera;
-  in.Set(Buffer::kColor, &r.color);
-  in.Set(Buffer::kTransmitted, &r.tran);
-  in.Set(Buffer::kReflected, &r.ref);
-  in.Set(Buffer::kWeight, &r.weight);
-  in.Set(Buffer::kDepth, &r.depth);
-  in.Set(Buffer::kAlpha, &r.alpha);
-  return in;
-}
-
-void MoveGradients(RenderGradients* g, GaussianRenderGrad* out) {
-  out->color = std::move(g->images[static_cast<int>(Buffer::kColor)]);
-  out->tran = std::move(g->images[static_cast<int>(Buffer::kTransmitted)]);
-  out->ref = std::move(g->images[static_cast<int>(Buffer::kReflected)]);
-  out->weight = std::move(g->images[static_cast<int>(Buffer::kWeight)]);
-  out->depth = std::move(g->images[static_cast<int>(Buffer::kDepth)]);
-  out->alpha = std::move(g->images[static_cast<int>(Buffer::kAlpha)]);
-}
-
-void MoveGradients(RenderGradients* g, SurfelRenderGrad* out) {
-  out->color = std::move(g->images[static_cast<int>(Buffer::kColor)]);
-  out->depth = std::move(g->images[static_cast<int>(Buffer::kDepth)]);
-  out->alpha = std::move(g->images[static_cast<int>(Buffer::kAlpha)]);
-  out->normal_world = std::move(g->images[static_cast<int>(Buffer::kNormal)]);
-  out->median_depth = std::move(g->images[static_cast<int>(Buffer::kMedianDepth)]);
-  out->distortion = std::move(g->images[static_cast<int>(Buffer::kDistortion)]);
-}
-
-// After a branch's backward: densification statistics, the Adam step, then density control and
-// opacity resets on the branch's schedule (reference 1.10). The same for both branches. Returns the
-// name of a parameter block whose gradient was not finite ("" when all were).
-template <typename Model>
-std::string OptimizeAndControlDensity(const SolverOptions& o, const BranchSchedule& s, size_t budget,
-                               int it, const Camera& camera, const std::vector<float>& mean2d_grads,
-                               const std::vector<float>& radii, double extent, Model& grads,
-                               Model* model, Adam* adam, DensityStats* stats, Rng* rng) {
-  if (it < s.densify_until) {
-    std::vector<float> norms;
-    ScreenGradientNorms(mean2d_grads, camera.width, camera.height, &norms);
-    stats->Accumulate(norms, radii);
+// Sets every channel of `image` to `value` where the mask is 0.
+void FillOutsideMask(const Image& mask, float value, Image* image) {
+  for (int c = 0; c < image->channels(); ++c) {
+    for (size_t i = 0; i < image->plane_size(); ++i) {
+      if (mask.plane(0)[i] == 0.0f) image->plane(c)[i] = value;
+    }
   }
-  const std::string nonfinite = adam->Step(model->Blocks(), grads.Blocks(), Rates(o, it, extent));
-  if (!nonfinite.empty()) return nonfinite;  // the run stops: no density decisions on bad data
-  if (it > s.densify_from && it < s.densify_until && it % s.densify_interval == 0) {
-    DensityOptions d;
-    d.grad_threshold = o.densify_grad_threshold;
-    d.percent_dense = o.percent_dense;
-    d.min_opacity = s.min_opacity;
-    d.max_primitives = budget;
-    DensifyAndPrune(model, adam, stats, d, extent, it > s.opacity_reset_interval, rng);
-  }
-  if (it < s.densify_until && it % s.opacity_reset_interval == 0) ResetOpacity(model, adam);
-  return "";
 }
 
 // Keeps the strongest of the callbacks' requests: abort over terminate over continue.
@@ -153,39 +106,41 @@ const char* TerminationTypeName(TerminationType type) {
 std::string SolveSummary::FullReport() const {
   std::ostringstream s;
   s << "MGSR solve: " << TerminationTypeName(termination_type)
-    << (message.empty() ? "" : " (" + message + ")") << "\n"
-    << "  warm-up 2DGS   " << warmup_iterations_2d << " iterations"
-    << (auto_stopped_2d ? ", auto-stopped" : "") << ", final loss " << final_loss_2d << "\n"
-    << "  warm-up 3DGS   " << warmup_iterations_3d << " iterations"
-    << (auto_stopped_3d ? ", auto-stopped" : "") << ", final loss " << final_loss_3d << "\n"
-    << "  mutual         " << mutual_iterations << " iterations\n"
+    << (message.empty() ? "" : " (" + message + ")") << "\n";
+  for (Branch b : {Branch::kSurfels2D, Branch::kGaussians3D}) {
+    const BranchSummary& x = branch(b);
+    s << "  warm-up " << BranchLabel(b) << "   " << x.warmup_iterations << " iterations"
+      << (x.auto_stopped ? ", auto-stopped" : "") << ", final loss " << x.final_loss << "\n";
+  }
+  s << "  mutual         " << mutual_iterations << " iterations\n"
     << "  time           warm-up " << warmup_seconds << " s, mutual " << mutual_seconds
     << " s (exposure fit " << exposure_fit_seconds << " s)\n"
-    << "  primitives     " << num_surfels << " surfels, " << num_gaussians << " Gaussians\n";
+    << "  primitives     " << branch(Branch::kSurfels2D).primitives << " surfels, "
+    << branch(Branch::kGaussians3D).primitives << " Gaussians\n";
   return s.str();
 }
 
 std::string SolveSummary::BriefReport() const {
   std::ostringstream s;
-  s << "warm-up: 2DGS " << warmup_iterations_2d << " it" << (auto_stopped_2d ? " (auto-stop)" : "")
-    << ", 3DGS " << warmup_iterations_3d << " it" << (auto_stopped_3d ? " (auto-stop)" : "") << ", "
-    << warmup_seconds << " s; mutual: " << mutual_iterations << " it, " << mutual_seconds << " s; "
-    << num_surfels << " surfels, " << num_gaussians << " Gaussians";
+  s << "warm-up:";
+  for (Branch b : {Branch::kSurfels2D, Branch::kGaussians3D}) {
+    s << (b == Branch::kSurfels2D ? " " : ", ") << BranchLabel(b) << " "
+      << branch(b).warmup_iterations << " it" << (branch(b).auto_stopped ? " (auto-stop)" : "");
+  }
+  s << ", " << warmup_seconds << " s; mutual: " << mutual_iterations << " it, " << mutual_seconds
+    << " s; " << branch(Branch::kSurfels2D).primitives << " surfels, "
+    << branch(Branch::kGaussians3D).primitives << " Gaussians";
   return s.str();
 }
 
 MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Scene& scene)
-    : options_(options),
-      scene_(scene),
-      rng_(options.seed),
-      stop_2d_(options.warmup_min_iterations, options.auto_stop_window, options.auto_stop_range),
-      stop_3d_(options.warmup_min_iterations, options.auto_stop_window, options.auto_stop_range) {
+    : options_(options), scene_(scene), rng_(options.seed) {
   train_ = scene.TrainIndices();
   for (const View& v : scene.views) {
-    ViewTargets t;
-    t.gt_2d = CompositeOnBackground(v, options.background_2d);
-    t.gt_3d = CompositeOnBackground(v, options.background_3d);
-    targets_.push_back(std::move(t));
+    std::array<Image, 2> photos;
+    photos[BranchIndex(Branch::kSurfels2D)] = CompositeOnBackground(v, options.background_2d);
+    photos[BranchIndex(Branch::kGaussians3D)] = CompositeOnBackground(v, options.background_3d);
+    photos_.push_back(std::move(photos));
   }
   // Initial points: a seeded subset when there are more than the options allow.
   std::vector<Eigen::Vector3f> points = scene.points, colors = scene.point_colors;
@@ -202,18 +157,56 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
     points.swap(p);
     colors.swap(c);
   }
-  InitGaussiansFromPoints(points, colors, options.sh_degree, &gaussians_);
-  InitSurfelsFromPoints(points, colors, options.sh_degree, options.seed + 1, &surfels_,
+  GaussianModel gaussians;
+  SurfelModel surfels;
+  InitGaussiansFromPoints(points, colors, options.sh_degree, &gaussians);
+  InitSurfelsFromPoints(points, colors, options.sh_degree, options.seed + 1, &surfels,
                         options.surfel_orientation_from_points ? SurfelOrientation::kNeighbourhood
                                                                : SurfelOrientation::kRandom);
   if (!options.reflection) {
     // Plain 3DGS: no reflected layer (sigmoid(-30) ~ 1e-13), and its blocks never learn.
-    std::fill(gaussians_.ref_opacity_logits.begin(), gaussians_.ref_opacity_logits.end(), -30.0f);
+    std::fill(gaussians.ref_opacity_logits.begin(), gaussians.ref_opacity_logits.end(), -30.0f);
   }
-  stats_3d_.Reset(gaussians_.size());
-  stats_2d_.Reset(surfels_.size());
-  exposure_3d_.Reset(static_cast<int>(scene.views.size()), options.exposure, train_);
-  exposure_2d_.Reset(static_cast<int>(scene.views.size()), options.exposure, train_);
+  for (ExposureModel& e : exposures_)
+    e.Reset(static_cast<int>(scene.views.size()), options.exposure, train_);
+
+  // What both branches share; then each branch's schedule, budget and background.
+  BranchTrainerOptions common;
+  common.density.grad_threshold = options.densify_grad_threshold;
+  common.density.percent_dense = options.percent_dense;
+  common.extent = scene.extent;
+  const SolverOptions* o = &options_;
+  const double extent = scene.extent;
+  common.learning_rates = [o, extent](int it) { return Rates(*o, it, extent); };
+  common.auto_stop_min_iteration = options.warmup_min_iterations;
+  common.auto_stop_window = options.auto_stop_window;
+  common.auto_stop_range = options.auto_stop_range;
+  common.exposure_lr = options.exposure_lr;
+  common.exposure_prior = options.exposure_prior;
+  common.exposure_offset_prior = options.exposure_offset_prior;
+  common.exposure_mean_prior = options.exposure_mean_prior;
+
+  BranchTrainerOptions o2 = common;
+  o2.schedule = options.schedule_2d;
+  o2.density.max_primitives = options.max_surfels;
+  o2.background = options.background_2d;
+  SurfelRenderOptions r2;
+  r2.low_pass = options.surfel_area_preserving_low_pass ? SurfelLowPass::kAreaPreserving
+                                                        : SurfelLowPass::kReference;
+  r2.filter_sigma = options.surfel_filter_sigma;
+  ExposureModel* e2 = &exposures_[BranchIndex(
+      options.exposure_per_branch ? Branch::kSurfels2D : Branch::kGaussians3D)];
+  surfels_ = std::make_unique<SurfelTrainer>(std::move(surfels), r2, o2, e2, &rng_);
+
+  BranchTrainerOptions o3 = common;
+  o3.schedule = options.schedule_3d;
+  o3.density.max_primitives = options.max_gaussians;
+  o3.background = options.background_3d;
+  gaussians_ = std::make_unique<GaussianTrainer>(std::move(gaussians), GaussianRenderOptions(),
+                                                 o3, &exposures_[BranchIndex(Branch::kGaussians3D)],
+                                                 &rng_);
+  trainers_[BranchIndex(Branch::kSurfels2D)] = surfels_.get();
+  trainers_[BranchIndex(Branch::kGaussians3D)] = gaussians_.get();
 }
 
 Status MutualBoostedSolver::BuildProblems() {
@@ -222,49 +215,16 @@ Status MutualBoostedSolver::BuildProblems() {
     Status status;
     std::unique_ptr<LossTerm> term = LossRegistry::Get().Create(row.term, row.config, &status);
     if (term == nullptr) return status.WithContext("loss row " + LossSpecId(row) + ": ");
-    StageProblem& sp = ProblemFor(row.branch, row.stage);
-    if (row.exposure && options_.exposure != ExposureMode::kOff) {
-      auto wrapped = std::make_unique<ExposureCompensatedLoss>(std::move(term));
-      sp.exposure_terms.push_back(wrapped.get());
-      term = std::move(wrapped);
-    }
-    sp.problem.AddTerm(std::move(term), row.weight, row.branch, row.name);
-    sp.rows.push_back(row);
+    trainer(row.branch).AddLossRow(row, std::move(term),
+                                   row.exposure && options_.exposure != ExposureMode::kOff);
   }
   problems_built_ = true;
   return Status::Ok();
 }
 
-double MutualBoostedSolver::EvaluateLoss(Branch branch, Stage stage, int view, int it,
-                                         const RenderBuffers& in, const Targets& t,
-                                         RenderGradients* grad) {
-  StageProblem& sp = ProblemFor(branch, stage);
-  for (size_t i = 0; i < sp.rows.size(); ++i)
-    sp.problem.SetWeight(i, it >= sp.rows[i].first_iteration ? sp.rows[i].weight : 0.0);
-  for (ExposureCompensatedLoss* e : sp.exposure_terms)
-    e->set_transform(ExposureFor(branch).transform(view));
-  if (!sp.checked) {
-    // Once per branch and stage: every row's inputs and targets exist (a custom row may ask for a
-    // buffer this branch does not render, or a target this stage does not have).
-    const Status s = sp.problem.Check(branch, in, t);
-    if (!s.ok()) {
-      step_error_ = s.WithContext(std::string(branch == Branch::kSurfels2D ? "2DGS" : "3DGS") +
-                                  " " + StageName(stage) + " loss row ");
-      return std::numeric_limits<double>::quiet_NaN();
-    }
-    sp.checked = true;
-  }
-  std::vector<Problem::TermValue>& terms = last_terms_[branch == Branch::kSurfels2D ? 0 : 1];
-  const double loss = sp.problem.Evaluate(branch, in, t, grad, &terms);
-  if (!sp.exposure_terms.empty()) {
-    ColorTransform gradient{};
-    for (const ExposureCompensatedLoss* e : sp.exposure_terms) {
-      for (int k = 0; k < kColorTransformSize; ++k) gradient[k] += e->parameter_gradient()[k];
-    }
-    ExposureFor(branch).Step(view, gradient, options_.exposure_lr, options_.exposure_prior,
-                             options_.exposure_offset_prior, options_.exposure_mean_prior);
-  }
-  return loss;
+void MutualBoostedSolver::SetShDegree(int degree) {
+  sh_degree_ = degree;
+  for (BranchTrainer* t : trainers_) t->set_sh_degree(degree);
 }
 
 void MutualBoostedSolver::FitExposures() {
@@ -274,16 +234,14 @@ void MutualBoostedSolver::FitExposures() {
   for (int view : train_) {
     const View& v = scene_.views[view];
     const Image* mask = v.mask.empty() ? nullptr : &v.mask;
-    GaussianRender g;
-    RenderGaussians(v.camera, &g);
-    ColorTransform p;
-    if (FitColorTransform(g.color, targets_[view].gt_3d, mask, fo, &p).ok())
-      exposure_3d_.SetTransform(view, p);
-    if (options_.exposure_per_branch) {
-      SurfelRender s;
-      RenderSurfels(v.camera, &s);
-      if (FitColorTransform(s.color, targets_[view].gt_2d, mask, fo, &p).ok())
-        exposure_2d_.SetTransform(view, p);
+    for (Branch b : {Branch::kGaussians3D, Branch::kSurfels2D}) {
+      // A branch fits the transforms it owns (a shared model is the 3DGS branch's).
+      BranchTrainer& t = trainer(b);
+      if (&t.exposure() != &exposures_[BranchIndex(b)]) continue;
+      ColorTransform p;
+      if (FitColorTransform(t.RenderColor(v.camera), photos_[view][BranchIndex(b)], mask, fo, &p)
+              .ok())
+        exposures_[BranchIndex(b)].SetTransform(view, p);
     }
   }
 }
@@ -300,10 +258,9 @@ int MutualBoostedSolver::NextView() {
   return v;
 }
 
-void MutualBoostedSolver::Notify(Stage stage, int iteration, Branch branch, double loss) {
-  IterationInfo info{stage,           iteration,          branch, loss, gaussians_.size(),
-                     surfels_.size(), Now() - start_time_,
-                     last_terms_[branch == Branch::kSurfels2D ? 0 : 1]};
+void MutualBoostedSolver::Notify(Stage stage, int iteration, const BranchTrainer& t, double loss) {
+  IterationInfo info{stage,          iteration,           t.branch(),    loss,
+                     gaussians_->size(), surfels_->size(), Now() - start_time_, t.LastTerms()};
   for (IterationCallback* c : callbacks_) Request((*c)(info), &callback_request_);
 }
 
@@ -312,131 +269,64 @@ void MutualBoostedSolver::NotifyIterationEnd(Stage stage, int iteration) {
     Request(c->OnIterationEnd(*this, stage, iteration), &callback_request_);
 }
 
-GaussianRenderOptions MutualBoostedSolver::GaussianOptions(const Camera& camera) const {
-  GaussianRenderOptions o;
-  o.camera = camera;
-  o.sh_degree = sh_degree_;
-  const float bg = options_.background_3d;
-  o.background[0] = o.background[1] = o.background[2] = bg;
-  return o;
-}
-
-SurfelRenderOptions MutualBoostedSolver::SurfelOptions(const Camera& camera) const {
-  SurfelRenderOptions o;
-  o.camera = camera;
-  o.sh_degree = sh_degree_;
-  const float bg = options_.background_2d;
-  o.background[0] = o.background[1] = o.background[2] = bg;
-  o.low_pass = options_.surfel_area_preserving_low_pass ? SurfelLowPass::kAreaPreserving
-                                                        : SurfelLowPass::kReference;
-  o.filter_sigma = options_.surfel_filter_sigma;
-  return o;
-}
-
-void MutualBoostedSolver::RenderGaussians(const Camera& camera, GaussianRender* out) {
-  gaussian_renderer_.Forward(gaussians_, GaussianOptions(camera), out);
-}
-
-void MutualBoostedSolver::RenderSurfels(const Camera& camera, SurfelRender* out) {
-  surfel_renderer_.Forward(surfels_, SurfelOptions(camera), out);
-}
-
 Targets MutualBoostedSolver::LossTargets(Branch branch, int view, const Image* other) const {
   const View& v = scene_.views[view];
   Targets t;
   t.mask = v.mask.empty() ? nullptr : &v.mask;
+  t.image = &photos_[view][BranchIndex(branch)];
   if (branch == Branch::kSurfels2D) {
-    t.image = &targets_[view].gt_2d;
     t.transmitted = other;
   } else {
-    t.image = &targets_[view].gt_3d;
     t.other_depth = other;
   }
   return t;
 }
 
-double MutualBoostedSolver::StepSurfels(int view, Stage stage, int it, const Image* transmitted) {
+Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* teacher, int view,
+                                       int it, int schedule_it) {
   const View& v = scene_.views[view];
-  const SolverOptions& o = options_;
-  const SurfelRenderOptions ro = SurfelOptions(v.camera);
-  SurfelRender render;
-  surfel_renderer_.Forward(surfels_, ro, &render);
-
-  // The 2DGS loss of the stage (the loss table; the paper's: reference 1.3 warm-up, 1.5 mutual).
-  const Targets t =
-      LossTargets(Branch::kSurfels2D, view, stage == Stage::kMutual ? transmitted : nullptr);
-  const RenderBuffers in = SurfelBuffers(v.camera, render);
-  RenderGradients g;
-  const double loss = EvaluateLoss(Branch::kSurfels2D, stage, view, it, in, t, &g);
-  if (!step_error_.ok()) return loss;
-  SurfelRenderGrad rg;
-  MoveGradients(&g, &rg);
-  SurfelGradients grads;
-  surfel_renderer_.Backward(surfels_, ro, render, rg, &grads);
-
-  nonfinite_block_ = OptimizeAndControlDensity(o, o.schedule_2d, o.max_surfels, it, v.camera, grads.mean2d,
-                            surfel_renderer_.projected().radius, scene_.extent, grads.params,
-                            &surfels_, &adam_2d_, &stats_2d_, &rng_);
-  return loss;
+  const MutualSupervision sup = SupervisionFor(learner->branch());
+  const float background = learner->branch() == Branch::kSurfels2D ? options_.background_2d
+                                                                     : options_.background_3d;
+  // The teacher's render, a constant target (reference 1.5).
+  Image target = *teacher->Hold(v.camera).Get(sup.buffer);
+  if (sup.background_outside_mask && !v.mask.empty()) FillOutsideMask(v.mask, background, &target);
+  const Targets targets = LossTargets(learner->branch(), view, &target);
+  // Bidirectional: the learner's render the loss compares, before its step.
+  RenderBuffers before;
+  if (options_.bidirectional) before = learner->Hold(v.camera);
+  BranchSummary& sum = learner->summary();
+  sum.final_loss = learner->Step(Stage::kMutual, view, v.camera, schedule_it, targets);
+  MGSR_RETURN_IF_ERROR(CheckFinite(*learner, it, sum.final_loss));
+  if (options_.bidirectional) {
+    // d L_learner / d target from the rows that differentiate it, at the render the loss
+    // compared; pixels forced to the background are constants. The teacher's renderer still
+    // holds the target's forward state (the learner's step does not use it).
+    TargetGradients d;
+    learner->TargetGradient(Stage::kMutual, before, targets, &d);
+    Image g = std::move(sup.target == OtherBranchTarget::kTransmitted ? d.transmitted
+                                                                       : d.other_depth);
+    if (!g.empty()) {
+      if (sup.background_outside_mask && !v.mask.empty()) FillOutsideMask(v.mask, 0.0f, &g);
+      RenderGradients into;
+      into.images[static_cast<int>(sup.buffer)] = std::move(g);
+      MGSR_RETURN_IF_ERROR(teacher->BackpropHeld(&into, it));
+    }
+  }
+  Notify(Stage::kMutual, it, *learner, sum.final_loss);
+  return Status::Ok();
 }
 
-double MutualBoostedSolver::StepGaussians(int view, Stage stage, int it,
-                                          const Image* surfel_depth) {
-  const View& v = scene_.views[view];
-  const SolverOptions& o = options_;
-  const GaussianRenderOptions ro = GaussianOptions(v.camera);
-  GaussianRender render;
-  gaussian_renderer_.Forward(gaussians_, ro, &render);
-
-  // The 3DGS loss of the stage (the loss table; the paper's: reference 1.4 warm-up, 1.5 mutual).
-  const Targets t =
-      LossTargets(Branch::kGaussians3D, view, stage == Stage::kMutual ? surfel_depth : nullptr);
-  const RenderBuffers in = GaussianBuffers(v.camera, render);
-  RenderGradients g;
-  const double loss = EvaluateLoss(Branch::kGaussians3D, stage, view, it, in, t, &g);
-  if (!step_error_.ok()) return loss;
-  GaussianRenderGrad rg;
-  MoveGradients(&g, &rg);
-  GaussianGradients grads;
-  gaussian_renderer_.Backward(gaussians_, ro, render, rg, &grads);
-
-  nonfinite_block_ = OptimizeAndControlDensity(o, o.schedule_3d, o.max_gaussians, it, v.camera, grads.mean2d,
-                            gaussian_renderer_.projected().radius, scene_.extent, grads.params,
-                            &gaussians_, &adam_3d_, &stats_3d_, &rng_);
-  return loss;
-}
-
-void MutualBoostedSolver::BackpropIntoGaussians(int view, int it, GaussianRender* render,
-                                                Image d_transmitted) {
-  const View& v = scene_.views[view];
-  const GaussianRenderOptions ro = GaussianOptions(v.camera);
-  GaussianRenderGrad rg;
-  rg.tran = std::move(d_transmitted);
-  GaussianGradients grads;
-  gaussian_renderer_.Backward(gaussians_, ro, *render, rg, &grads);
-  adam_3d_.Step(gaussians_.Blocks(), grads.params.Blocks(), Rates(options_, it, scene_.extent));
-}
-
-void MutualBoostedSolver::BackpropIntoSurfels(int view, int it, SurfelRender* render,
-                                              Image d_depth) {
-  const View& v = scene_.views[view];
-  const SurfelRenderOptions ro = SurfelOptions(v.camera);
-  SurfelRenderGrad rg;
-  rg.depth = std::move(d_depth);
-  SurfelGradients grads;
-  surfel_renderer_.Backward(surfels_, ro, *render, rg, &grads);
-  adam_2d_.Step(surfels_.Blocks(), grads.params.Blocks(), Rates(options_, it, scene_.extent));
-}
-
-Status MutualBoostedSolver::CheckFinite(Branch branch, int iteration, double loss) const {
-  if (!step_error_.ok()) return step_error_;
-  if (std::isfinite(loss) && nonfinite_block_.empty()) return Status::Ok();
-  const std::string where = std::string(branch == Branch::kSurfels2D ? "2DGS" : "3DGS") + " " +
+Status MutualBoostedSolver::CheckFinite(const BranchTrainer& t, int iteration, double loss) const {
+  if (!t.StepStatus().ok()) return t.StepStatus();
+  const std::string& block = t.NonfiniteBlock();
+  if (std::isfinite(loss) && block.empty()) return Status::Ok();
+  const std::string where = std::string(t.name()) + " " +
                             (stage_ == Stage::kWarmup ? "warm-up" : "mutual") + " iteration " +
                             std::to_string(iteration);
-  if (!nonfinite_block_.empty()) {
-    return Status::Error("non-finite gradient of parameter block '" + nonfinite_block_ + "' at " +
-                         where + " (loss " + std::to_string(loss) +
+  if (!block.empty()) {
+    return Status::Error("non-finite gradient of parameter block '" + block + "' at " + where +
+                         " (loss " + std::to_string(loss) +
                          "); stopped, the last checkpoint is the last good state");
   }
   return Status::Error("non-finite loss (" + std::to_string(loss) + ") at " + where +
@@ -451,8 +341,11 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
       summary_.termination_type = TerminationType::kFailure;
     summary_.message = s.message();
   }
-  summary_.num_gaussians = gaussians_.size();
-  summary_.num_surfels = surfels_.size();
+  for (const BranchTrainer* t : trainers_) {
+    BranchSummary& b = summary_.branches[BranchIndex(t->branch())];
+    b = t->summary();
+    b.primitives = t->size();
+  }
   *summary = summary_;
   return s;
 }
@@ -491,32 +384,34 @@ Status MutualBoostedSolver::Run() {
     // A finished run (a checkpoint of one) stays finished, also when a callback ended it early.
     if (summary_.termination_type == TerminationType::kNotRun)
       summary_.termination_type = TerminationType::kFinished;
-    sh_degree_ = options_.sh_degree;
+    SetShDegree(options_.sh_degree);
     return Status::Ok();
   }
   MGSR_RETURN_IF_ERROR(options_.Validate());
   MGSR_RETURN_IF_ERROR(BuildProblems());
   if (train_.empty()) return Status::Error("the scene has no training views");
-  if (gaussians_.size() == 0) return Status::Error("the scene has no initial points");
+  if (gaussians_->size() == 0) return Status::Error("the scene has no initial points");
   stop_requested_ = 0;
   start_time_ = Now() - summary_.warmup_seconds - summary_.mutual_seconds;
   const SolverOptions& o = options_;
   SolveSummary& sum = summary_;
   Status ended;
 
-  // Warm-up: the branches step in turn; each stops on its own.
+  // Warm-up: the branches step in turn (2DGS first); each stops on its own.
   Timer warmup;
   const double warmup_before = sum.warmup_seconds;
   while (stage_ == Stage::kWarmup) {
-    const bool done_2d =
-        !o.train_2d || sum.auto_stopped_2d || sum.warmup_iterations_2d >= o.warmup_max_iterations;
-    const bool done_3d =
-        !o.train_3d || sum.auto_stopped_3d || sum.warmup_iterations_3d >= o.warmup_max_iterations;
-    if (done_2d && done_3d) {
+    std::array<bool, 2> done{};
+    for (const BranchTrainer* t : trainers_) {
+      const BranchSummary& b = t->summary();
+      done[BranchIndex(t->branch())] = !Trains(t->branch()) || b.auto_stopped ||
+                                       b.warmup_iterations >= o.warmup_max_iterations;
+    }
+    if (done[0] && done[1]) {
       if (o.exposure != ExposureMode::kOff && o.exposure_fit_at_mutual && o.train_2d &&
           o.train_3d) {
         Timer fit;
-        sh_degree_ = o.sh_degree;
+        SetShDegree(o.sh_degree);
         FitExposures();
         sum.exposure_fit_seconds = fit.ElapsedSeconds();
       }
@@ -525,27 +420,23 @@ Status MutualBoostedSolver::Run() {
       break;
     }
     const int it = next_iteration_;
-    sh_degree_ = std::min(o.sh_degree, it / o.sh_interval);
+    SetShDegree(std::min(o.sh_degree, it / o.sh_interval));
     const int view = NextView();
-    if (!done_2d) {
-      sum.final_loss_2d = StepSurfels(view, Stage::kWarmup, it, nullptr);
-      MGSR_RETURN_IF_ERROR(CheckFinite(Branch::kSurfels2D, it, sum.final_loss_2d));
-      sum.warmup_iterations_2d = it;
-      Notify(Stage::kWarmup, it, Branch::kSurfels2D, sum.final_loss_2d);
-      sum.auto_stopped_2d = o.auto_stop && stop_2d_.Update(it, sum.final_loss_2d);
-    }
-    if (!done_3d) {
-      sum.final_loss_3d = StepGaussians(view, Stage::kWarmup, it, nullptr);
-      MGSR_RETURN_IF_ERROR(CheckFinite(Branch::kGaussians3D, it, sum.final_loss_3d));
-      sum.warmup_iterations_3d = it;
-      Notify(Stage::kWarmup, it, Branch::kGaussians3D, sum.final_loss_3d);
-      sum.auto_stopped_3d = o.auto_stop && stop_3d_.Update(it, sum.final_loss_3d);
+    for (BranchTrainer* t : trainers_) {
+      if (done[BranchIndex(t->branch())]) continue;
+      BranchSummary& b = t->summary();
+      b.final_loss = t->Step(Stage::kWarmup, view, scene_.views[view].camera, it,
+                             LossTargets(t->branch(), view, nullptr));
+      MGSR_RETURN_IF_ERROR(CheckFinite(*t, it, b.final_loss));
+      b.warmup_iterations = it;
+      Notify(Stage::kWarmup, it, *t, b.final_loss);
+      b.auto_stopped = o.auto_stop && t->UpdateAutoStop(it, b.final_loss);
     }
     ++next_iteration_;
     sum.warmup_seconds = warmup_before + warmup.ElapsedSeconds();
     if (EndIteration(Stage::kWarmup, it, false, &ended)) return ended;
   }
-  sh_degree_ = o.sh_degree;
+  SetShDegree(o.sh_degree);
 
   // Mutual stage: the supervising branch's render is a constant target.
   Timer mutual;
@@ -555,73 +446,14 @@ Status MutualBoostedSolver::Run() {
     const int it = next_iteration_;
     const int view = NextView();
     const bool joint = o.mutual_mode == "joint";
-    const bool step_2d = joint || it % 2 == 1, step_3d = joint || it % 2 == 0;
     // The count the branch schedules (density control, opacity reset, learning rates) see. In
     // alternate mode the 2DGS branch steps on odd counts only, so it takes the count of the round
     // it opens: events on even counts then reach both branches, in the same round.
     const int schedule_it = joint ? it : it + it % 2;
-    if (step_2d) {
-      GaussianRender g;
-      RenderGaussians(scene_.views[view].camera, &g);
-      // Transmitted target, the 2DGS background (white) where the mask is background (ref. 1.5).
-      Image target = std::move(g.tran);
-      const Image& mask = scene_.views[view].mask;
-      if (!mask.empty()) {
-        for (int c = 0; c < 3; ++c) {
-          for (size_t i = 0; i < target.plane_size(); ++i) {
-            if (mask.plane(0)[i] == 0.0f) target.plane(c)[i] = o.background_2d;
-          }
-        }
-      }
-      // Bidirectional: the 2DGS image the loss compares with C_tran, before the 2DGS step.
-      SurfelRender s2;
-      if (o.bidirectional) RenderSurfels(scene_.views[view].camera, &s2);
-      sum.final_loss_2d = StepSurfels(view, Stage::kMutual, schedule_it, &target);
-      MGSR_RETURN_IF_ERROR(CheckFinite(Branch::kSurfels2D, it, sum.final_loss_2d));
-      if (o.bidirectional) {
-        // d L_2D / d C_tran from the loss table's rows that differentiate the transmitted target,
-        // at the 2DGS render the loss compared. Pixels forced to the background are constants.
-        TargetGradients d;
-        ProblemFor(Branch::kSurfels2D, Stage::kMutual)
-            .problem.EvaluateTargetGradient(
-                Branch::kSurfels2D, SurfelBuffers(scene_.views[view].camera, s2),
-                LossTargets(Branch::kSurfels2D, view, &target), &d);
-        Image dt = std::move(d.transmitted);
-        if (!dt.empty()) {
-          if (!mask.empty()) {
-            for (int c = 0; c < 3; ++c) {
-              for (size_t i = 0; i < dt.plane_size(); ++i) {
-                if (mask.plane(0)[i] == 0.0f) dt.plane(c)[i] = 0.0f;
-              }
-            }
-          }
-          // The Gaussian renderer still holds g's forward state (the 2DGS step does not use it).
-          BackpropIntoGaussians(view, it, &g, std::move(dt));
-        }
-      }
-      Notify(Stage::kMutual, it, Branch::kSurfels2D, sum.final_loss_2d);
-    }
-    if (step_3d) {
-      SurfelRender s;
-      RenderSurfels(scene_.views[view].camera, &s);
-      // Bidirectional: the 3DGS depth the loss used, before the 3DGS step.
-      GaussianRender g3;
-      if (o.bidirectional) RenderGaussians(scene_.views[view].camera, &g3);
-      sum.final_loss_3d = StepGaussians(view, Stage::kMutual, schedule_it, &s.depth);
-      MGSR_RETURN_IF_ERROR(CheckFinite(Branch::kGaussians3D, it, sum.final_loss_3d));
-      if (o.bidirectional) {
-        // d L_3D / d Z2D from the rows that differentiate the 2DGS depth (the mutual depth loss),
-        // at the 3DGS render the loss compared. The surfel renderer still holds the forward state
-        // of `s` (the 3DGS step does not use it).
-        TargetGradients d;
-        ProblemFor(Branch::kGaussians3D, Stage::kMutual)
-            .problem.EvaluateTargetGradient(
-                Branch::kGaussians3D, GaussianBuffers(scene_.views[view].camera, g3),
-                LossTargets(Branch::kGaussians3D, view, &s.depth), &d);
-        if (!d.other_depth.empty()) BackpropIntoSurfels(view, it, &s, std::move(d.other_depth));
-      }
-      Notify(Stage::kMutual, it, Branch::kGaussians3D, sum.final_loss_3d);
-    }
+    if (joint || it % 2 == 1)
+      MGSR_RETURN_IF_ERROR(MutualStep(surfels_.get(), gaussians_.get(), view, it, schedule_it));
+    if (joint || it % 2 == 0)
+      MGSR_RETURN_IF_ERROR(MutualStep(gaussians_.get(), surfels_.get(), view, it, schedule_it));
     sum.mutual_iterations = it;
     ++next_iteration_;
     sum.mutual_seconds = mutual_before + mutual.ElapsedSeconds();

@@ -5,6 +5,7 @@
 // steps one branch per iteration (the paper), `joint` both (the authors' code).
 #pragma once
 
+#include <array>
 #include <csignal>
 #include <functional>
 #include <memory>
@@ -19,10 +20,9 @@
 #include "mgsr/model/surfel_model.h"
 #include "mgsr/render/gaussian_renderer.h"
 #include "mgsr/render/surfel_renderer.h"
-#include "solvers/adam.h"
-#include "solvers/auto_stop.h"
-#include "solvers/density_control.h"
+#include "solvers/branch_trainer.h"
 #include "solvers/exposure_model.h"
+#include "solvers/primitive_types.h"
 #include "solvers/solver_options.h"
 
 namespace mgsr {
@@ -78,12 +78,12 @@ const char* TerminationTypeName(TerminationType type);
 struct SolveSummary {
   TerminationType termination_type = TerminationType::kNotRun;
   std::string message;  // why it ended, one line
-  int warmup_iterations_2d = 0, warmup_iterations_3d = 0, mutual_iterations = 0;
-  bool auto_stopped_2d = false, auto_stopped_3d = false;
+  // Per branch, indexed by BranchIndex (the 2DGS branch 0, the 3DGS branch 1).
+  std::array<BranchSummary, 2> branches;
+  const BranchSummary& branch(Branch b) const { return branches[BranchIndex(b)]; }
+  int mutual_iterations = 0;
   double warmup_seconds = 0, mutual_seconds = 0;
   double exposure_fit_seconds = 0;  // the Ceres fits at the start of the mutual stage
-  size_t num_gaussians = 0, num_surfels = 0;
-  double final_loss_2d = 0, final_loss_3d = 0;
   std::string BriefReport() const;
   // Several lines: termination, iterations and time per stage, counts, final losses.
   std::string FullReport() const;
@@ -112,69 +112,45 @@ class MutualBoostedSolver {
   Status SaveCheckpoint(const std::string& path) const;
   Status LoadCheckpoint(const std::string& path);
 
-  const GaussianModel& gaussians() const { return gaussians_; }
-  const SurfelModel& surfels() const { return surfels_; }
+  const GaussianModel& gaussians() const { return gaussians_->model(); }
+  const SurfelModel& surfels() const { return surfels_->model(); }
   // For tools and tests that edit a model between runs (the optimiser state keeps its rows: change
   // values, not sizes).
-  GaussianModel* mutable_gaussians() { return &gaussians_; }
-  SurfelModel* mutable_surfels() { return &surfels_; }
+  GaussianModel* mutable_gaussians() { return gaussians_->mutable_model(); }
+  SurfelModel* mutable_surfels() { return surfels_->mutable_model(); }
   int active_sh_degree() const { return sh_degree_; }
   // Per-view colour transforms (indexed like scene.views; identity for test views).
-  const ExposureModel& exposure(Branch branch) const { return ExposureFor(branch); }
+  const ExposureModel& exposure(Branch branch) const { return trainer(branch).exposure(); }
 
   // Renders of one view with the trained models (for outputs and evaluation).
-  void RenderGaussians(const Camera& camera, GaussianRender* out);
-  void RenderSurfels(const Camera& camera, SurfelRender* out);
+  void RenderGaussians(const Camera& camera, GaussianRender* out) { gaussians_->Render(camera, out); }
+  void RenderSurfels(const Camera& camera, SurfelRender* out) { surfels_->Render(camera, out); }
 
  private:
-  struct ViewTargets {
-    Image gt_2d, gt_3d;  // ground truth on each branch's background
-  };
+  const BranchTrainer& trainer(Branch b) const { return *trainers_[BranchIndex(b)]; }
+  BranchTrainer& trainer(Branch b) { return *trainers_[BranchIndex(b)]; }
+  bool Trains(Branch b) const {
+    return b == Branch::kSurfels2D ? options_.train_2d : options_.train_3d;
+  }
   // What a branch's loss terms compare with on a view: the photo on the branch's background, the
   // mask, and `other`, the other branch's render in the mutual stage (the 3DGS transmitted image
   // for the 2DGS branch, the 2DGS depth for the 3DGS branch; null in the warm-up).
   Targets LossTargets(Branch branch, int view, const Image* other) const;
-  double StepSurfels(int view, Stage stage, int iteration, const Image* transmitted_target);
+  // One mutual step of `learner`, supervised by `teacher`'s render of the view (held constant; with
+  // bidirectional supervision it then steps with the gradient of the learner's loss).
+  Status MutualStep(BranchTrainer* learner, BranchTrainer* teacher, int view, int iteration,
+                    int schedule_iteration);
   // An error naming the branch, iteration and block when the last step's loss or gradient was not
   // finite (NaN or inf): the run stops before a bad state can reach a checkpoint.
-  Status CheckFinite(Branch branch, int iteration, double loss) const;
-  double StepGaussians(int view, Stage stage, int iteration, const Image* surfel_depth);
-  // Bidirectional mode: back-propagates a gradient on the other branch's render (whose forward
-  // state its renderer still holds) and steps that branch.
-  void BackpropIntoGaussians(int view, int iteration, GaussianRender* render, Image d_transmitted);
-  void BackpropIntoSurfels(int view, int iteration, SurfelRender* render, Image d_depth);
-  // Render options of each branch for a camera: active SH degree and the branch's background.
-  GaussianRenderOptions GaussianOptions(const Camera& camera) const;
-  SurfelRenderOptions SurfelOptions(const Camera& camera) const;
+  Status CheckFinite(const BranchTrainer& trainer, int iteration, double loss) const;
+  void SetShDegree(int degree);
   int NextView();
-  const ExposureModel& ExposureFor(Branch b) const {
-    return options_.exposure_per_branch && b == Branch::kSurfels2D ? exposure_2d_ : exposure_3d_;
-  }
-  ExposureModel& ExposureFor(Branch b) {
-    return options_.exposure_per_branch && b == Branch::kSurfels2D ? exposure_2d_ : exposure_3d_;
-  }
-  // One Problem per branch and stage, built from the loss table once, when Solve first runs.
-  struct StageProblem {
-    Problem problem;
-    std::vector<LossSpec> rows;  // parallel to problem.entries()
-    // The rows behind the view's colour transform (exposure compensation on).
-    std::vector<ExposureCompensatedLoss*> exposure_terms;
-    bool checked = false;  // inputs and targets checked against the first render
-  };
+  // The loss table's rows, each added to its branch's trainer once, when Solve first runs.
   Status BuildProblems();
-  StageProblem& ProblemFor(Branch b, Stage s) {
-    return problems_[b == Branch::kSurfels2D ? 0 : 1][s == Stage::kWarmup ? 0 : 1];
-  }
-  // The branch's loss of the stage on one view's render: rows switched on by iteration, the
-  // view's colour transform set and stepped with the gradient of its rows. Fills the gradient
-  // buffers and the branch's per-row breakdown; a row whose inputs or targets are missing stops
-  // the run (step_error_, returned by CheckFinite).
-  double EvaluateLoss(Branch branch, Stage stage, int view, int iteration, const RenderBuffers& in,
-                      const Targets& targets, RenderGradients* grad);
   // Ceres fit of every training view's transform against the current renders.
   void FitExposures();
   // Calls the callbacks; what they ask is kept in callback_request_ for the iteration's end.
-  void Notify(Stage stage, int iteration, Branch branch, double loss);
+  void Notify(Stage stage, int iteration, const BranchTrainer& trainer, double loss);
   void NotifyIterationEnd(Stage stage, int iteration);
   // At the end of each iteration (the state at a boundary): the callbacks' OnIterationEnd, then
   // their requests and RequestStop(). True when Run must return (with *status); `last`: the run's
@@ -187,15 +163,15 @@ class MutualBoostedSolver {
   SolverOptions options_;
   const Scene& scene_;
   std::vector<int> train_;
-  std::vector<ViewTargets> targets_;
-  GaussianModel gaussians_;
-  SurfelModel surfels_;
-  Adam adam_3d_, adam_2d_;
-  DensityStats stats_3d_, stats_2d_;
-  ExposureModel exposure_3d_, exposure_2d_;
-  GaussianRenderer gaussian_renderer_;
-  SurfelRenderer surfel_renderer_;
+  // Per view, the photo composited on each branch's background (indexed by BranchIndex).
+  std::vector<std::array<Image, 2>> photos_;
   Rng rng_;
+  // Per-view colour transforms, indexed by BranchIndex; without exposure_per_branch the 2DGS
+  // branch uses the 3DGS branch's.
+  ExposureModel exposures_[2];
+  std::unique_ptr<SurfelTrainer> surfels_;
+  std::unique_ptr<GaussianTrainer> gaussians_;
+  std::array<BranchTrainer*, 2> trainers_{};  // indexed by BranchIndex
   std::vector<int> view_stack_;
   int sh_degree_ = 0;
   std::vector<IterationCallback*> callbacks_;
@@ -204,13 +180,8 @@ class MutualBoostedSolver {
   Stage stage_ = Stage::kWarmup;
   int next_iteration_ = 1;
   bool finished_ = false;
-  AutoStop stop_2d_, stop_3d_;
   SolveSummary summary_;
-  std::string nonfinite_block_;  // of the last step, for CheckFinite
-  Status step_error_;            // of the last step, for CheckFinite
-  StageProblem problems_[2][2];  // [2DGS, 3DGS][warm-up, mutual]
   bool problems_built_ = false;
-  std::vector<Problem::TermValue> last_terms_[2];  // [2DGS, 3DGS], for Notify
   volatile std::sig_atomic_t stop_requested_ = 0;
 };
 

@@ -179,7 +179,7 @@ TEST(MutualBoostedSolverTest, EndToEndLossFallsAndPsnrRises) {
   }
   EXPECT_LT(last / nl, 0.7 * first / nf);
   EXPECT_GT(psnr_after, psnr_before + 3) << psnr_before << " -> " << psnr_after;
-  EXPECT_EQ(summary.warmup_iterations_2d, 120);
+  EXPECT_EQ(summary.branch(Branch::kSurfels2D).warmup_iterations, 120);
   EXPECT_EQ(summary.mutual_iterations, 20);
 }
 
@@ -264,8 +264,8 @@ TEST(MutualBoostedSolverTest, SingleBranchMethods) {
     SolveSummary summary;
     ASSERT_TRUE(solver.Solve(&summary).ok());
     EXPECT_EQ(summary.mutual_iterations, 0);
-    EXPECT_EQ(summary.warmup_iterations_2d, o.train_2d ? 60 : 0);
-    EXPECT_EQ(summary.warmup_iterations_3d, o.train_3d ? 60 : 0);
+    EXPECT_EQ(summary.branch(Branch::kSurfels2D).warmup_iterations, o.train_2d ? 60 : 0);
+    EXPECT_EQ(summary.branch(Branch::kGaussians3D).warmup_iterations, o.train_3d ? 60 : 0);
     EXPECT_EQ(solver.gaussians().means == g0.means, !o.train_3d);
     EXPECT_EQ(solver.surfels().means == s0.means, !o.train_2d);
     if (std::string(method) == "3dgs") {
@@ -358,7 +358,7 @@ TEST(CheckpointTest, InterruptedAndResumedRunEqualsAnUninterruptedOne) {
       SolveSummary s2;
       ASSERT_TRUE(second.Solve(&s2).ok());
       ExpectSameModels(full, second);
-      EXPECT_EQ(s2.warmup_iterations_2d, s_full.warmup_iterations_2d);
+      EXPECT_EQ(s2.branch(Branch::kSurfels2D).warmup_iterations, s_full.branch(Branch::kSurfels2D).warmup_iterations);
       EXPECT_EQ(s2.mutual_iterations, s_full.mutual_iterations);
       for (int v : scene.TrainIndices()) {
         EXPECT_EQ(full.exposure(Branch::kGaussians3D).transform(v),
@@ -539,7 +539,7 @@ TEST(MutualBoostedSolverTest, ANonFiniteValueLeavesTheLastGoodCheckpoint) {
   ASSERT_TRUE(resumed.LoadCheckpoint(ckpt).ok());
   SolveSummary finished;
   ASSERT_TRUE(resumed.Solve(&finished).ok());
-  EXPECT_EQ(finished.warmup_iterations_2d, 20);
+  EXPECT_EQ(finished.branch(Branch::kSurfels2D).warmup_iterations, 20);
   for (float x : resumed.surfels().opacity_logits) ASSERT_TRUE(std::isfinite(x));
 }
 
@@ -945,8 +945,8 @@ TEST(MutualBoostedSolverTest, ACallbackEndsOrAbortsTheRunAtTheIterationsEnd) {
     ASSERT_TRUE(solver.Solve(&summary).ok());
     EXPECT_EQ(summary.termination_type, TerminationType::kUserSuccess);
     EXPECT_TRUE(summary.IsFinished());
-    EXPECT_EQ(summary.warmup_iterations_2d, 10);
-    EXPECT_EQ(summary.warmup_iterations_3d, 10);
+    EXPECT_EQ(summary.branch(Branch::kSurfels2D).warmup_iterations, 10);
+    EXPECT_EQ(summary.branch(Branch::kGaussians3D).warmup_iterations, 10);
     EXPECT_EQ(summary.mutual_iterations, 0);
     EXPECT_NE(summary.FullReport().find("ended by a callback (after warm-up iteration 10)"),
               std::string::npos)
@@ -954,7 +954,7 @@ TEST(MutualBoostedSolverTest, ACallbackEndsOrAbortsTheRunAtTheIterationsEnd) {
     // A finished run stays finished.
     SolveSummary again;
     ASSERT_TRUE(solver.Solve(&again).ok());
-    EXPECT_EQ(again.warmup_iterations_2d, 10);
+    EXPECT_EQ(again.branch(Branch::kSurfels2D).warmup_iterations, 10);
   }
   {
     MutualBoostedSolver solver(o, scene);
@@ -966,7 +966,7 @@ TEST(MutualBoostedSolverTest, ACallbackEndsOrAbortsTheRunAtTheIterationsEnd) {
     EXPECT_EQ(s.message(), "aborted by an iteration callback after warm-up iteration 5");
     EXPECT_EQ(summary.termination_type, TerminationType::kUserAbort);
     EXPECT_FALSE(summary.IsFinished());
-    EXPECT_EQ(summary.warmup_iterations_3d, 5);
+    EXPECT_EQ(summary.branch(Branch::kGaussians3D).warmup_iterations, 5);
   }
 }
 

@@ -1,0 +1,132 @@
+#include "solvers/branch_trainer.h"
+
+#include <deque>
+#include <limits>
+
+namespace mgsr {
+
+const char* BranchLabel(Branch branch) {
+  return branch == Branch::kSurfels2D ? "2DGS" : "3DGS";
+}
+
+BranchTrainer::BranchTrainer(Branch branch, const BranchTrainerOptions& options,
+                             ExposureModel* exposure, Rng* rng)
+    : branch_(branch),
+      options_(options),
+      exposure_(exposure),
+      rng_(rng),
+      auto_stop_(options.auto_stop_min_iteration, options.auto_stop_window,
+                 options.auto_stop_range) {}
+
+void BranchTrainer::AddLossRow(const LossSpec& row, std::unique_ptr<LossTerm> term,
+                               bool behind_exposure) {
+  StageProblem& sp = ProblemFor(row.stage);
+  if (behind_exposure) {
+    auto wrapped = std::make_unique<ExposureCompensatedLoss>(std::move(term));
+    sp.exposure_terms.push_back(wrapped.get());
+    term = std::move(wrapped);
+  }
+  sp.problem.AddTerm(std::move(term), row.weight, branch_, row.name);
+  sp.rows.push_back(row);
+}
+
+double BranchTrainer::EvaluateLoss(Stage stage, int view, int iteration, const RenderBuffers& in,
+                                   const Targets& targets, RenderGradients* gradient) {
+  StageProblem& sp = ProblemFor(stage);
+  for (size_t i = 0; i < sp.rows.size(); ++i)
+    sp.problem.SetWeight(i, iteration >= sp.rows[i].first_iteration ? sp.rows[i].weight : 0.0);
+  for (ExposureCompensatedLoss* e : sp.exposure_terms) e->set_transform(exposure_->transform(view));
+  if (!sp.checked) {
+    // Once per stage: every row's inputs and targets exist (a custom row may ask for a buffer this
+    // branch does not render, or a target this stage does not have).
+    const Status s = sp.problem.Check(branch_, in, targets);
+    if (!s.ok()) {
+      step_error_ =
+          s.WithContext(std::string(name()) + " " + StageName(stage) + " loss row ");
+      return std::numeric_limits<double>::quiet_NaN();
+    }
+    sp.checked = true;
+  }
+  const double loss = sp.problem.Evaluate(branch_, in, targets, gradient, &last_terms_);
+  if (!sp.exposure_terms.empty()) {
+    ColorTransform g{};
+    for (const ExposureCompensatedLoss* e : sp.exposure_terms) {
+      for (int k = 0; k < kColorTransformSize; ++k) g[k] += e->parameter_gradient()[k];
+    }
+    exposure_->Step(view, g, options_.exposure_lr, options_.exposure_prior,
+                    options_.exposure_offset_prior, options_.exposure_mean_prior);
+  }
+  return loss;
+}
+
+void BranchTrainer::TargetGradient(Stage stage, const RenderBuffers& at, const Targets& targets,
+                                   TargetGradients* gradient) const {
+  ProblemFor(stage).problem.EvaluateTargetGradient(branch_, at, targets, gradient);
+}
+
+std::string BranchTrainer::OptimizeAndControlDensity(const Camera& camera,
+                                                     const std::vector<float>& mean2d,
+                                                     const std::vector<float>& radii,
+                                                     std::vector<ParamBlock> params,
+                                                     std::vector<ParamBlock> gradients, int it) {
+  // Reference 1.10: view-averaged screen-gradient statistics while densifying, the Adam step,
+  // then density control and opacity resets on the branch's schedule.
+  const BranchSchedule& s = options_.schedule;
+  if (it < s.densify_until) {
+    std::vector<float> norms;
+    ScreenGradientNorms(mean2d, camera.width, camera.height, &norms);
+    stats_.Accumulate(norms, radii);
+  }
+  const std::string nonfinite = adam_.Step(params, gradients, options_.learning_rates(it));
+  if (!nonfinite.empty()) return nonfinite;  // the run stops: no density decisions on bad data
+  if (it > s.densify_from && it < s.densify_until && it % s.densify_interval == 0) {
+    DensityOptions d = options_.density;
+    d.min_opacity = s.min_opacity;
+    Densify(d, it > s.opacity_reset_interval);
+  }
+  if (it < s.densify_until && it % s.opacity_reset_interval == 0) ResetOpacities();
+  return "";
+}
+
+void BranchTrainer::Save(BinaryWriter* w) const {
+  w->Write<int32_t>(summary_.warmup_iterations);
+  w->Write<uint8_t>(summary_.auto_stopped ? 1 : 0);
+  w->Write<double>(summary_.final_loss);
+  WriteVector(w, std::vector<double>(auto_stop_.window().begin(), auto_stop_.window().end()));
+  SaveModel(w);
+  WriteAdamState(w, adam_);
+  WriteVector(w, stats_.grad_sum);
+  WriteVector(w, stats_.count);
+}
+
+Status BranchTrainer::Read(BinaryReader* r) {
+  Pending p;
+  uint8_t stopped = 0;
+  MGSR_RETURN_IF_ERROR(r->Read(&p.summary.warmup_iterations));
+  MGSR_RETURN_IF_ERROR(r->Read(&stopped));
+  MGSR_RETURN_IF_ERROR(r->Read(&p.summary.final_loss));
+  p.summary.auto_stopped = stopped != 0;
+  MGSR_RETURN_IF_ERROR(ReadVector(r, &p.window));
+  if (!AllFinite(p.window))
+    return Status::Error(r->path() + ": corrupt checkpoint (NaN in the " + name() +
+                         " loss window)");
+  if (p.summary.warmup_iterations < 0)
+    return Status::Error(r->path() + ": corrupt checkpoint (" + name() + " iteration count)");
+  MGSR_RETURN_IF_ERROR(ReadModel(r));
+  MGSR_RETURN_IF_ERROR(ReadAdamState(r, &p.adam));
+  MGSR_RETURN_IF_ERROR(ReadVector(r, &p.stats.grad_sum));
+  MGSR_RETURN_IF_ERROR(ReadVector(r, &p.stats.count));
+  pending_ = std::move(p);
+  return Status::Ok();
+}
+
+void BranchTrainer::CommitRead() {
+  CommitModel();
+  adam_ = std::move(pending_.adam);
+  stats_ = std::move(pending_.stats);
+  auto_stop_.set_window(std::deque<double>(pending_.window.begin(), pending_.window.end()));
+  summary_ = pending_.summary;
+  pending_ = Pending();
+}
+
+}  // namespace mgsr

@@ -1,0 +1,291 @@
+// One branch's training, whatever its primitive: a BranchTrainer owns the model, its renderer, the
+// Adam state, the density statistics and schedule, the primitive budget, the background, the
+// warm-up's auto-stop and the branch's loss (one Problem per stage, from the loss table). The solver
+// composes two of them (the 2DGS and the 3DGS branch) and the mutual supervision between them; it
+// never touches a primitive type itself (DESIGN.md section 4).
+//
+// PrimitiveTrainer<P> implements it for a primitive type described by P (see SurfelPrimitive and
+// GaussianPrimitive in solvers/primitive_types.h); a new primitive type is a new P, its model and its
+// renderer. What P supplies:
+//   using Model, Renderer, Render, RenderOptions, RenderGrad, Gradients;
+//   static constexpr Branch kBranch;
+//   static RenderBuffers Buffers(const Camera&, const Render&);     // what loss terms read
+//   static void TakeGradients(RenderGradients* from, RenderGrad* to);  // d loss / d buffers
+//   static const std::vector<float>& Radii(const Renderer&);       // > 0 where drawn, last render
+//   static DensifyResult DensifyAndPrune(Model*, Adam*, DensityStats*, const DensityOptions&,
+//                                        double extent, bool prune_large, Rng*);
+//   static void ResetOpacity(Model*, Adam*);
+// Model: size(), Blocks(), max_sh_degree, Resize(n). Renderer: Forward(model, options, &render),
+// Backward(model, options, render, render_grad, &gradients). Gradients: params (a Model: d loss /
+// d parameter) and mean2d (2 per primitive: the densification statistic). RenderOptions: camera,
+// sh_degree, background[3].
+#pragma once
+
+#include <array>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "mgsr/core/camera.h"
+#include "mgsr/core/rng.h"
+#include "mgsr/core/status.h"
+#include "mgsr/io/binary_stream.h"
+#include "mgsr/loss/exposure_compensation.h"
+#include "mgsr/loss/problem.h"
+#include "mgsr/render/project_gaussians.h"
+#include "solvers/adam.h"
+#include "solvers/auto_stop.h"
+#include "solvers/checkpoint_io.h"
+#include "solvers/density_control.h"
+#include "solvers/exposure_model.h"
+#include "solvers/loss_table.h"
+#include "solvers/solver_options.h"
+
+namespace mgsr {
+
+// "2DGS" / "3DGS", and the branch's index in per-branch arrays (2DGS 0, 3DGS 1).
+const char* BranchLabel(Branch branch);
+inline int BranchIndex(Branch branch) { return branch == Branch::kSurfels2D ? 0 : 1; }
+
+// What a branch's training reports (SolveSummary holds one per branch).
+struct BranchSummary {
+  int warmup_iterations = 0;
+  bool auto_stopped = false;
+  double final_loss = 0;  // of its last step
+  size_t primitives = 0;
+};
+
+// A branch's settings; the same for every primitive type.
+struct BranchTrainerOptions {
+  BranchSchedule schedule;  // density control and opacity resets
+  // Thresholds of density control; max_primitives is the branch's budget (0 = none), min_opacity
+  // is taken from the schedule.
+  DensityOptions density;
+  double extent = 1;       // the scene's extent: density control's and the position rate's scale
+  float background = 0;    // the grey level the branch renders and compares on
+  // The Adam learning rates at a step, per block and column.
+  std::function<Adam::LearningRates(int iteration)> learning_rates;
+  // The warm-up's auto-stop.
+  int auto_stop_min_iteration = 15000, auto_stop_window = 100;
+  double auto_stop_range = 0.01;
+  // The step of the per-view colour transform behind the branch's exposure rows.
+  double exposure_lr = 0, exposure_prior = 0, exposure_offset_prior = 0, exposure_mean_prior = 0;
+};
+
+class BranchTrainer {
+ public:
+  // `exposure`: the per-view colour transforms the branch's exposure rows are behind (owned by the
+  // solver; the two branches may share one). `rng`: the solver's generator, which density control
+  // draws from (shared so a run is one reproducible sequence).
+  BranchTrainer(Branch branch, const BranchTrainerOptions& options, ExposureModel* exposure,
+                Rng* rng);
+  virtual ~BranchTrainer() = default;
+  BranchTrainer(const BranchTrainer&) = delete;
+  BranchTrainer& operator=(const BranchTrainer&) = delete;
+
+  Branch branch() const { return branch_; }
+  const char* name() const { return BranchLabel(branch_); }
+  virtual size_t size() const = 0;
+  // The SH degree renders use (the warm-up raises it on a schedule).
+  void set_sh_degree(int degree) { sh_degree_ = degree; }
+  ExposureModel& exposure() { return *exposure_; }
+  const ExposureModel& exposure() const { return *exposure_; }
+
+  // --- The loss: one Problem per stage, built from the loss table's rows of this branch.
+  // `behind_exposure`: the row compares through the view's colour transform.
+  void AddLossRow(const LossSpec& row, std::unique_ptr<LossTerm> term, bool behind_exposure);
+
+  // --- Training.
+  // One step on a view: renders it, evaluates the stage's loss (rows switched on by `iteration`,
+  // the view's colour transform set, then stepped with its rows' gradient), back-propagates, steps
+  // Adam and runs density control and opacity resets on the branch's schedule at `iteration`.
+  // Returns the loss; StepStatus() says whether the step was sound.
+  virtual double Step(Stage stage, int view, const Camera& camera, int iteration,
+                      const Targets& targets) = 0;
+  // OK, or why the last step must stop the run: a loss row the branch cannot feed (checked on the
+  // stage's first step); NonfiniteBlock() names a parameter block whose gradient was not finite.
+  const Status& StepStatus() const { return step_error_; }
+  const std::string& NonfiniteBlock() const { return nonfinite_block_; }
+  // The active rows of the last step: label, weight, unweighted value.
+  const std::vector<Problem::TermValue>& LastTerms() const { return last_terms_; }
+  // The warm-up's auto-stop: records the loss of `iteration`; true once it has flattened.
+  bool UpdateAutoStop(int iteration, double loss) { return auto_stop_.Update(iteration, loss); }
+  BranchSummary& summary() { return summary_; }
+  const BranchSummary& summary() const { return summary_; }
+
+  // --- Supervising the other branch.
+  // Renders the view with the current parameters into a render the trainer keeps until its next
+  // Hold, and returns its buffers (valid as long). Until the trainer renders again (Step, Hold,
+  // RenderColor), BackpropHeld can send a gradient through this render.
+  virtual RenderBuffers Hold(const Camera& camera) = 0;
+  // Bidirectional supervision: back-propagates d loss / d buffers of the held render (the other
+  // branch's loss differentiated with respect to its target) and steps Adam at `iteration`. An
+  // error when the renderer no longer holds that render's forward state.
+  virtual Status BackpropHeld(RenderGradients* gradient, int iteration) = 0;
+  // d (the stage's loss) / d (the targets that are the other branch's renders), at the buffers
+  // `at` (what the step compared), with this iteration's weights.
+  void TargetGradient(Stage stage, const RenderBuffers& at, const Targets& targets,
+                      TargetGradients* gradient) const;
+  // The branch's colour of a view (exposure fits).
+  virtual Image RenderColor(const Camera& camera) = 0;
+
+  // --- Checkpoints: everything needed to continue exactly (model, optimiser state, density
+  // statistics, auto-stop window, summary). Read checks every value and keeps what it read aside;
+  // CommitRead installs it (the solver commits only once the whole file has been read).
+  void Save(BinaryWriter* w) const;
+  Status Read(BinaryReader* r);
+  void CommitRead();
+
+ protected:
+  // The stage's loss on one render; fills `gradient` and LastTerms(); sets step_error_ when a row
+  // cannot be fed.
+  double EvaluateLoss(Stage stage, int view, int iteration, const RenderBuffers& in,
+                      const Targets& targets, RenderGradients* gradient);
+  // After the backward pass: density statistics, Adam, density control, opacity resets.
+  std::string OptimizeAndControlDensity(const Camera& camera, const std::vector<float>& mean2d,
+                                        const std::vector<float>& radii,
+                                        std::vector<ParamBlock> params,
+                                        std::vector<ParamBlock> gradients, int iteration);
+  virtual void SaveModel(BinaryWriter* w) const = 0;
+  virtual Status ReadModel(BinaryReader* r) = 0;
+  virtual void CommitModel() = 0;
+  // Density control and opacity resets of the primitive type.
+  virtual void Densify(const DensityOptions& options, bool prune_large) = 0;
+  virtual void ResetOpacities() = 0;
+
+  const Branch branch_;
+  const BranchTrainerOptions options_;
+  ExposureModel* const exposure_;
+  Rng* const rng_;
+  int sh_degree_ = 0;
+  Adam adam_;
+  DensityStats stats_;
+  Status step_error_;            // of the last step
+  std::string nonfinite_block_;  // of the last step
+
+ private:
+  struct StageProblem {
+    Problem problem;
+    std::vector<LossSpec> rows;  // parallel to problem.entries()
+    std::vector<ExposureCompensatedLoss*> exposure_terms;  // the rows behind the colour transform
+    bool checked = false;  // inputs and targets checked against the first render
+  };
+  StageProblem& ProblemFor(Stage s) { return problems_[s == Stage::kWarmup ? 0 : 1]; }
+  const StageProblem& ProblemFor(Stage s) const { return problems_[s == Stage::kWarmup ? 0 : 1]; }
+
+  StageProblem problems_[2];  // warm-up, mutual
+  AutoStop auto_stop_;
+  BranchSummary summary_;
+  std::vector<Problem::TermValue> last_terms_;
+  // Read, not yet committed.
+  struct Pending {
+    Adam adam;
+    DensityStats stats;
+    std::vector<double> window;
+    BranchSummary summary;
+  } pending_;
+};
+
+template <typename P>
+class PrimitiveTrainer : public BranchTrainer {
+ public:
+  using Model = typename P::Model;
+  // `render_options`: the branch's render settings (camera and SH degree are set per render, the
+  // background from the options).
+  PrimitiveTrainer(Model initial, typename P::RenderOptions render_options,
+                   const BranchTrainerOptions& options, ExposureModel* exposure, Rng* rng)
+      : BranchTrainer(P::kBranch, options, exposure, rng),
+        model_(std::move(initial)),
+        render_options_(std::move(render_options)) {
+    for (float& b : render_options_.background) b = options.background;
+    stats_.Reset(model_.size());
+  }
+
+  size_t size() const override { return model_.size(); }
+  const Model& model() const { return model_; }
+  // For tools and tests that edit a model between runs (the optimiser state keeps its rows: change
+  // values, not sizes).
+  Model* mutable_model() { return &model_; }
+
+  typename P::RenderOptions RenderOptionsFor(const Camera& camera) const {
+    typename P::RenderOptions o = render_options_;
+    o.camera = camera;
+    o.sh_degree = sh_degree_;
+    return o;
+  }
+  // A render of the trained model (outputs, evaluation).
+  void Render(const Camera& camera, typename P::Render* out) {
+    renderer_.Forward(model_, RenderOptionsFor(camera), out);
+    held_current_ = false;
+  }
+
+  double Step(Stage stage, int view, const Camera& camera, int iteration,
+              const Targets& targets) override {
+    const typename P::RenderOptions ro = RenderOptionsFor(camera);
+    typename P::Render render;
+    renderer_.Forward(model_, ro, &render);
+    held_current_ = false;
+    RenderGradients g;
+    const double loss = EvaluateLoss(stage, view, iteration, P::Buffers(camera, render), targets, &g);
+    if (!step_error_.ok()) return loss;
+    typename P::RenderGrad rg;
+    P::TakeGradients(&g, &rg);
+    typename P::Gradients grads;
+    renderer_.Backward(model_, ro, render, rg, &grads);
+    nonfinite_block_ = OptimizeAndControlDensity(camera, grads.mean2d, P::Radii(renderer_),
+                                                 model_.Blocks(), grads.params.Blocks(), iteration);
+    return loss;
+  }
+
+  RenderBuffers Hold(const Camera& camera) override {
+    held_options_ = RenderOptionsFor(camera);
+    renderer_.Forward(model_, held_options_, &held_);
+    held_current_ = true;
+    return P::Buffers(held_options_.camera, held_);
+  }
+
+  Status BackpropHeld(RenderGradients* gradient, int iteration) override {
+    if (!held_current_) {
+      return Status::Error(std::string(name()) +
+                           " trainer: the held render's forward state is gone (the branch "
+                           "rendered again since Hold)");
+    }
+    typename P::RenderGrad rg;
+    P::TakeGradients(gradient, &rg);
+    typename P::Gradients grads;
+    renderer_.Backward(model_, held_options_, held_, rg, &grads);
+    adam_.Step(model_.Blocks(), grads.params.Blocks(), options_.learning_rates(iteration));
+    return Status::Ok();
+  }
+
+  Image RenderColor(const Camera& camera) override {
+    typename P::Render r;
+    Render(camera, &r);
+    return *P::Buffers(camera, r).Get(Buffer::kColor);
+  }
+
+ protected:
+  void SaveModel(BinaryWriter* w) const override {
+    WriteModelBlocks(w, model_.max_sh_degree, const_cast<Model&>(model_).Blocks());
+  }
+  Status ReadModel(BinaryReader* r) override { return ReadModelBlocks(r, &pending_model_); }
+  void CommitModel() override {
+    model_ = std::move(pending_model_);
+    pending_model_ = Model();
+    held_current_ = false;
+  }
+  void Densify(const DensityOptions& options, bool prune_large) override {
+    P::DensifyAndPrune(&model_, &adam_, &stats_, options, options_.extent, prune_large, rng_);
+  }
+  void ResetOpacities() override { P::ResetOpacity(&model_, &adam_); }
+
+ private:
+  Model model_, pending_model_;
+  typename P::Renderer renderer_;
+  typename P::RenderOptions render_options_, held_options_;
+  typename P::Render held_;
+  bool held_current_ = false;
+};
+
+}  // namespace mgsr

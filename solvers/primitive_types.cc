@@ -1,0 +1,54 @@
+#include "solvers/primitive_types.h"
+
+#include <utility>
+
+namespace mgsr {
+namespace {
+
+Image Take(RenderGradients* g, Buffer b) { return std::move(g->images[static_cast<int>(b)]); }
+
+}  // namespace
+
+RenderBuffers SurfelPrimitive::Buffers(const Camera& camera, const Render& r) {
+  RenderBuffers in;
+  in.camera = &camera;
+  in.Set(Buffer::kColor, &r.color);
+  in.Set(Buffer::kDepth, &r.depth);
+  in.Set(Buffer::kAlpha, &r.alpha);
+  in.Set(Buffer::kNormal, &r.normal_world);
+  in.Set(Buffer::kMedianDepth, &r.median_depth);
+  in.Set(Buffer::kDistortion, &r.distortion);
+  return in;
+}
+
+void SurfelPrimitive::TakeGradients(RenderGradients* g, RenderGrad* out) {
+  out->color = Take(g, Buffer::kColor);
+  out->depth = Take(g, Buffer::kDepth);
+  out->alpha = Take(g, Buffer::kAlpha);
+  out->normal_world = Take(g, Buffer::kNormal);
+  out->median_depth = Take(g, Buffer::kMedianDepth);
+  out->distortion = Take(g, Buffer::kDistortion);
+}
+
+RenderBuffers GaussianPrimitive::Buffers(const Camera& camera, const Render& r) {
+  RenderBuffers in;
+  in.camera = &camera;
+  in.Set(Buffer::kColor, &r.color);
+  in.Set(Buffer::kTransmitted, &r.tran);
+  in.Set(Buffer::kReflected, &r.ref);
+  in.Set(Buffer::kWeight, &r.weight);
+  in.Set(Buffer::kDepth, &r.depth);
+  in.Set(Buffer::kAlpha, &r.alpha);
+  return in;
+}
+
+void GaussianPrimitive::TakeGradients(RenderGradients* g, RenderGrad* out) {
+  out->color = Take(g, Buffer::kColor);
+  out->tran = Take(g, Buffer::kTransmitted);
+  out->ref = Take(g, Buffer::kReflected);
+  out->weight = Take(g, Buffer::kWeight);
+  out->depth = Take(g, Buffer::kDepth);
+  out->alpha = Take(g, Buffer::kAlpha);
+}
+
+}  // namespace mgsr

@@ -1,0 +1,267 @@
+// The generic branch trainer with a primitive type that is neither a surfel nor a Gaussian: a stub
+// whose primitives are horizontal bands of flat colour. It trains, checkpoints and supervises
+// through the same code as the two real branches (solvers/branch_trainer.h), which is what a new
+// primitive type would get.
+#include "solvers/branch_trainer.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "mgsr/loss/loss_registry.h"
+
+namespace mgsr {
+namespace {
+
+// N bands, each one RGB colour; band k covers rows [k H / N, (k + 1) H / N) of every view.
+struct BandModel {
+  int max_sh_degree = 0;
+  std::vector<float> colour;  // N x 3
+  size_t size() const { return colour.size() / 3; }
+  void Resize(size_t n) { colour.resize(3 * n); }
+  std::vector<ParamBlock> Blocks() { return {{"colour", &colour, 3}}; }
+};
+
+struct BandRenderOptions {
+  Camera camera;
+  int sh_degree = 0;
+  float background[3] = {0, 0, 0};
+};
+
+struct BandRender {
+  Image color;
+};
+
+struct BandRenderGrad {
+  Image color;
+};
+
+struct BandGradients {
+  BandModel params;
+  std::vector<float> mean2d;
+};
+
+int BandOfRow(int row, int height, size_t bands) {
+  return static_cast<int>(static_cast<size_t>(row) * bands / static_cast<size_t>(height));
+}
+
+class BandRenderer {
+ public:
+  void Forward(const BandModel& m, const BandRenderOptions& o, BandRender* out) {
+    out->color = Image(o.camera.width, o.camera.height, 3);
+    for (int y = 0; y < o.camera.height; ++y) {
+      const int k = BandOfRow(y, o.camera.height, m.size());
+      for (int x = 0; x < o.camera.width; ++x) {
+        for (int c = 0; c < 3; ++c) out->color.at(c, y, x) = m.colour[3 * k + c];
+      }
+    }
+    radius_.assign(m.size(), 1.0f);
+  }
+  void Backward(const BandModel& m, const BandRenderOptions& o, const BandRender& /*render*/,
+                const BandRenderGrad& g, BandGradients* out) {
+    out->params.Resize(m.size());
+    std::fill(out->params.colour.begin(), out->params.colour.end(), 0.0f);
+    out->mean2d.assign(2 * m.size(), 0.0f);
+    if (g.color.empty()) return;
+    for (int y = 0; y < o.camera.height; ++y) {
+      const int k = BandOfRow(y, o.camera.height, m.size());
+      for (int x = 0; x < o.camera.width; ++x) {
+        for (int c = 0; c < 3; ++c) out->params.colour[3 * k + c] += g.color.at(c, y, x);
+      }
+    }
+  }
+  const std::vector<float>& radius() const { return radius_; }
+
+ private:
+  std::vector<float> radius_;
+};
+
+// The primitive type's description for PrimitiveTrainer: no density control (a fixed band count).
+struct BandPrimitive {
+  using Model = BandModel;
+  using Renderer = BandRenderer;
+  using Render = BandRender;
+  using RenderOptions = BandRenderOptions;
+  using RenderGrad = BandRenderGrad;
+  using Gradients = BandGradients;
+  static constexpr Branch kBranch = Branch::kGaussians3D;
+
+  static RenderBuffers Buffers(const Camera& camera, const Render& r) {
+    RenderBuffers in;
+    in.camera = &camera;
+    in.Set(Buffer::kColor, &r.color);
+    return in;
+  }
+  static void TakeGradients(RenderGradients* from, RenderGrad* to) {
+    to->color = std::move(from->images[static_cast<int>(Buffer::kColor)]);
+  }
+  static const std::vector<float>& Radii(const Renderer& r) { return r.radius(); }
+  static DensifyResult DensifyAndPrune(Model*, Adam*, DensityStats*, const DensityOptions&, double,
+                                       bool, Rng*) {
+    ++densify_calls;
+    return {};
+  }
+  static void ResetOpacity(Model*, Adam*) { ++reset_calls; }
+  static int densify_calls, reset_calls;
+};
+int BandPrimitive::densify_calls = 0;
+int BandPrimitive::reset_calls = 0;
+
+using BandTrainer = PrimitiveTrainer<BandPrimitive>;
+
+Camera SmallCamera() {
+  Camera c;
+  c.width = 8;
+  c.height = 12;
+  c.fx = c.fy = 10;
+  c.cx = 4;
+  c.cy = 6;
+  return c;
+}
+
+// The photo: band k of 4 in grey level 0.2 + 0.2 k.
+Image BandPhoto(const Camera& c) {
+  Image im(c.width, c.height, 3);
+  for (int y = 0; y < c.height; ++y) {
+    for (int x = 0; x < c.width; ++x) {
+      for (int ch = 0; ch < 3; ++ch) im.at(ch, y, x) = 0.2f + 0.2f * BandOfRow(y, c.height, 4);
+    }
+  }
+  return im;
+}
+
+BranchTrainerOptions StubOptions() {
+  BranchTrainerOptions o;
+  o.schedule.densify_from = 10;
+  o.schedule.densify_until = 40;
+  o.schedule.densify_interval = 10;
+  o.schedule.opacity_reset_interval = 25;
+  o.learning_rates = [](int) {
+    return [](const std::string&, int width, std::vector<float>* rates) {
+      rates->assign(width, 0.02f);
+    };
+  };
+  o.auto_stop_min_iteration = 0;
+  o.auto_stop_window = 10;
+  o.auto_stop_range = 1e-3;
+  return o;
+}
+
+std::unique_ptr<BandTrainer> MakeTrainer(ExposureModel* exposure, Rng* rng) {
+  BandModel m;
+  m.Resize(4);
+  std::fill(m.colour.begin(), m.colour.end(), 0.5f);
+  auto t = std::make_unique<BandTrainer>(std::move(m), BandRenderOptions(), StubOptions(),
+                                         exposure, rng);
+  LossSpec row;
+  row.branch = Branch::kGaussians3D;
+  row.stage = Stage::kWarmup;
+  row.name = "photo_l1";
+  row.term = "l1";
+  row.weight = 1.0;
+  Status s;
+  t->AddLossRow(row, LossRegistry::Get().Create("l1", row.config, &s), false);
+  EXPECT_TRUE(s.ok()) << s.message();
+  return t;
+}
+
+TEST(BranchTrainerTest, AStubPrimitiveTrainsChecksPointsAndSupervisesThroughTheGenericTrainer) {
+  const Camera camera = SmallCamera();
+  const Image photo = BandPhoto(camera);
+  Targets targets;
+  targets.image = &photo;
+  ExposureModel exposure;
+  exposure.Reset(1, ExposureMode::kOff);
+  Rng rng(7);
+  std::unique_ptr<BandTrainer> t = MakeTrainer(&exposure, &rng);
+  EXPECT_EQ(t->size(), 4u);
+  EXPECT_STREQ(t->name(), "3DGS");
+
+  // Training: the loss falls and every band reaches its photo's grey level; the schedule's
+  // density events reach the primitive type (iterations 20 and 30; resets at 25).
+  const double first = t->Step(Stage::kWarmup, 0, camera, 1, targets);
+  ASSERT_TRUE(t->StepStatus().ok()) << t->StepStatus().message();
+  double loss = first;
+  int it = 2;
+  for (; it <= 60; ++it) loss = t->Step(Stage::kWarmup, 0, camera, it, targets);
+  EXPECT_GT(first, 0.1);
+  EXPECT_LT(loss, 0.01 * first);
+  for (int k = 0; k < 4; ++k) EXPECT_NEAR(t->model().colour[3 * k], 0.2f + 0.2f * k, 0.02f);
+  EXPECT_EQ(BandPrimitive::densify_calls, 2);
+  EXPECT_EQ(BandPrimitive::reset_calls, 1);
+  ASSERT_EQ(t->LastTerms().size(), 1u);
+  EXPECT_EQ(t->LastTerms()[0].name, "photo_l1");
+
+  // Checkpoint through the generic Save/Read/CommitRead: a second trainer continues exactly.
+  t->summary().warmup_iterations = 60;
+  BinaryWriter w;
+  t->Save(&w);
+  Rng rng2(7);
+  rng2.set_state(rng.state());
+  std::unique_ptr<BandTrainer> u = MakeTrainer(&exposure, &rng2);
+  const std::string data = w.data();
+  BinaryReader r("stub.ckpt", data);
+  ASSERT_TRUE(u->Read(&r).ok());
+  EXPECT_TRUE(r.AtEnd());
+  EXPECT_EQ(u->summary().warmup_iterations, 0);  // nothing changes before the commit
+  u->CommitRead();
+  EXPECT_EQ(u->summary().warmup_iterations, 60);
+  for (int k = 0; k < 5; ++k, ++it) {
+    EXPECT_EQ(t->Step(Stage::kWarmup, 0, camera, it, targets),
+              u->Step(Stage::kWarmup, 0, camera, it, targets));
+  }
+  EXPECT_EQ(t->model().colour, u->model().colour);
+
+  // A truncated checkpoint is refused naming the file.
+  const std::string cut = data.substr(0, data.size() / 2);
+  BinaryReader short_reader("cut.ckpt", cut);
+  const Status bad = u->Read(&short_reader);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("cut.ckpt"), std::string::npos) << bad.message();
+
+  // Supervision: a held render's buffers, a gradient sent back through it, and an error once the
+  // branch has rendered again.
+  const RenderBuffers held = t->Hold(camera);
+  ASSERT_NE(held.Get(Buffer::kColor), nullptr);
+  const float before = t->model().colour[0];
+  RenderGradients g;
+  g.Get(Buffer::kColor, *held.Get(Buffer::kColor)).Fill(1.0f);  // d/dc > 0: the colour falls
+  ASSERT_TRUE(t->BackpropHeld(&g, it).ok());
+  EXPECT_LT(t->model().colour[0], before);
+  t->Step(Stage::kWarmup, 0, camera, it, targets);
+  RenderGradients g2;
+  g2.Get(Buffer::kColor, photo).Fill(1.0f);
+  EXPECT_FALSE(t->BackpropHeld(&g2, it).ok());
+}
+
+TEST(BranchTrainerTest, ARowTheBranchCannotFeedStopsTheStepNamingIt) {
+  const Camera camera = SmallCamera();
+  const Image photo = BandPhoto(camera);
+  Targets targets;
+  targets.image = &photo;
+  ExposureModel exposure;
+  exposure.Reset(1, ExposureMode::kOff);
+  Rng rng(1);
+  std::unique_ptr<BandTrainer> t = MakeTrainer(&exposure, &rng);
+  LossSpec row;
+  row.branch = Branch::kGaussians3D;
+  row.stage = Stage::kWarmup;
+  row.name = "depth_smooth";
+  row.term = "tv";
+  row.config = {{"buffer", "depth"}, {"guide", "image"}};
+  row.weight = 1.0;
+  Status s;
+  t->AddLossRow(row, LossRegistry::Get().Create("tv", row.config, &s), false);
+  ASSERT_TRUE(s.ok()) << s.message();
+  const double loss = t->Step(Stage::kWarmup, 0, camera, 1, targets);
+  EXPECT_TRUE(std::isnan(loss));
+  ASSERT_FALSE(t->StepStatus().ok());
+  EXPECT_NE(t->StepStatus().message().find("3DGS warmup loss row"), std::string::npos)
+      << t->StepStatus().message();
+  EXPECT_NE(t->StepStatus().message().find("depth_smooth"), std::string::npos)
+      << t->StepStatus().message();
+}
+
+}  // namespace
+}  // namespace mgsr
