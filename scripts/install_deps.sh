@@ -16,6 +16,8 @@ PACKAGES=(
   colmap
   # charts of the benchmark harness (mgsr_bench)
   gnuplot-nox
+  # the formatting check of CI (scripts/check_format.sh)
+  clang-format
 )
 
 missing=()

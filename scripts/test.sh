@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# One command for the test suite on a fresh Debian 12 machine: install, build, run ctest.
+# One command for the test suite on a fresh Debian 12 machine: install, check the formatting, build
+# (warnings are errors), run ctest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install_deps.sh
+bash scripts/check_format.sh
 bash scripts/build.sh
 cd "${MGSR_BUILD_DIR:-build}"
 ctest --output-on-failure -j "$(nproc)"

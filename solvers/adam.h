@@ -29,7 +29,7 @@ class Adam {
   // an infinity ("" when all are finite): the caller stops, since that block's parameters and
   // moments are no longer finite either.
   std::string Step(const std::vector<ParamBlock>& params, const std::vector<ParamBlock>& grads,
-            const LearningRates& learning_rates);
+                   const LearningRates& learning_rates);
   // Mirror the model's row operations.
   void KeepRows(const std::vector<uint8_t>& keep);
   void AppendZeroRows(size_t count);

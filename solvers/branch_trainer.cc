@@ -5,9 +5,7 @@
 
 namespace mgsr {
 
-const char* BranchLabel(Branch branch) {
-  return branch == Branch::kSurfels2D ? "2DGS" : "3DGS";
-}
+const char* BranchLabel(Branch branch) { return branch == Branch::kSurfels2D ? "2DGS" : "3DGS"; }
 
 BranchTrainer::BranchTrainer(Branch branch, const BranchTrainerOptions& options,
                              ExposureModel* exposure, Rng* rng)
@@ -41,8 +39,7 @@ double BranchTrainer::EvaluateLoss(Stage stage, int view, int iteration, const R
     // branch does not render, or a target this stage does not have).
     const Status s = sp.problem.Check(branch_, in, targets);
     if (!s.ok()) {
-      step_error_ =
-          s.WithContext(std::string(name()) + " " + StageName(stage) + " loss row ");
+      step_error_ = s.WithContext(std::string(name()) + " " + StageName(stage) + " loss row ");
       return std::numeric_limits<double>::quiet_NaN();
     }
     sp.checked = true;

@@ -1,12 +1,12 @@
 // One branch's training, whatever its primitive: a BranchTrainer owns the model, its renderer, the
 // Adam state, the density statistics and schedule, the primitive budget, the background, the
-// warm-up's auto-stop and the branch's loss (one Problem per stage, from the loss table). The solver
-// composes two of them (the 2DGS and the 3DGS branch) and the mutual supervision between them; it
-// never touches a primitive type itself (DESIGN.md section 4).
+// warm-up's auto-stop and the branch's loss (one Problem per stage, from the loss table). The
+// solver composes two of them (the 2DGS and the 3DGS branch) and the mutual supervision between
+// them; it never touches a primitive type itself (DESIGN.md section 4).
 //
 // PrimitiveTrainer<P> implements it for a primitive type described by P (see SurfelPrimitive and
-// GaussianPrimitive in solvers/primitive_types.h); a new primitive type is a new P, its model and its
-// renderer. What P supplies:
+// GaussianPrimitive in solvers/primitive_types.h); a new primitive type is a new P, its model and
+// its renderer. What P supplies:
 //   using Model, Renderer, Render, RenderOptions, RenderGrad, Gradients;
 //   static constexpr Branch kBranch;
 //   static RenderBuffers Buffers(const Camera&, const Render&);     // what loss terms read
@@ -62,8 +62,8 @@ struct BranchTrainerOptions {
   // Thresholds of density control; max_primitives is the branch's budget (0 = none), min_opacity
   // is taken from the schedule.
   DensityOptions density;
-  double extent = 1;       // the scene's extent: density control's and the position rate's scale
-  float background = 0;    // the grey level the branch renders and compares on
+  double extent = 1;     // the scene's extent: density control's and the position rate's scale
+  float background = 0;  // the grey level the branch renders and compares on
   // The Adam learning rates at a step, per block and column.
   std::function<Adam::LearningRates(int iteration)> learning_rates;
   // The warm-up's auto-stop.
@@ -167,7 +167,7 @@ class BranchTrainer {
  private:
   struct StageProblem {
     Problem problem;
-    std::vector<LossSpec> rows;  // parallel to problem.entries()
+    std::vector<LossSpec> rows;                            // parallel to problem.entries()
     std::vector<ExposureCompensatedLoss*> exposure_terms;  // the rows behind the colour transform
     bool checked = false;  // inputs and targets checked against the first render
   };
@@ -227,7 +227,8 @@ class PrimitiveTrainer : public BranchTrainer {
     renderer_.Forward(model_, ro, &render);
     held_current_ = false;
     RenderGradients g;
-    const double loss = EvaluateLoss(stage, view, iteration, P::Buffers(camera, render), targets, &g);
+    const double loss =
+        EvaluateLoss(stage, view, iteration, P::Buffers(camera, render), targets, &g);
     if (!step_error_.ok()) return loss;
     typename P::RenderGrad rg;
     P::TakeGradients(&g, &rg);

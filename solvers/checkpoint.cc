@@ -4,9 +4,10 @@
 //
 // Format 4: magic, the options it was written under (name = value lines), the scene's fingerprint
 // (per view: name and a SHA-256 of its size, camera and split), the solver's state, each branch
-// trainer's state (BranchTrainer::Save, 2DGS then 3DGS), and a SHA-256 of all of it. Loading verifies the checksum first, then refuses other options or another scene naming
-// what differs, then checks every value (finite parameters and moments, steps and iterations in
-// range) before changing anything.
+// trainer's state (BranchTrainer::Save, 2DGS then 3DGS), and a SHA-256 of all of it. Loading
+// verifies the checksum first, then refuses other options or another scene naming what differs,
+// then checks every value (finite parameters and moments, steps and iterations in range) before
+// changing anything.
 #include <cmath>
 #include <cstdio>
 #include <deque>
@@ -43,8 +44,8 @@ std::string ViewFingerprint(const View& v) {
     std::snprintf(number, sizeof(number), "%.17g ", x);
     text += number;
   };
-  for (double x : {static_cast<double>(c.width), static_cast<double>(c.height), c.fx, c.fy, c.cx,
-                   c.cy})
+  for (double x :
+       {static_cast<double>(c.width), static_cast<double>(c.height), c.fx, c.fy, c.cx, c.cy})
     add(x);
   for (int i = 0; i < 9; ++i) add(c.R(i / 3, i % 3));
   for (int i = 0; i < 3; ++i) add(c.t(i));
@@ -118,9 +119,10 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
                            " (written by another version); start again with --overwrite");
     }
     if (it->second != value) {
-      return Status::Error(path + ": the checkpoint was written with " + name + " = " +
-                           it->second + ", this run has " + name + " = " + value +
-                           "; resume with the options of that run, or start again with --overwrite");
+      return Status::Error(
+          path + ": the checkpoint was written with " + name + " = " + it->second +
+          ", this run has " + name + " = " + value +
+          "; resume with the options of that run, or start again with --overwrite");
     }
   }
   // The scene: same views in the same order, with the same cameras and split.
@@ -136,8 +138,8 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
     MGSR_RETURN_IF_ERROR(r.ReadCString(&name));
     MGSR_RETURN_IF_ERROR(r.ReadCString(&fingerprint));
     if (name != v.name) {
-      return Status::Error(path + ": the checkpoint was written for another scene (view '" +
-                           name + "' there, '" + v.name + "' here)");
+      return Status::Error(path + ": the checkpoint was written for another scene (view '" + name +
+                           "' there, '" + v.name + "' here)");
     }
     if (fingerprint != ViewFingerprint(v)) {
       return Status::Error(path + ": view '" + v.name +
@@ -187,8 +189,7 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
       return Status::Error(path + ": corrupt checkpoint (view order)");
   }
   const int last = stage == 0 ? options_.warmup_max_iterations : options_.mutual_iterations;
-  if (stage < 0 || stage > 1 || next < 1 || next > last + 1 || sh < 0 ||
-      sh > options_.sh_degree) {
+  if (stage < 0 || stage > 1 || next < 1 || next > last + 1 || sh < 0 || sh > options_.sh_degree) {
     return Status::Error(path + ": corrupt checkpoint (stage " + std::to_string(stage) +
                          ", next iteration " + std::to_string(next) + ", SH degree " +
                          std::to_string(sh) + " out of range)");

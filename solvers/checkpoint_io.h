@@ -72,8 +72,10 @@ Status ReadModelBlocks(BinaryReader* r, Model* m) {
       return Status::Error(r->path() + ": corrupt checkpoint (block sizes disagree)");
     }
     if (!AllFinite(*blocks[k].data)) {
-      return Status::Error(r->path() + ": checkpoint holds NaN or infinite values in parameter "
-                           "block '" + name + "'");
+      return Status::Error(r->path() +
+                           ": checkpoint holds NaN or infinite values in parameter "
+                           "block '" +
+                           name + "'");
     }
     rows = blocks[k].data->size() / width;
   }

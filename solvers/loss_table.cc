@@ -87,8 +87,8 @@ Status MergeRow(const nlohmann::json& row, LossSpec* spec) {
 
 Status ApplyRow(const nlohmann::json& row, std::vector<LossSpec>* table) {
   if (!row.is_object()) return Status::Error("a row must be an object");
-  static const std::set<std::string> known = {"branch", "stage",  "name",           "term",
-                                              "config", "weight", "first_iteration", "exposure"};
+  static const std::set<std::string> known = {
+      "branch", "stage", "name", "term", "config", "weight", "first_iteration", "exposure"};
   for (const auto& [key, value] : row.items()) {
     if (known.count(key) == 0) return Status::Error("unknown key \"" + key + "\"");
   }
@@ -159,15 +159,13 @@ std::vector<LossSpec> PaperLossTable(const SolverOptions& o) {
       Row(b2, mutual, "normal_consistency", "normal_consistency", nlohmann::json::object(),
           w * o.lambda_normal),
       Row(b2, mutual, "normal_tv", "tv", TvConfig("normal", "transmitted"), w * o.lambda_normal),
-      Row(b2, mutual, "depth_tv", "tv", TvConfig("depth", "transmitted"),
-          w * o.depth_tv_mutual_2d),
+      Row(b2, mutual, "depth_tv", "tv", TvConfig("depth", "transmitted"), w * o.depth_tv_mutual_2d),
       Row(b2, mutual, "distortion", "distortion", nlohmann::json::object(),
           w * o.lambda_distortion),
       // 3DGS warm-up (reference 1.4): render loss, edge-aware TV of the transmitted image and of
       // the depth.
       Row(b3, warm, "photo", "render", RenderConfig("image", o.lambda_l1), 1.0, 0, true),
-      Row(b3, warm, "transmitted_tv", "tv", TvConfig("transmitted", "image"),
-          o.transmitted_tv_3d),
+      Row(b3, warm, "transmitted_tv", "tv", TvConfig("transmitted", "image"), o.transmitted_tv_3d),
       Row(b3, warm, "depth_tv", "tv", TvConfig("depth", "image"), o.depth_tv_3d),
       // 3DGS mutual (reference 1.5): render loss and the depth loss against the 2DGS depth.
       Row(b3, mutual, "photo", "render", RenderConfig("image", o.lambda_l1), o.w_3d, 0, true),
@@ -182,7 +180,8 @@ Status CheckLossTable(const std::vector<LossSpec>& table) {
     if (!ids.insert(id).second) return Status::Error("loss row " + id + " appears twice");
     if (!(s.weight >= 0) || !std::isfinite(s.weight))
       return Status::Error("loss row " + id + ": the weight must be finite and >= 0");
-    if (!s.config.is_object()) return Status::Error("loss row " + id + ": config must be an object");
+    if (!s.config.is_object())
+      return Status::Error("loss row " + id + ": config must be an object");
     Status status;
     if (LossRegistry::Get().Create(s.term, s.config, &status) == nullptr)
       return status.WithContext("loss row " + id + ": ");
@@ -224,10 +223,14 @@ Status ApplyLossConfigFile(const std::string& path, std::vector<LossSpec>* table
 }
 
 nlohmann::json LossSpecToJson(const LossSpec& s) {
-  return {{"branch", BranchName(s.branch)}, {"stage", StageName(s.stage)},
-          {"name", s.name},                 {"term", s.term},
-          {"config", s.config},             {"weight", s.weight},
-          {"first_iteration", s.first_iteration}, {"exposure", s.exposure}};
+  return {{"branch", BranchName(s.branch)},
+          {"stage", StageName(s.stage)},
+          {"name", s.name},
+          {"term", s.term},
+          {"config", s.config},
+          {"weight", s.weight},
+          {"first_iteration", s.first_iteration},
+          {"exposure", s.exposure}};
 }
 
 nlohmann::json LossTableToJson(const std::vector<LossSpec>& table) {

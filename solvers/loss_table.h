@@ -1,9 +1,9 @@
 // The loss table: which loss terms each branch minimises in each stage, with what weight and from
 // which iteration, as data (like a list of Ceres residual blocks, but built from the registry by
 // name). The solver builds one Problem per branch and stage from it, once, and switches rows on
-// and off by iteration. The default is the paper's table (PaperLossTable, from SolverOptions' scalar
-// weights); a JSON file (--loss_config) overrides rows or adds new ones, so a new term that trains
-// is one class, one registration line and one row:
+// and off by iteration. The default is the paper's table (PaperLossTable, from SolverOptions'
+// scalar weights); a JSON file (--loss_config) overrides rows or adds new ones, so a new term that
+// trains is one class, one registration line and one row:
 //
 //   {"losses": [
 //     {"branch": "2d", "stage": "warmup", "name": "normal_consistency", "weight": 1.0},
@@ -30,7 +30,7 @@ namespace mgsr {
 struct SolverOptions;
 
 enum class Stage { kWarmup, kMutual };
-const char* StageName(Stage stage);    // "warmup" | "mutual"
+const char* StageName(Stage stage);     // "warmup" | "mutual"
 const char* BranchName(Branch branch);  // "2d" | "3d"
 
 struct LossSpec {

@@ -61,7 +61,8 @@ struct MutualSupervision {
 };
 
 MutualSupervision SupervisionFor(Branch learner) {
-  if (learner == Branch::kSurfels2D) return {Buffer::kTransmitted, OtherBranchTarget::kTransmitted, true};
+  if (learner == Branch::kSurfels2D)
+    return {Buffer::kTransmitted, OtherBranchTarget::kTransmitted, true};
   return {Buffer::kDepth, OtherBranchTarget::kDepth, false};
 }
 
@@ -194,17 +195,17 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   r2.low_pass = options.surfel_area_preserving_low_pass ? SurfelLowPass::kAreaPreserving
                                                         : SurfelLowPass::kReference;
   r2.filter_sigma = options.surfel_filter_sigma;
-  ExposureModel* e2 = &exposures_[BranchIndex(
-      options.exposure_per_branch ? Branch::kSurfels2D : Branch::kGaussians3D)];
+  ExposureModel* e2 = &exposures_[BranchIndex(options.exposure_per_branch ? Branch::kSurfels2D
+                                                                          : Branch::kGaussians3D)];
   surfels_ = std::make_unique<SurfelTrainer>(std::move(surfels), r2, o2, e2, &rng_);
 
   BranchTrainerOptions o3 = common;
   o3.schedule = options.schedule_3d;
   o3.density.max_primitives = options.max_gaussians;
   o3.background = options.background_3d;
-  gaussians_ = std::make_unique<GaussianTrainer>(std::move(gaussians), GaussianRenderOptions(),
-                                                 o3, &exposures_[BranchIndex(Branch::kGaussians3D)],
-                                                 &rng_);
+  gaussians_ =
+      std::make_unique<GaussianTrainer>(std::move(gaussians), GaussianRenderOptions(), o3,
+                                        &exposures_[BranchIndex(Branch::kGaussians3D)], &rng_);
   trainers_[BranchIndex(Branch::kSurfels2D)] = surfels_.get();
   trainers_[BranchIndex(Branch::kGaussians3D)] = gaussians_.get();
 }
@@ -215,8 +216,8 @@ Status MutualBoostedSolver::BuildProblems() {
     Status status;
     std::unique_ptr<LossTerm> term = LossRegistry::Get().Create(row.term, row.config, &status);
     if (term == nullptr) return status.WithContext("loss row " + LossSpecId(row) + ": ");
-    trainer(row.branch).AddLossRow(row, std::move(term),
-                                   row.exposure && options_.exposure != ExposureMode::kOff);
+    trainer(row.branch)
+        .AddLossRow(row, std::move(term), row.exposure && options_.exposure != ExposureMode::kOff);
   }
   problems_built_ = true;
   return Status::Ok();
@@ -259,8 +260,14 @@ int MutualBoostedSolver::NextView() {
 }
 
 void MutualBoostedSolver::Notify(Stage stage, int iteration, const BranchTrainer& t, double loss) {
-  IterationInfo info{stage,          iteration,           t.branch(),    loss,
-                     gaussians_->size(), surfels_->size(), Now() - start_time_, t.LastTerms()};
+  IterationInfo info{stage,
+                     iteration,
+                     t.branch(),
+                     loss,
+                     gaussians_->size(),
+                     surfels_->size(),
+                     Now() - start_time_,
+                     t.LastTerms()};
   for (IterationCallback* c : callbacks_) Request((*c)(info), &callback_request_);
 }
 
@@ -286,8 +293,8 @@ Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* te
                                        int it, int schedule_it) {
   const View& v = scene_.views[view];
   const MutualSupervision sup = SupervisionFor(learner->branch());
-  const float background = learner->branch() == Branch::kSurfels2D ? options_.background_2d
-                                                                     : options_.background_3d;
+  const float background =
+      learner->branch() == Branch::kSurfels2D ? options_.background_2d : options_.background_3d;
   // The teacher's render, a constant target (reference 1.5).
   Image target = *teacher->Hold(v.camera).Get(sup.buffer);
   if (sup.background_outside_mask && !v.mask.empty()) FillOutsideMask(v.mask, background, &target);
@@ -304,8 +311,8 @@ Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* te
     // holds the target's forward state (the learner's step does not use it).
     TargetGradients d;
     learner->TargetGradient(Stage::kMutual, before, targets, &d);
-    Image g = std::move(sup.target == OtherBranchTarget::kTransmitted ? d.transmitted
-                                                                       : d.other_depth);
+    Image g =
+        std::move(sup.target == OtherBranchTarget::kTransmitted ? d.transmitted : d.other_depth);
     if (!g.empty()) {
       if (sup.background_outside_mask && !v.mask.empty()) FillOutsideMask(v.mask, 0.0f, &g);
       RenderGradients into;
@@ -352,9 +359,8 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
 
 bool MutualBoostedSolver::EndIteration(Stage stage, int iteration, bool last, Status* status) {
   NotifyIterationEnd(stage, iteration);
-  const std::string where =
-      std::string(stage == Stage::kWarmup ? "warm-up" : "mutual") + " iteration " +
-      std::to_string(iteration);
+  const std::string where = std::string(stage == Stage::kWarmup ? "warm-up" : "mutual") +
+                            " iteration " + std::to_string(iteration);
   const CallbackReturnType request = callback_request_;
   callback_request_ = CallbackReturnType::kContinue;
   if (request == CallbackReturnType::kAbort) {
@@ -404,8 +410,8 @@ Status MutualBoostedSolver::Run() {
     std::array<bool, 2> done{};
     for (const BranchTrainer* t : trainers_) {
       const BranchSummary& b = t->summary();
-      done[BranchIndex(t->branch())] = !Trains(t->branch()) || b.auto_stopped ||
-                                       b.warmup_iterations >= o.warmup_max_iterations;
+      done[BranchIndex(t->branch())] =
+          !Trains(t->branch()) || b.auto_stopped || b.warmup_iterations >= o.warmup_max_iterations;
     }
     if (done[0] && done[1]) {
       if (o.exposure != ExposureMode::kOff && o.exposure_fit_at_mutual && o.train_2d &&

@@ -123,7 +123,9 @@ class MutualBoostedSolver {
   const ExposureModel& exposure(Branch branch) const { return trainer(branch).exposure(); }
 
   // Renders of one view with the trained models (for outputs and evaluation).
-  void RenderGaussians(const Camera& camera, GaussianRender* out) { gaussians_->Render(camera, out); }
+  void RenderGaussians(const Camera& camera, GaussianRender* out) {
+    gaussians_->Render(camera, out);
+  }
   void RenderSurfels(const Camera& camera, SurfelRender* out) { surfels_->Render(camera, out); }
 
  private:

@@ -103,8 +103,8 @@ std::string Text(double v) {
 }
 std::string Text(const BranchSchedule& b) {
   return std::to_string(b.densify_from) + " " + std::to_string(b.densify_until) + " " +
-         std::to_string(b.densify_interval) + " " + std::to_string(b.opacity_reset_interval) +
-         " " + Text(b.min_opacity);
+         std::to_string(b.densify_interval) + " " + std::to_string(b.opacity_reset_interval) + " " +
+         Text(b.min_opacity);
 }
 
 }  // namespace

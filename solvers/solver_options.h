@@ -40,7 +40,7 @@ struct SolverOptions {
   bool train_2d = true, train_3d = true;
   bool reflection = true;
   // Loss weights (reference 1.3-1.7).
-  double lambda_l1 = 0.8;            // render loss: lambda L1 + (1 - lambda) D-SSIM
+  double lambda_l1 = 0.8;  // render loss: lambda L1 + (1 - lambda) D-SSIM
   // Normal consistency and normal TV. The reference uses 0.05; at that weight the trained disks
   // stay tilted (4-20 degrees off the true normal, larger disks more), each tilted disk's near rim
   // stands out of the surface unless its centre sits deeper, and the surface ends 0.4-1.0 px
@@ -60,7 +60,9 @@ struct SolverOptions {
   // The loss table (solvers/loss_table.h). Empty: the paper's, built from the weights above when
   // the solver starts (so presets and the weight flags apply); otherwise exactly these rows.
   std::vector<LossSpec> losses;
-  std::vector<LossSpec> LossTable() const { return losses.empty() ? PaperLossTable(*this) : losses; }
+  std::vector<LossSpec> LossTable() const {
+    return losses.empty() ? PaperLossTable(*this) : losses;
+  }
   // Density control.
   BranchSchedule schedule_2d{500, 15000, 100, 3000, 0.05f};
   BranchSchedule schedule_3d{50, 2500, 20, 500, 0.005f};

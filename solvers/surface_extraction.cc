@@ -47,8 +47,7 @@ double TrainingFootprint(const Scene& scene) {
 
 std::vector<Camera> FusionCameras(const Scene& scene, int resolution_scale) {
   std::vector<Camera> cameras = TrainingCameras(scene);
-  for (Camera& c : cameras)
-    c = c.Resized(c.width * resolution_scale, c.height * resolution_scale);
+  for (Camera& c : cameras) c = c.Resized(c.width * resolution_scale, c.height * resolution_scale);
   return cameras;
 }
 

@@ -32,8 +32,8 @@ ViewRender RenderView(MutualBoostedSolver* solver, const SolverOptions& o, const
       }
       out.geometry = {g.depth, std::move(g.depth), std::move(g.alpha), std::move(normal)};
     }
-    out.appearance = {std::move(g.color), std::move(g.tran), std::move(g.ref),
-                      std::move(g.weight), o.background_3d};
+    out.appearance = {std::move(g.color), std::move(g.tran), std::move(g.ref), std::move(g.weight),
+                      o.background_3d};
   }
   return out;
 }

@@ -81,10 +81,10 @@ std::string Commit(const std::string& scratch) {
       FirstLineOf({git, "-C", MGSR_SOURCE_DIR, "rev-parse", "--short", "HEAD"}, scratch);
   if (head.empty()) return "unknown";
   // The committed report is not the code: benchmarks/run deletes it before a full run.
-  const std::string dirty = FirstLineOf({git, "-C", MGSR_SOURCE_DIR, "status", "--porcelain",
-                                         "--untracked-files=no", "--", ".",
-                                         ":(exclude)benchmarks/report", ":(exclude)BENCHMARKS.md"},
-                                        scratch);
+  const std::string dirty =
+      FirstLineOf({git, "-C", MGSR_SOURCE_DIR, "status", "--porcelain", "--untracked-files=no",
+                   "--", ".", ":(exclude)benchmarks/report", ":(exclude)BENCHMARKS.md"},
+                  scratch);
   return head + (dirty.empty() ? "" : " (with uncommitted changes)");
 }
 

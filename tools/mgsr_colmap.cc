@@ -13,12 +13,12 @@ DEFINE_string(masks, "", "Optional folder of foreground masks (<stem>.png).");
 DEFINE_string(workspace, "", "Output folder (created).");
 
 int main(int argc, char** argv) {
-  mgsr_tools::ParseToolFlags(
-      "mgsr_colmap --images DIR --workspace DIR [--masks DIR] [options]",
-      {{"Input and output", {"images", "masks", "workspace"}},
-       {"COLMAP", {"colmap", "per_image_cameras", "camera_model", "exhaustive_max_images",
-                   "max_image_size"}}},
-      &argc, &argv);
+  mgsr_tools::ParseToolFlags("mgsr_colmap --images DIR --workspace DIR [--masks DIR] [options]",
+                             {{"Input and output", {"images", "masks", "workspace"}},
+                              {"COLMAP",
+                               {"colmap", "per_image_cameras", "camera_model",
+                                "exhaustive_max_images", "max_image_size"}}},
+                             &argc, &argv);
   mgsr::ColmapPipelineOptions options = mgsr_tools::ColmapOptionsFromFlags();
   options.images = FLAGS_images;
   options.masks = FLAGS_masks;

@@ -14,13 +14,13 @@
 
 #include "mgsr/core/timer.h"
 #include "mgsr/eval/exposure_alignment.h"
-#include "mgsr/eval/image_metrics.h"
 #include "mgsr/eval/ground_truth.h"
+#include "mgsr/eval/image_metrics.h"
 #include "mgsr/eval/mesh_metrics.h"
 #include "mgsr/eval/metrics_json.h"
-#include "mgsr/io/output_folder.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
+#include "mgsr/io/output_folder.h"
 #include "mgsr/io/ply.h"
 #include "tools/tool_flags.h"
 
@@ -187,8 +187,7 @@ int EvaluateRun(nlohmann::json* report) {
   // The mesh must be the one this metrics.json describes, not another run's left beside it.
   s = mgsr::VerifyOutputManifest(FLAGS_run, run);
   if (!s.ok()) return Fail(s.message());
-  if (!run["files"].contains("mesh.ply"))
-    return Fail(metrics_path + ": the run wrote no mesh.ply");
+  if (!run["files"].contains("mesh.ply")) return Fail(metrics_path + ": the run wrote no mesh.ply");
   mgsr::GroundTruthGeometry gt;
   if (!FLAGS_gt.empty()) {
     s = mgsr::ReadTriangleMesh(FLAGS_gt, &gt.mesh);

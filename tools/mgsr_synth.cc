@@ -39,8 +39,9 @@ int main(int argc, char** argv) {
       "mgsr_synth --output DIR [--shape sphere] [--num_views 48] ...",
       {{"Output", {"output", "text", "masks", "constant_light_copy"}},
        {"Object", {"shape", "detail", "specular", "shininess", "mirror", "num_points"}},
-       {"Cameras and photos", {"num_views", "width", "height", "distance", "test_every",
-                               "supersampling", "pose_noise_deg", "pose_noise_rel"}},
+       {"Cameras and photos",
+        {"num_views", "width", "height", "distance", "test_every", "supersampling",
+         "pose_noise_deg", "pose_noise_rel"}},
        {"Light", {"varying_light", "exposure_stops"}},
        {"Randomness", {"seed"}}},
       &argc, &argv);

@@ -66,10 +66,9 @@ std::string TableRow(const std::string& label, const RunRecord& r) {
     << Fixed(r.psnr, 2) << " | " << Fixed(r.ssim, 4) << " | " << Fixed(r.psnr_aligned, 2) << " | "
     << Fixed(r.ssim_aligned, 4) << " | " << Fixed(r.offset_px, 2) << " | " << Fixed(r.fscore_1px, 3)
     << " | " << Fixed(100 * r.ceiling_nc, 2) << " | " << Fixed(1000 * r.ceiling_cd, 2) << " | "
-    << Fixed(r.t_warmup, 0) << " | " << Fixed(r.t_mutual, 0)
-    << " | " << Fixed(r.t_mesh, 1) << " | " << Fixed(r.t_total, 0) << " | " << Fixed(r.peak_mb, 0)
-    << " | " << Fixed(r.gaussians, 0) << " | " << Fixed(r.surfels, 0) << " | "
-    << (r.ok ? "ok" : "**failed**: " + r.failure) << " |";
+    << Fixed(r.t_warmup, 0) << " | " << Fixed(r.t_mutual, 0) << " | " << Fixed(r.t_mesh, 1) << " | "
+    << Fixed(r.t_total, 0) << " | " << Fixed(r.peak_mb, 0) << " | " << Fixed(r.gaussians, 0)
+    << " | " << Fixed(r.surfels, 0) << " | " << (r.ok ? "ok" : "**failed**: " + r.failure) << " |";
   return s.str();
 }
 
@@ -204,7 +203,6 @@ bool WriteContactSheet(const std::string& path, const std::string& scene,
   return cv::imwrite(path, sheet);
 }
 
-
 const RunRecord* FindRun(const std::vector<RunRecord>& runs, const std::string& scene,
                          const std::string& method) {
   for (const RunRecord& r : runs) {
@@ -238,8 +236,8 @@ void WriteMainCase(const ReportContext& c, const std::vector<RunRecord>& runs,
        << Signed(100 * (mgsr->nc - r->nc), 2) << " | " << Fixed(1000 * r->cd, 2) << " | "
        << Signed(1000 * (mgsr->cd - r->cd), 2) << " | " << Fixed(r->psnr, 2) << " | "
        << Signed(mgsr->psnr - r->psnr, 2) << " | " << Fixed(r->psnr_aligned, 2) << " | "
-       << Signed(mgsr->psnr_aligned - r->psnr_aligned, 2) << " | " << Fixed(r->t_total, 0)
-       << " | " << Signed(mgsr->t_total - r->t_total, 0) << " | "
+       << Signed(mgsr->psnr_aligned - r->psnr_aligned, 2) << " | " << Fixed(r->t_total, 0) << " | "
+       << Signed(mgsr->t_total - r->t_total, 0) << " | "
        << (r->ok ? "ok" : "**failed**: " + r->failure) << " |\n";
   }
 }
@@ -361,7 +359,8 @@ void ReadRunResult(int exit_code, int signal, bool timed_out, double timeout_sec
   r->ceiling_cd = Get(m, {"mesh", "ceiling", "cd"});
   if (const nlohmann::json* f = Find(m, {"mesh", "fscores"}); f != nullptr && f->is_array()) {
     for (const nlohmann::json& e : *f) {
-      if (e.is_object() && e.value("footprints", 0.0) == 1.0) r->fscore_1px = e.value("fscore", kNaN);
+      if (e.is_object() && e.value("footprints", 0.0) == 1.0)
+        r->fscore_1px = e.value("fscore", kNaN);
     }
   }
   r->t_warmup = Get(m, {"seconds", "warmup"});
@@ -408,10 +407,10 @@ Status ReadResultsCsv(const std::string& path, const std::string& work,
     r.ok = f[2] == "ok";
     r.failure = f[3];
     r.run_dir = JoinPath(work, "runs/" + r.scene + "/" + r.method);
-    double* fields[] = {&r.nc,       &r.cd,           &r.psnr,         &r.ssim,    &r.psnr_aligned,
-                        &r.ssim_aligned, &r.t_warmup, &r.t_mutual,     &r.t_mesh,  &r.t_total,
-                        &r.wall_seconds, &r.peak_mb,  &r.gaussians,    &r.surfels,
-                        &r.offset_px,    &r.fscore_1px, &r.ceiling_nc, &r.ceiling_cd};
+    double* fields[] = {&r.nc,           &r.cd,         &r.psnr,      &r.ssim,    &r.psnr_aligned,
+                        &r.ssim_aligned, &r.t_warmup,   &r.t_mutual,  &r.t_mesh,  &r.t_total,
+                        &r.wall_seconds, &r.peak_mb,    &r.gaussians, &r.surfels, &r.offset_px,
+                        &r.fscore_1px,   &r.ceiling_nc, &r.ceiling_cd};
     for (int k = 0; k < 18; ++k) {
       const std::string& v = f[4 + k];
       if (v.empty()) continue;
@@ -475,19 +474,22 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
   for (const RunRecord& r : runs) {
     csv << r.scene << "," << r.method << "," << (r.ok ? "ok" : "failed") << ","
         << CsvEscape(r.failure);
-    for (double v :
-         {r.nc, r.cd, r.psnr, r.ssim, r.psnr_aligned, r.ssim_aligned, r.t_warmup, r.t_mutual,
-          r.t_mesh, r.t_total, r.wall_seconds, r.peak_mb, r.gaussians, r.surfels, r.offset_px,
-          r.fscore_1px, r.ceiling_nc, r.ceiling_cd}) {
+    for (double v : {r.nc, r.cd, r.psnr, r.ssim, r.psnr_aligned, r.ssim_aligned, r.t_warmup,
+                     r.t_mutual, r.t_mesh, r.t_total, r.wall_seconds, r.peak_mb, r.gaussians,
+                     r.surfels, r.offset_px, r.fscore_1px, r.ceiling_nc, r.ceiling_cd}) {
       csv << "," << (std::isfinite(v) ? Precise(v) : "");
     }
     csv << "\n";
   }
   MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(JoinPath(dir, "results.csv"), csv.str()));
-  const nlohmann::json context = {{"title", c.title},     {"command", c.command},
-                                  {"commit", c.commit},   {"date", c.date},
-                                  {"machine", c.machine}, {"threads", c.threads},
-                                  {"nc_threshold", c.nc_threshold}, {"main_scene", c.main_scene}};
+  const nlohmann::json context = {{"title", c.title},
+                                  {"command", c.command},
+                                  {"commit", c.commit},
+                                  {"date", c.date},
+                                  {"machine", c.machine},
+                                  {"threads", c.threads},
+                                  {"nc_threshold", c.nc_threshold},
+                                  {"main_scene", c.main_scene}};
   MGSR_RETURN_IF_ERROR(
       WriteStringToFileAtomic(JoinPath(dir, "context.json"), context.dump(2) + "\n"));
 
@@ -518,8 +520,7 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
   if (!c.rebuilt.empty())
     md << "The tables and charts were rebuilt from this run's results.csv on " << c.rebuilt
        << " (`mgsr_bench --report_only`); no run was repeated.\n\n";
-  md
-     << "NC and CD compare the TSDF mesh with the scene's exact mesh (NC x100, CD x1000, as in "
+  md << "NC and CD compare the TSDF mesh with the scene's exact mesh (NC x100, CD x1000, as in "
      << "the paper); PSNR/SSIM are on held-out views, raw and exposure-aligned (an affine colour "
      << "fit per test image on the mask, since test views are lit differently). Times are "
      << "wall-clock seconds of the solver's stages; peak MB is the process's peak resident "

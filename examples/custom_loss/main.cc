@@ -24,9 +24,9 @@ class RowWatcher : public mgsr::IterationCallback {
     for (const mgsr::Problem::TermValue& t : info.terms) {
       if (t.name != name_) continue;
       if (++steps_ % 20 == 1) {
-        std::printf("%s %s iteration %d: %s = %.5f (of loss %.5f)\n",
-                    mgsr::StageName(info.stage), info.branch == mgsr::Branch::kSurfels2D ? "2DGS" : "3DGS",
-                    info.iteration, name_.c_str(), t.weight * t.value, info.loss);
+        std::printf("%s %s iteration %d: %s = %.5f (of loss %.5f)\n", mgsr::StageName(info.stage),
+                    info.branch == mgsr::Branch::kSurfels2D ? "2DGS" : "3DGS", info.iteration,
+                    name_.c_str(), t.weight * t.value, info.loss);
       }
     }
     return mgsr::CallbackReturnType::kContinue;

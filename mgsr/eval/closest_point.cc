@@ -77,8 +77,8 @@ class ClosestTriangleSet {
     if (std::find(visited_.begin(), visited_.end(), t) != visited_.end()) return true;
     visited_.push_back(t);
     const auto& f = mesh_.triangles[t];
-    const Eigen::Vector3d q =
-        ClosestPointOnTriangle(p_, mesh_.vertices[f[0]], mesh_.vertices[f[1]], mesh_.vertices[f[2]]);
+    const Eigen::Vector3d q = ClosestPointOnTriangle(p_, mesh_.vertices[f[0]], mesh_.vertices[f[1]],
+                                                     mesh_.vertices[f[2]]);
     const double d = (q - p_).norm();
     if (d < best_->distance) {
       best_->distance = d;
@@ -165,7 +165,8 @@ TriangleClosestPoint::TriangleClosestPoint(const TriangleMesh& mesh)
       }
     }
   }
-  index_->tree = std::make_unique<SampleTree>(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  index_->tree =
+      std::make_unique<SampleTree>(3, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
   index_->tree->buildIndex();
 }
 

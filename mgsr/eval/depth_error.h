@@ -14,8 +14,8 @@ namespace mgsr {
 
 struct DepthErrorStats {
   size_t pixels = 0;
-  double median = 0, mean = 0;  // scene units, signed (negative: behind the true surface)
-  double median_footprints = 0; // the median in pixel footprints (depth / focal length)
+  double median = 0, mean = 0;   // scene units, signed (negative: behind the true surface)
+  double median_footprints = 0;  // the median in pixel footprints (depth / focal length)
   double mean_abs = 0;
   double share_beyond_footprint = 0;  // share of pixels more than one footprint off
 };

@@ -11,7 +11,7 @@
 namespace mgsr {
 
 struct GroundTruthGeometry {
-  std::string mesh_path;     // empty: the scene has no ground-truth mesh
+  std::string mesh_path;  // empty: the scene has no ground-truth mesh
   TriangleMesh mesh;
   std::string visible_path;  // empty: no visible-points file
   TriangleMesh visible_points;

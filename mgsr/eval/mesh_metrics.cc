@@ -102,8 +102,8 @@ FScore ScoreAt(const Matches& to_gt, const Matches& to_pred, double threshold, d
   f.footprints = footprints;
   f.precision = ShareBelow(to_gt.distance, threshold);
   f.recall = ShareBelow(to_pred.distance, threshold);
-  f.fscore = f.precision + f.recall > 0 ? 2 * f.precision * f.recall / (f.precision + f.recall)
-                                        : 0.0;
+  f.fscore =
+      f.precision + f.recall > 0 ? 2 * f.precision * f.recall / (f.precision + f.recall) : 0.0;
   return f;
 }
 

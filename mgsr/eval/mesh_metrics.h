@@ -60,7 +60,7 @@ struct MeshMetrics {
   double accuracy = std::numeric_limits<double>::infinity();
   double completeness = std::numeric_limits<double>::infinity();
   double chamfer = std::numeric_limits<double>::infinity();
-  double normal_consistency = 0;  // NaN-free; 0 when normals are unknown on a side
+  double normal_consistency = 0;                 // NaN-free; 0 when normals are unknown on a side
   double precision = 0, recall = 0, fscore = 0;  // at options.fscore_threshold
   // Signed distance of the predicted surface to the ground truth along its outward normal
   // (negative: inside), over the predicted samples; 0 with fraction_inside 0 when the ground truth

@@ -75,8 +75,9 @@ Status LoadColmapScene(const std::string& root, const SceneOptions& options, Sce
   std::string split_file;
   const bool has_split = ReadTestList(root, &test_names, &split_file);
   if (has_split && test_names.empty()) {
-    return Status::Error(split_file + ": lists no test views (give one image name per line, or "
-                                      "remove the file for every 8th image)");
+    return Status::Error(split_file +
+                         ": lists no test views (give one image name per line, or "
+                         "remove the file for every 8th image)");
   }
   if (has_split) {
     std::set<std::string> known;
@@ -104,7 +105,8 @@ Status LoadColmapScene(const std::string& root, const SceneOptions& options, Sce
                           : (options.test_every > 0 && i % options.test_every == 0);
   }
   if (has_split && test_names.size() >= images.size()) {
-    return Status::Error(split_file + ": lists every image as a test view, none is left to train on");
+    return Status::Error(split_file +
+                         ": lists every image as a test view, none is left to train on");
   }
 
   if (options.load_images) {

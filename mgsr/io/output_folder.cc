@@ -41,8 +41,9 @@ Status OutputFolder::Open(const std::string& dir, OutputMode mode, OutputFolder*
     return Status::Error(dir + ": output exists and is not a folder");
   if (mode == OutputMode::kFresh && fs::is_directory(dir, ec) &&
       fs::directory_iterator(dir, ec) != fs::directory_iterator()) {
-    return Status::Error(dir + ": output folder is not empty (use --overwrite to replace a previous "
-                               "run, or --resume to continue it)");
+    return Status::Error(dir +
+                         ": output folder is not empty (use --overwrite to replace a previous "
+                         "run, or --resume to continue it)");
   }
   folder->mode_ = mode;
   return Status::Ok();

@@ -11,10 +11,9 @@
 //   --resume can pick up from the last checkpoint).
 #pragma once
 
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "mgsr/core/status.h"
 

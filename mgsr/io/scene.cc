@@ -63,8 +63,8 @@ Status ValidateViews(const Scene& scene) {
   constexpr double kMinFovDeg = 0.1, kMaxFovDeg = 179.0, kPi = 3.14159265358979323846;
   for (const View& v : scene.views) {
     const Camera& c = v.camera;
-    for (const auto& [focal, side, axis] :
-         {std::make_tuple(c.fx, c.width, "horizontal"), std::make_tuple(c.fy, c.height, "vertical")}) {
+    for (const auto& [focal, side, axis] : {std::make_tuple(c.fx, c.width, "horizontal"),
+                                            std::make_tuple(c.fy, c.height, "vertical")}) {
       const double fov = 2 * std::atan(side / (2 * focal)) * 180 / kPi;
       if (!(focal > 0) || !(fov >= kMinFovDeg && fov <= kMaxFovDeg)) {
         return Status::Error(root + ": view " + v.name + ": focal length " + Number(focal) +
@@ -73,7 +73,8 @@ Status ValidateViews(const Scene& scene) {
                              Number(kMaxFovDeg) + ")");
       }
     }
-    if (!(c.cx >= -c.width && c.cx <= 2.0 * c.width && c.cy >= -c.height && c.cy <= 2.0 * c.height)) {
+    if (!(c.cx >= -c.width && c.cx <= 2.0 * c.width && c.cy >= -c.height &&
+          c.cy <= 2.0 * c.height)) {
       return Status::Error(root + ": view " + v.name + ": principal point (" + Number(c.cx) + ", " +
                            Number(c.cy) + ") lies far outside its " + std::to_string(c.width) +
                            " x " + std::to_string(c.height) + " image");
@@ -99,17 +100,18 @@ Status ValidateViews(const Scene& scene) {
   for (size_t i = 0; i < scene.views.size(); ++i) {
     if (!std::isfinite(distances[i]) || (median > 0 && distances[i] > 1000 * median)) {
       return Status::Error(root + ": view " + scene.views[i].name + ": camera lies " +
-                           Number(distances[i]) + " from the cameras' centre, over 1000 times "
-                           "their median distance " + Number(median) + " (a corrupt pose?)");
+                           Number(distances[i]) +
+                           " from the cameras' centre, over 1000 times "
+                           "their median distance " +
+                           Number(median) + " (a corrupt pose?)");
     }
   }
   if (scene.has_masks()) {
     bool any_foreground = false;
     for (const View& v : scene.views) {
       const float* m = v.mask.data();
-      any_foreground = any_foreground || std::any_of(m, m + v.mask.size(), [](float x) {
-                         return x > 0.0f;
-                       });
+      any_foreground =
+          any_foreground || std::any_of(m, m + v.mask.size(), [](float x) { return x > 0.0f; });
     }
     if (!any_foreground) {
       return Status::Error(root + ": every mask is empty (all background): nothing to reconstruct");

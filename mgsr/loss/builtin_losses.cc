@@ -77,26 +77,29 @@ void RegisterBuiltinLosses(LossRegistry* r) {
   });
   // The render loss behind a fixed per-view colour transform ("transform": A row-major, then b);
   // the solver sets each view's transform itself.
-  r->Register("exposure_render", [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
-    ColorTransform p = IdentityColorTransform();
-    if (c.contains("transform")) {
-      const auto& a = c["transform"];
-      if (!a.is_array() || a.size() != kColorTransformSize) {
-        *s = Status::Error("'transform' must be an array of 12 numbers (A row-major, then b)");
-        return nullptr;
-      }
-      for (int i = 0; i < kColorTransformSize; ++i) {
-        if (!a[i].is_number()) {
-          *s = Status::Error("'transform' must be an array of 12 numbers (A row-major, then b)");
-          return nullptr;
+  r->Register(
+      "exposure_render", [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
+        ColorTransform p = IdentityColorTransform();
+        if (c.contains("transform")) {
+          const auto& a = c["transform"];
+          if (!a.is_array() || a.size() != kColorTransformSize) {
+            *s = Status::Error("'transform' must be an array of 12 numbers (A row-major, then b)");
+            return nullptr;
+          }
+          for (int i = 0; i < kColorTransformSize; ++i) {
+            if (!a[i].is_number()) {
+              *s =
+                  Status::Error("'transform' must be an array of 12 numbers (A row-major, then b)");
+              return nullptr;
+            }
+            p[i] = a[i].get<double>();
+          }
         }
-        p[i] = a[i].get<double>();
-      }
-    }
-    return std::make_unique<ExposureCompensatedLoss>(
-        std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, Number(c, "lambda", 0.8)),
-        p);
-  });
+        return std::make_unique<ExposureCompensatedLoss>(
+            std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage,
+                                         Number(c, "lambda", 0.8)),
+            p);
+      });
   r->Register("distortion", [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {
     return std::make_unique<DistortionLoss>();
   });

@@ -1,8 +1,9 @@
 // LossTerm: our ceres::CostFunction. A term declares the render buffers it reads, returns its
 // value, and on request adds scale * d value / d buffer into the gradient buffers. Targets are
 // constants, except that a term comparing with the other branch's render may declare it
-// (TargetInputs) and give its gradient with respect to it (bidirectional supervision). Terms run in float during training and in double for gradient checks; a new term
-// derives from LossTermImpl<Derived> and writes one templated Compute<T>(), which gives both.
+// (TargetInputs) and give its gradient with respect to it (bidirectional supervision). Terms run in
+// float during training and in double for gradient checks; a new term derives from
+// LossTermImpl<Derived> and writes one templated Compute<T>(), which gives both.
 #pragma once
 
 #include <memory>
@@ -32,8 +33,8 @@ class LossTerm {
   // The other branch's renders among the targets that the term differentiates (bidirectional
   // supervision asks for scale * d value / d target of these; every other target is a constant).
   virtual std::vector<OtherBranchTarget> TargetInputs() const { return {}; }
-  virtual void EvaluateTargetGradient(const RenderBuffers& in, const Targets& targets,
-                                      double scale, TargetGradients* grad) const = 0;
+  virtual void EvaluateTargetGradient(const RenderBuffers& in, const Targets& targets, double scale,
+                                      TargetGradients* grad) const = 0;
   virtual void EvaluateTargetGradient(const RenderBuffersD& in, const TargetsD& targets,
                                       double scale, TargetGradientsD* grad) const = 0;
 };

@@ -41,8 +41,8 @@ double Problem::Evaluate(Branch branch, const RenderBuffers& in, const Targets& 
   return total;
 }
 
-void Problem::EvaluateTargetGradient(Branch branch, const RenderBuffers& in,
-                                     const Targets& targets, TargetGradients* grad) const {
+void Problem::EvaluateTargetGradient(Branch branch, const RenderBuffers& in, const Targets& targets,
+                                     TargetGradients* grad) const {
   *grad = TargetGradients();
   for (const Entry& e : entries_) {
     if (e.branch != branch || e.weight == 0 || e.term->TargetInputs().empty()) continue;

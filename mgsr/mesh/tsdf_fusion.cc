@@ -91,8 +91,8 @@ Status TsdfIntegrator::Integrate(const DepthFrame& f) {
   if (frame_max <= 0) return Status::Ok();  // nothing to fuse from this view
   any_depth_ = true;
   const double depth_max = options_.depth_max > 0 ? options_.depth_max : frame_max * 1.01;
-  auto rgbd = open3d::geometry::RGBDImage::CreateFromColorAndDepth(color, depth, 1.0, depth_max,
-                                                                   false);
+  auto rgbd =
+      open3d::geometry::RGBDImage::CreateFromColorAndDepth(color, depth, 1.0, depth_max, false);
   // Open3D puts pixel centres at integer coordinates; COLMAP at half-integers.
   const open3d::camera::PinholeCameraIntrinsic intrinsic(w, h, f.camera.fx, f.camera.fy,
                                                          f.camera.cx - 0.5, f.camera.cy - 0.5);

@@ -2,10 +2,10 @@
 
 #include <glog/logging.h>
 
-#include <algorithm>
-#include <cmath>
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
 #include <nanoflann.hpp>
 
 #include "mgsr/core/rng.h"

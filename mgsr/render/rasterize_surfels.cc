@@ -81,18 +81,17 @@ void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, std::vect
   }
 }
 
-// The low-pass floor's offset c of rho2d (see rasterize_surfels.h): e^{-c/2} = min(1, |det J| / s^2)
-// with det J = det M / T_w2^3 and s the filter's sigma (inv_square = 1 / s^2). `dc` receives
+// The low-pass floor's offset c of rho2d (see rasterize_surfels.h): e^{-c/2} = min(1, |det J| /
+// s^2) with det J = det M / T_w2^3 and s the filter's sigma (inv_square = 1 / s^2). `dc` receives
 // d c / d M (row-major over the stored rows, which differ from M by row operations that keep its
 // determinant) where c > 0 and not clamped.
 constexpr float kMinFilterArea = 1e-6f;  // below: the filter adds nothing visible (c is capped)
 inline float LowPassOffset(const float tu[3], const float tv[3], const float tw[3],
                            float inv_square, float dc[9]) {
-  const float cof[9] = {tv[1] * tw[2] - tv[2] * tw[1], tv[2] * tw[0] - tv[0] * tw[2],
-                        tv[0] * tw[1] - tv[1] * tw[0], tw[1] * tu[2] - tw[2] * tu[1],
-                        tw[2] * tu[0] - tw[0] * tu[2], tw[0] * tu[1] - tw[1] * tu[0],
-                        tu[1] * tv[2] - tu[2] * tv[1], tu[2] * tv[0] - tu[0] * tv[2],
-                        tu[0] * tv[1] - tu[1] * tv[0]};
+  const float cof[9] = {
+      tv[1] * tw[2] - tv[2] * tw[1], tv[2] * tw[0] - tv[0] * tw[2], tv[0] * tw[1] - tv[1] * tw[0],
+      tw[1] * tu[2] - tw[2] * tu[1], tw[2] * tu[0] - tw[0] * tu[2], tw[0] * tu[1] - tw[1] * tu[0],
+      tu[1] * tv[2] - tu[2] * tv[1], tu[2] * tv[0] - tu[0] * tv[2], tu[0] * tv[1] - tu[1] * tv[0]};
   const float det = tu[0] * cof[0] + tu[1] * cof[1] + tu[2] * cof[2];
   const float z = tw[2];
   const float area = inv_square * std::abs(det) / (z * z * z);
@@ -166,8 +165,8 @@ inline void IntersectRow(const Surfel& s, F16 px, float py, float min_power, I16
   const F16 rho = simd::Min(h->rho3d, h->rho2d);
   // Depth: where the ray meets the disk's plane in the splat branch; the centre's depth where the
   // screen low-pass draws the surfel (as 2DGS's own rasterizer; MGSR's copy takes the plane there
-  // too, reference 3.3). Off the disk that intersection is unbounded: for a nearly edge-on surfel it
-  // lies thousands of units away, and those depths made the 2DGS branch's single-iteration loss
+  // too, reference 3.3). Off the disk that intersection is unbounded: for a nearly edge-on surfel
+  // it lies thousands of units away, and those depths made the 2DGS branch's single-iteration loss
   // spikes (up to 4.6e6) through the depth TV and distortion terms; with disks started tangent to
   // the surface (every silhouette disk edge-on) they cost the 2DGS-only method 10 dB.
   h->z = simd::Select(h->splat_branch, s.tw[0] * h->u + s.tw[1] * h->v + s.tw[2],

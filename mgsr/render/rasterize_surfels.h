@@ -61,7 +61,7 @@ struct SurfelRender {
   // weight_sum = sum of the blend weights = 1 - final_t, but without the cancellation of 1 - T
   // where the alpha is small: the expected depth is depth_sum / weight_sum.
   std::vector<float> final_t, depth_sum, weight_sum, m1, m2, m_ref;  // m1, m2: see .cc
-  std::vector<uint32_t> last, median_index;              // 1 + index within the tile list (0: none)
+  std::vector<uint32_t> last, median_index;  // 1 + index within the tile list (0: none)
 };
 
 // Upstream gradients; an empty image means zero.

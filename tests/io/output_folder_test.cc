@@ -29,8 +29,9 @@ TEST(OutputFolderTest, ANonEmptyFolderIsRefusedUnlessResumingOrOverwriting) {
   OutputFolder out;
   const Status s = OutputFolder::Open(dir, OutputMode::kFresh, &out);
   ASSERT_FALSE(s.ok());
-  EXPECT_EQ(s.message(), dir + ": output folder is not empty (use --overwrite to replace a "
-                               "previous run, or --resume to continue it)");
+  EXPECT_EQ(s.message(), dir +
+                             ": output folder is not empty (use --overwrite to replace a "
+                             "previous run, or --resume to continue it)");
   EXPECT_TRUE(FileExists(dir + "/mesh.ply"));  // nothing touched
   // A missing or empty folder is fine (created when the run first writes); a file where the
   // folder should be is not.
@@ -48,8 +49,8 @@ TEST(OutputFolderTest, OverwriteClearsTheRunAndResumeKeepsItsState) {
   ASSERT_TRUE(OutputFolder::Open(dir, OutputMode::kOverwrite, &out).ok());
   EXPECT_TRUE(FileExists(dir + "/mesh.ply"));  // nothing goes before the run's first write
   ASSERT_TRUE(out.Prepare().ok());
-  for (const char* f : {"metrics.json", "mesh.ply", "point_cloud_2d.ply", "renders",
-                        "checkpoints", "log.csv"}) {
+  for (const char* f :
+       {"metrics.json", "mesh.ply", "point_cloud_2d.ply", "renders", "checkpoints", "log.csv"}) {
     EXPECT_FALSE(fs::exists(dir + "/" + f)) << f;
   }
   EXPECT_TRUE(FileExists(dir + "/notes.txt"));  // not ours: left alone

@@ -106,8 +106,8 @@ TEST(PlyTest, ListPropertiesAndOversizedHeadersAreRefused) {
     ASSERT_TRUE(WriteStringToFileAtomic(path, ply).ok());
     const Status s = ReadTriangleMesh(path, &m);
     ASSERT_FALSE(s.ok()) << name;
-    EXPECT_EQ(s.message(), path + ": property '" + name +
-                               "' of element 'vertex' is a list, expected a scalar");
+    EXPECT_EQ(s.message(),
+              path + ": property '" + name + "' of element 'vertex' is a list, expected a scalar");
     GaussianModel g;
     EXPECT_FALSE(ReadGaussianPly(path, &g).ok());  // the model readers go through the same check
   }

@@ -19,8 +19,8 @@ std::vector<Camera> RingOfCameras(int count, int size) {
     const double z = 0.9 - 1.6 * (i + 0.5) / count, r = std::sqrt(1 - z * z);
     const Eigen::Vector3d center(3.5 * r * std::cos(golden * i), 3.5 * r * std::sin(golden * i),
                                  3.5 * z);
-    cameras.push_back(LookAtCamera(center, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ(),
-                                   size, size, size * 1.39, size * 1.39));
+    cameras.push_back(LookAtCamera(center, Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ(), size,
+                                   size, size * 1.39, size * 1.39));
   }
   return cameras;
 }

@@ -253,8 +253,8 @@ TEST(SurfelRendererGeometryTest, NearlyEdgeOnSplatKeepsItsDepthOnTheDisk) {
     m.log_scales = {std::log(0.3f), std::log(0.3f)};
     // Normal along z, tilted towards the camera (-y) by the given angle: the disk lies almost in
     // the plane through the viewing direction.
-    const Eigen::Quaternionf q(Eigen::AngleAxisf(static_cast<float>(degrees * M_PI / 180),
-                                                 Eigen::Vector3f::UnitX()));
+    const Eigen::Quaternionf q(
+        Eigen::AngleAxisf(static_cast<float>(degrees * M_PI / 180), Eigen::Vector3f::UnitX()));
     m.quats = {q.w(), q.x(), q.y(), q.z()};
     m.opacity_logits = {5.0f};
     m.sh = {0.1f, 0.2f, 0.3f};

@@ -28,7 +28,8 @@ View Photo(const std::string& name, float r, float g, float b, bool is_test = fa
 
 TEST(BackdropTest, FindsAUniformGreyDespiteAnObjectOnTheBorder) {
   Scene scene;
-  for (int i = 0; i < 4; ++i) scene.views.push_back(Photo("v" + std::to_string(i), 0.6f, 0.6f, 0.6f));
+  for (int i = 0; i < 4; ++i)
+    scene.views.push_back(Photo("v" + std::to_string(i), 0.6f, 0.6f, 0.6f));
   // A test view is not looked at, however it looks.
   scene.views.push_back(Photo("t", 0.1f, 0.9f, 0.1f, /*is_test=*/true));
   const Backdrop b = EstimateBackdrop(scene);
@@ -42,7 +43,8 @@ TEST(BackdropTest, RefusesVaryingColouredOrMaskedBackdrops) {
   Rng rng(3);
   for (int i = 0; i < 3; ++i) {
     View v = Photo("n" + std::to_string(i), 0.5f, 0.5f, 0.5f);
-    for (size_t k = 0; k < v.image.size(); ++k) v.image.data()[k] = static_cast<float>(rng.Uniform());
+    for (size_t k = 0; k < v.image.size(); ++k)
+      v.image.data()[k] = static_cast<float>(rng.Uniform());
     noisy.views.push_back(std::move(v));
   }
   Backdrop b = EstimateBackdrop(noisy);

@@ -152,8 +152,8 @@ std::unique_ptr<BandTrainer> MakeTrainer(ExposureModel* exposure, Rng* rng) {
   BandModel m;
   m.Resize(4);
   std::fill(m.colour.begin(), m.colour.end(), 0.5f);
-  auto t = std::make_unique<BandTrainer>(std::move(m), BandRenderOptions(), StubOptions(),
-                                         exposure, rng);
+  auto t = std::make_unique<BandTrainer>(std::move(m), BandRenderOptions(), StubOptions(), exposure,
+                                         rng);
   LossSpec row;
   row.branch = Branch::kGaussians3D;
   row.stage = Stage::kWarmup;

@@ -1,18 +1,17 @@
 #include <gtest/gtest.h>
 
-#include <cstring>
-
 #include <cmath>
+#include <cstring>
 #include <functional>
 #include <map>
 
 #include "mgsr/core/rng.h"
+#include "mgsr/core/sha256.h"
 #include "mgsr/eval/image_metrics.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/scene.h"
 #include "mgsr/loss/loss_registry.h"
 #include "mgsr/loss/loss_util.h"
-#include "mgsr/core/sha256.h"
 #include "mgsr/model/activations.h"
 #include "solvers/adam.h"
 #include "solvers/auto_stop.h"
@@ -348,8 +347,8 @@ TEST(CheckpointTest, InterruptedAndResumedRunEqualsAnUninterruptedOne) {
       ASSERT_TRUE(first.Solve(&s1).ok());
       EXPECT_EQ(s1.termination_type, TerminationType::kInterrupted);
       EXPECT_EQ(s1.message, std::string("after ") +
-                                (stage == Stage::kWarmup ? "warm-up" : "mutual") +
-                                " iteration " + std::to_string(at));
+                                (stage == Stage::kWarmup ? "warm-up" : "mutual") + " iteration " +
+                                std::to_string(at));
       const std::string ckpt = dir + "/run.ckpt";
       ASSERT_TRUE(first.SaveCheckpoint(ckpt).ok());
       // A fresh solver (a new process, in practice) continues from the file.
@@ -358,7 +357,8 @@ TEST(CheckpointTest, InterruptedAndResumedRunEqualsAnUninterruptedOne) {
       SolveSummary s2;
       ASSERT_TRUE(second.Solve(&s2).ok());
       ExpectSameModels(full, second);
-      EXPECT_EQ(s2.branch(Branch::kSurfels2D).warmup_iterations, s_full.branch(Branch::kSurfels2D).warmup_iterations);
+      EXPECT_EQ(s2.branch(Branch::kSurfels2D).warmup_iterations,
+                s_full.branch(Branch::kSurfels2D).warmup_iterations);
       EXPECT_EQ(s2.mutual_iterations, s_full.mutual_iterations);
       for (int v : scene.TrainIndices()) {
         EXPECT_EQ(full.exposure(Branch::kGaussians3D).transform(v),
@@ -430,7 +430,8 @@ TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
            {"seed = 0, this run has seed = 5", [](SolverOptions* x) { x->seed = 5; }},
            {"mutual_iterations = 4, this run has mutual_iterations = 3",
             [](SolverOptions* x) { x->mutual_iterations = 3; }},
-           {"train_3d = 1, this run has train_3d = 0", [](SolverOptions* x) { x->train_3d = false; }},
+           {"train_3d = 1, this run has train_3d = 0",
+            [](SolverOptions* x) { x->train_3d = false; }},
        }) {
     SolverOptions other = o;
     edit.second(&other);
@@ -898,7 +899,8 @@ TEST(LossTableSolverTest, ARowTheBranchCannotFeedStopsTheRunNamingIt) {
     SolverOptions o = TinyOptions();
     o.warmup_max_iterations = 5;
     o.losses = o.LossTable();
-    ASSERT_TRUE(ApplyLossConfig({{"losses", {nlohmann::json::parse(row)}}}, "test", &o.losses).ok());
+    ASSERT_TRUE(
+        ApplyLossConfig({{"losses", {nlohmann::json::parse(row)}}}, "test", &o.losses).ok());
     MutualBoostedSolver solver(o, scene);
     SolveSummary summary;
     const Status s = solver.Solve(&summary);

@@ -1,11 +1,11 @@
 #include "mgsr/synth/synthetic_scene.h"
-#include "mgsr/eval/closest_point.h"
 
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
 #include <cmath>
 
+#include "mgsr/eval/closest_point.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
 #include "mgsr/io/ply.h"
@@ -24,7 +24,6 @@ double SignedVolume(const TriangleMesh& m) {
   }
   return v;
 }
-
 
 double DistanceToMesh(const Eigen::Vector3d& p, const TriangleMesh& m) {
   double best = 1e300;

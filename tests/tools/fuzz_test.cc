@@ -26,8 +26,8 @@ const std::string kTools = MGSR_TOOLS_DIR;
 
 bool IsText(const std::string& path) {
   for (const char* ext : {".txt", ".json"}) {
-    if (path.size() >= std::strlen(ext) && path.compare(path.size() - std::strlen(ext),
-                                                        std::string::npos, ext) == 0)
+    if (path.size() >= std::strlen(ext) &&
+        path.compare(path.size() - std::strlen(ext), std::string::npos, ext) == 0)
       return true;
   }
   return false;
@@ -59,9 +59,15 @@ std::string Mutate(const std::string& data, bool text, Rng* rng, std::string* wh
     }
     case 3: {
       if (!text) {  // an extreme value in a 4- or 8-byte field
-        const uint64_t values[] = {0xFFFFFFFFull,         0x80000000ull,       0x7FF0000000000000ull,
-                                   0x7FF8000000000001ull, 0,                   uint64_t{1} << 40,
-                                   0xFFFFFFFFFFFFFFFFull, 0x7F800000ull,       0x4F000000ull};
+        const uint64_t values[] = {0xFFFFFFFFull,
+                                   0x80000000ull,
+                                   0x7FF0000000000000ull,
+                                   0x7FF8000000000001ull,
+                                   0,
+                                   uint64_t{1} << 40,
+                                   0xFFFFFFFFFFFFFFFFull,
+                                   0x7F800000ull,
+                                   0x4F000000ull};
         const uint64_t v = values[rng->UniformInt(sizeof(values) / sizeof(values[0]))];
         const size_t width = rng->UniformInt(2) == 0 ? 4 : 8;
         if (out.size() >= width) {
@@ -71,8 +77,8 @@ std::string Mutate(const std::string& data, bool text, Rng* rng, std::string* wh
                   std::to_string(at);
         }
       } else {  // a token replaced
-        const char* tokens[] = {"nan", "inf", "-1", "0", "1e308", "-1e308", "99999999999",
-                                "abc", "",    "4294967344", "[", "{}", "null", "\"x\""};
+        const char* tokens[] = {"nan", "inf", "-1",         "0", "1e308", "-1e308", "99999999999",
+                                "abc", "",    "4294967344", "[", "{}",    "null",   "\"x\""};
         std::vector<std::pair<size_t, size_t>> spans;  // runs of non-space characters
         for (size_t i = 0; i < out.size();) {
           while (i < out.size() && std::isspace(static_cast<unsigned char>(out[i]))) ++i;
@@ -166,7 +172,8 @@ class FuzzTest : public ::testing::Test {
       ASSERT_TRUE(WriteStringToFileAtomic(path, original).ok());
       const std::string label = "case " + std::to_string(c) + ": " + file + " " + what;
       ASSERT_TRUE(r.exit_code == 0 || r.exit_code == 1)
-          << label << ": exit " << r.exit_code << " (crash or hang)\n" << r.output;
+          << label << ": exit " << r.exit_code << " (crash or hang)\n"
+          << r.output;
       if (r.exit_code == 0) {
         ++accepted;
         continue;
@@ -179,7 +186,8 @@ class FuzzTest : public ::testing::Test {
       }
       ASSERT_EQ(errors.size(), 1u) << label << "\n" << r.output;
       EXPECT_NE(errors[0].find(scene), std::string::npos)
-          << label << ": the error names no file of the scene\n" << r.output;
+          << label << ": the error names no file of the scene\n"
+          << r.output;
     }
     std::printf("%d cases: %d refused with one line naming the file, %d still usable\n", cases,
                 refused, accepted);
@@ -196,8 +204,7 @@ TEST_F(FuzzTest, ColmapBinaryModel) {
 
 TEST_F(FuzzTest, ColmapTextModelAndSplit) {
   const std::string scene = MakeScene(true, false);
-  Fuzz(scene, {"sparse/0/cameras.txt", "sparse/0/images.txt", "sparse/0/points3D.txt",
-               "split.txt"},
+  Fuzz(scene, {"sparse/0/cameras.txt", "sparse/0/images.txt", "sparse/0/points3D.txt", "split.txt"},
        90, 2);
 }
 

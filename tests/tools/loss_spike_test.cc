@@ -19,8 +19,8 @@ namespace {
 TEST(LossSpikeTest, FarCamerasGiveNoSingleIterationSpikes) {
   const std::string dir = testing::ScratchDir();
   testing::CommandResult r;
-  ASSERT_NO_FATAL_FAILURE(testing::ShortSurfelRun(
-      dir, "--width 64 --height 64 --num_views 24 --distance 12", &r));
+  ASSERT_NO_FATAL_FAILURE(
+      testing::ShortSurfelRun(dir, "--width 64 --height 64 --num_views 24 --distance 12", &r));
   // log.csv: stage,iteration,branch,loss,gaussians,surfels,seconds
   std::ifstream in(dir + "/out/log.csv");
   std::string line;

@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# The fast tests under AddressSanitizer and UndefinedBehaviorSanitizer: a separate build
+# (build_sanitize, -O1 -g, -DMGSR_SANITIZE=ON) of the libraries and the test binary, then every test
+# that runs in-process (renderers and their gradients, losses, I/O parsers, metrics, fusion,
+# checkpoints, short solves). The slow end-to-end and command-line tests run in the normal build.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+BUILD_DIR=${MGSR_SANITIZE_BUILD_DIR:-build_sanitize}
+if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
+  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG="-O1 -g" \
+    -DMGSR_SANITIZE=ON -DMGSR_BUILD_BENCHMARKS=OFF >/dev/null
+fi
+cmake --build "$BUILD_DIR" -j "$(nproc)" --target mgsr_tests
+# Tests that drive the command-line tools, the harness or the installed library, and the long
+# solves: covered by the normal build's ctest.
+SLOW='Cli*:CliHelp*:Fuzz*:ColmapPipeline*:Harness*:InstalledLibrary*:SurfaceOffset*:LossSpike*'
+SLOW+=':SharedScene*:*ExposureCompensationLearnsKnownGains*'
+export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1:strict_string_checks=1}
+export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
+export LSAN_OPTIONS=${LSAN_OPTIONS:-suppressions=$PWD/scripts/lsan_suppressions.txt}
+"$BUILD_DIR/tests/mgsr_tests" --gtest_filter="-$SLOW" --gtest_brief=1
