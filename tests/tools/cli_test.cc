@@ -111,8 +111,9 @@ TEST_F(CliTest, SolveRefusesAStaleFolderAndListsWhatItWrote) {
   ASSERT_EQ(r.exit_code, 0) << r.output;
   r = testing::RunCommand(solve + dir + "/a --seed 3");
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_EQ(r.output, "error: " + dir + "/a: output folder is not empty (use --overwrite to "
-                                        "replace a previous run, or --resume to continue it)\n");
+  EXPECT_EQ(r.output, "error: " + dir +
+                          "/a: output folder is not empty (use --overwrite to "
+                          "replace a previous run, or --resume to continue it)\n");
   r = testing::RunCommand(solve + dir + "/a --resume --overwrite");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_EQ(r.output, "error: --resume and --overwrite exclude each other\n");
@@ -160,14 +161,14 @@ TEST_F(CliTest, SolveThatCannotWriteLeavesNoResult) {
                            "--checkpoint_every 0 --output " +
                            dir + "/full";
   // 80 kB: the models (26 and 48 kB) and renders are written, the mesh (~100 kB) is not.
-  auto r = testing::RunCommand("bash -c \"trap '' XFSZ; ulimit -f 80; " + kTools +
-                               "/mgsr_solve" + args + "\"");
+  auto r = testing::RunCommand("bash -c \"trap '' XFSZ; ulimit -f 80; " + kTools + "/mgsr_solve" +
+                               args + "\"");
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_NE(r.output.find(dir + "/full/mesh.ply: write failed (disk full?)"), std::string::npos)
       << r.output;
   EXPECT_EQ(r.output.find("error: "), r.output.rfind("error: ")) << "one error: " << r.output;
-  for (const char* f : {"metrics.json", "mesh.ply", "point_cloud_2d.ply", "point_cloud_3d.ply",
-                        "renders"}) {
+  for (const char* f :
+       {"metrics.json", "mesh.ply", "point_cloud_2d.ply", "point_cloud_3d.ply", "renders"}) {
     EXPECT_FALSE(fs::exists(dir + "/full/" + f)) << f;
   }
   // An output below a file cannot be created: refused before any training.
@@ -190,9 +191,15 @@ TEST_F(CliTest, CtrlCWhileWritingTheOutputsLeavesNoHalfResult) {
     const std::string script =
         kTools + "/mgsr_solve --workspace " + base_ + " --output " + out +
         " --warmup_max_iterations 6 --warmup_min_iterations 0 --mutual_iterations 2 "
-        "--log_every 100 --eval_every 0 --checkpoint_every 0 > " + out + ".log 2>&1 & pid=\\$!; "
-        "until grep -q 'mutual: ' " + out + ".log 2>/dev/null || ! kill -0 \\$pid 2>/dev/null; "
-        "do sleep 0.005; done; sleep " + delay + "; kill -INT \\$pid 2>/dev/null; wait \\$pid; "
+        "--log_every 100 --eval_every 0 --checkpoint_every 0 > " +
+        out +
+        ".log 2>&1 & pid=\\$!; "
+        "until grep -q 'mutual: ' " +
+        out +
+        ".log 2>/dev/null || ! kill -0 \\$pid 2>/dev/null; "
+        "do sleep 0.005; done; sleep " +
+        delay +
+        "; kill -INT \\$pid 2>/dev/null; wait \\$pid; "
         "echo exit=\\$?";
     const auto r = testing::RunCommand("bash -c \"" + script + "\"");
     std::string log;
@@ -200,8 +207,8 @@ TEST_F(CliTest, CtrlCWhileWritingTheOutputsLeavesNoHalfResult) {
     if (r.output.find("exit=130") != std::string::npos) {
       ++interrupted;
       EXPECT_NE(log.find("interrupted while writing the outputs"), std::string::npos) << log;
-      for (const char* f : {"metrics.json", "mesh.ply", "point_cloud_2d.ply", "point_cloud_3d.ply",
-                            "renders"}) {
+      for (const char* f :
+           {"metrics.json", "mesh.ply", "point_cloud_2d.ply", "point_cloud_3d.ply", "renders"}) {
         EXPECT_FALSE(fs::exists(out + "/" + f)) << delay << ": " << f;
       }
       const auto resumed = testing::RunCommand(
@@ -237,10 +244,11 @@ TEST_F(CliTest, CheckLoadsTheSceneAndWritesNothing) {
 
 TEST_F(CliTest, SingleBranchMethodReportsAndWritesOnlyItsBranch) {
   const std::string out = Copy() + "/out";
-  const auto r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " +
-                                     out + " --method 2dgs --warmup_max_iterations 30 "
-                                     "--warmup_min_iterations 0 --mutual_iterations 10 "
-                                     "--log_every 20");
+  const auto r =
+      testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + out +
+                          " --method 2dgs --warmup_max_iterations 30 "
+                          "--warmup_min_iterations 0 --mutual_iterations 10 "
+                          "--log_every 20");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   // Progress lines follow the 2DGS steps; the untrained 3DGS branch shows as "-".
   EXPECT_NE(r.output.find("loss 2DGS 0."), std::string::npos) << r.output;
@@ -310,9 +318,10 @@ TEST_F(CliTest, SolveRejectsBadOptions) {
     r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
                             " --output /tmp/x --background " + bad);
     EXPECT_EQ(r.exit_code, 1) << bad;
-    EXPECT_NE(r.output.find("--background must be auto, reference or a grey level in [0, 1], not '" +
-                            std::string(bad) + "'"),
-              std::string::npos)
+    EXPECT_NE(
+        r.output.find("--background must be auto, reference or a grey level in [0, 1], not '" +
+                      std::string(bad) + "'"),
+        std::string::npos)
         << r.output;
   }
 }
@@ -326,10 +335,11 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
                                " --num_views 10 --width 32 --height 32 --num_points 100 "
                                "--masks=false");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  const std::string few = " --warmup_max_iterations 10 --warmup_min_iterations 0 "
-                          "--mutual_iterations 4 --log_every 20 --eval_every 0";
-  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
-                          "/out" + few);
+  const std::string few =
+      " --warmup_max_iterations 10 --warmup_min_iterations 0 "
+      "--mutual_iterations 4 --log_every 20 --eval_every 0";
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir + "/out" +
+                          few);
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("background: the photos' uniform backdrop, grey 0.6"), std::string::npos)
       << r.output;
@@ -341,6 +351,25 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("background: reference (2DGS white, 3DGS black): "), std::string::npos)
       << r.output;
+}
+
+// The progress line's test PSNR scores the same composite as the final evaluation: at the last
+// (3DGS) iteration of the run, with a grey background, both print the same figure.
+TEST_F(CliTest, ProgressPsnrAgreesWithTheFinalEvaluation) {
+  const std::string dir = testing::ScratchDir();
+  fs::remove_all(dir);
+  const auto r =
+      testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
+                          "/out --warmup_max_iterations 10 "
+                          "--warmup_min_iterations 0 --mutual_iterations 4 "
+                          "--log_every 100 --eval_every 4 --background 0.5");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string progress = "[mutual     4] test PSNR ";
+  const size_t at = r.output.find(progress);
+  ASSERT_NE(at, std::string::npos) << r.output;
+  const std::string figure = r.output.substr(at + progress.size(), 6);  // e.g. "17.42 "
+  EXPECT_NE(r.output.find("test views: PSNR " + figure + "dB"), std::string::npos)
+      << "progress " << figure << " vs final: " << r.output;
 }
 
 TEST_F(CliTest, MissingWorkspaceFlagAndFolder) {
@@ -514,8 +543,9 @@ TEST_F(CliTest, LossConfigChangesTheTableAndTheLogShowsEachRow) {
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
                           "/bad_out --loss_config " + dir + "/bad.json");
   EXPECT_EQ(r.exit_code, 1) << r.output;
-  EXPECT_EQ(r.output.rfind("error: " + dir + "/bad.json: loss row 3d/warmup/x: unknown loss term "
-                                             "'l2'",
+  EXPECT_EQ(r.output.rfind("error: " + dir +
+                               "/bad.json: loss row 3d/warmup/x: unknown loss term "
+                               "'l2'",
                            0),
             0u)
       << r.output;
@@ -523,8 +553,8 @@ TEST_F(CliTest, LossConfigChangesTheTableAndTheLogShowsEachRow) {
   EXPECT_FALSE(fs::exists(dir + "/bad_out"));
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
                           "/out --warmup_max_iterations 20 --warmup_min_iterations 0 "
-                          "--mutual_iterations 4 --checkpoint_every 0 --loss_config " + dir +
-                          "/losses.json");
+                          "--mutual_iterations 4 --checkpoint_every 0 --loss_config " +
+                          dir + "/losses.json");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   std::ifstream log(dir + "/out/log.csv");
   std::string header, line, warm_3d;

@@ -1,0 +1,674 @@
+#include "solvers/reconstruction_pipeline.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+
+#include "mgsr/core/timer.h"
+#include "mgsr/eval/exposure_alignment.h"
+#include "mgsr/eval/ground_truth.h"
+#include "mgsr/eval/image_metrics.h"
+#include "mgsr/eval/mesh_metrics.h"
+#include "mgsr/eval/metrics_json.h"
+#include "mgsr/io/file_util.h"
+#include "mgsr/io/image_io.h"
+#include "mgsr/io/model_ply.h"
+#include "mgsr/io/output_folder.h"
+#include "mgsr/io/ply.h"
+#include "mgsr/synth/ray_caster.h"
+#include "solvers/backdrop.h"
+#include "solvers/checkpoint_callback.h"
+#include "solvers/density_control.h"
+#include "solvers/mutual_boosted_solver.h"
+#include "solvers/trained_views.h"
+
+namespace mgsr {
+namespace {
+
+// Test-view PSNR of the 3DGS composite every N iterations (after a 3DGS step, when the renderer's
+// state is free to reuse), against the photo on the 3DGS branch's background: the composite the
+// final evaluation scores.
+class TestEvaluation : public IterationCallback {
+ public:
+  TestEvaluation(MutualBoostedSolver* solver, const Scene& scene, float background, int every)
+      : solver_(solver), scene_(scene), background_(background), every_(every) {}
+  CallbackReturnType operator()(const IterationInfo& i) override {
+    if (every_ <= 0 || i.branch != Branch::kGaussians3D || i.iteration % every_ != 0)
+      return CallbackReturnType::kContinue;
+    const auto test = scene_.TestIndices();
+    if (test.empty()) return CallbackReturnType::kContinue;
+    double psnr = 0;
+    for (int v : test) {
+      GaussianRender r;
+      solver_->RenderGaussians(scene_.views[v].camera, &r);
+      const Image gt = CompositeOnBackground(scene_.views[v], background_);
+      psnr += std::min(100.0, Psnr(r.color, gt));
+    }
+    std::printf("[%s %5d] test PSNR %.2f dB (%zu views)\n",
+                i.stage == Stage::kWarmup ? "warmup" : "mutual", i.iteration, psnr / test.size(),
+                test.size());
+    std::fflush(stdout);
+    return CallbackReturnType::kContinue;
+  }
+
+ private:
+  MutualBoostedSolver* solver_;
+  const Scene& scene_;
+  float background_;
+  int every_;
+};
+
+std::string DepthLine(const char* label, const DepthErrorStats& d) {
+  char line[200];
+  std::snprintf(line, sizeof(line),
+                "%s median %+.4f (%+.2f px), mean %+.4f, %.1f%% of pixels beyond 1 px", label,
+                d.median, d.median_footprints, d.mean, 100 * d.share_beyond_footprint);
+  return line;
+}
+
+// Signed depth error of the 2DGS branch on the training views when the warm-up ends (at the first
+// mutual 2DGS step), against the ground truth. Written beside the checkpoint so a resumed run still
+// reports it.
+class DepthAfterWarmup : public IterationCallback {
+ public:
+  DepthAfterWarmup(MutualBoostedSolver* solver, const SolverOptions& options, const Scene& scene,
+                   const RayCaster* ground_truth, std::string path)
+      : solver_(solver),
+        options_(options),
+        scene_(scene),
+        gt_(ground_truth),
+        path_(std::move(path)) {}
+  CallbackReturnType operator()(const IterationInfo& i) override {
+    if (gt_ == nullptr || done_ || i.stage != Stage::kMutual || i.branch != Branch::kSurfels2D ||
+        i.iteration != 1)
+      return CallbackReturnType::kContinue;
+    done_ = true;
+    const SurfaceDepthReport r = MeasureSurfaceDepth(solver_, options_, scene_, *gt_);
+    std::printf("%s\n%s\n",
+                DepthLine("depth after warm-up (train views): expected", r.expected).c_str(),
+                DepthLine("                                    median  ", r.median).c_str());
+    const nlohmann::json j = {{"expected", DepthErrorToJson(r.expected)},
+                              {"median", DepthErrorToJson(r.median)}};
+    const Status s = WriteStringToFileAtomic(path_, j.dump(2) + "\n");
+    if (!s.ok()) std::fprintf(stderr, "warning: %s\n", s.message().c_str());
+    return CallbackReturnType::kContinue;
+  }
+  const std::string& path() const { return path_; }
+
+ private:
+  MutualBoostedSolver* solver_;
+  const SolverOptions& options_;
+  const Scene& scene_;
+  const RayCaster* gt_;
+  std::string path_;
+  bool done_ = false;
+};
+
+// Everything the ground truth lets us say about the geometry: the mesh's exact metrics beside the
+// exact-depth ceiling of the same cameras and fusion (and of the training resolution when fusing
+// finer), and the signed depth error after the warm-up and at the end.
+Status ReportGeometry(MutualBoostedSolver* solver, const SolverOptions& options, const Scene& scene,
+                      const GroundTruthGeometry& gt, const RayCaster& gt_caster,
+                      const SurfaceOptions& surface, const TriangleMesh* mesh,
+                      const std::string& warmup_depth_path, nlohmann::json* metrics) {
+  const double footprint = TrainingFootprint(scene);
+  MeshMetricsOptions mo;
+  mo.pixel_footprint = footprint;
+  if (!gt.visible_path.empty()) mo.completeness_points = &gt.visible_points;
+  nlohmann::json& out = (*metrics)["mesh"];
+  out["ground_truth"] = gt.mesh_path;
+  if (!gt.visible_path.empty()) out["completeness_points"] = gt.visible_path;
+  auto line = [&](const char* label, const MeshMetrics& m) {
+    std::printf(
+        "%s NC x100 %.2f, CD x1000 %.3f, signed offset %+.4f (%+.2f px, %.0f%% inside), "
+        "F-score at 1 px %.3f\n",
+        label, 100 * m.normal_consistency, 1000 * m.chamfer, m.signed_offset_median,
+        m.signed_offset_median / footprint, 100 * m.fraction_inside, m.FScoreAtFootprints(1.0));
+  };
+  if (mesh != nullptr) {
+    const MeshMetrics m = EvaluateMesh(*mesh, gt.mesh, mo);
+    out.update(MeshMetricsToJson(m));
+    line("mesh vs ground truth:   ", m);
+  }
+  TriangleMesh ceiling;
+  MGSR_RETURN_IF_ERROR(ExactDepthCeiling(gt.mesh, scene, surface, &ceiling));
+  const MeshMetrics c = EvaluateMesh(ceiling, gt.mesh, mo);
+  out["ceiling"] = MeshMetricsToJson(c);
+  line("exact-depth ceiling:    ", c);
+  if (surface.resolution_scale != 1) {
+    SurfaceOptions one = surface;
+    one.resolution_scale = 1;
+    MGSR_RETURN_IF_ERROR(ExactDepthCeiling(gt.mesh, scene, one, &ceiling));
+    const MeshMetrics c1 = EvaluateMesh(ceiling, gt.mesh, mo);
+    out["ceiling_1x"] = MeshMetricsToJson(c1);
+    line("ceiling at 1x:          ", c1);
+  }
+  const SurfaceDepthReport d = MeasureSurfaceDepth(solver, options, scene, gt_caster);
+  (*metrics)["depth"]["end"] = {{"expected", DepthErrorToJson(d.expected)},
+                                {"median", DepthErrorToJson(d.median)}};
+  std::printf("%s\n%s\n", DepthLine("depth at the end (train views): expected", d.expected).c_str(),
+              DepthLine("                                median  ", d.median).c_str());
+  std::string text;
+  if (ReadFileToString(warmup_depth_path, &text).ok()) {
+    try {
+      (*metrics)["depth"]["after_warmup"] = nlohmann::json::parse(text);
+    } catch (const nlohmann::json::exception&) {
+      // A damaged side file only loses this figure.
+    }
+  }
+  return Status::Ok();
+}
+
+// Progress lines and log.csv rows.
+class ProgressLog : public IterationCallback {
+ public:
+  // A progress line follows each step of the last branch of a round (the 3DGS branch, or the 2DGS
+  // branch when it trains alone); an untrained branch shows as "-".
+  ProgressLog(const std::string& csv_path, int every, int expected_total, bool append,
+              bool train_2d, bool train_3d)
+      : path_(csv_path),
+        every_(every),
+        expected_(expected_total),
+        train_2d_(train_2d),
+        train_3d_(train_3d) {
+    // A resumed run continues the log; a missing or empty one (peek fails alike) starts with its
+    // header.
+    const bool header =
+        !append || std::ifstream(csv_path).peek() == std::ifstream::traits_type::eof();
+    csv_.open(csv_path, append ? std::ios::app : std::ios::trunc);
+    if (header) csv_ << "stage,iteration,branch,loss,gaussians,surfels,seconds,terms\n";
+  }
+  // The rows so far reach the disk (at every checkpoint, so a killed run loses none it resumes
+  // from); an error names the file.
+  Status Flush() {
+    csv_.flush();
+    if (!csv_) return Status::Error(path_ + ": cannot write the training log");
+    return Status::Ok();
+  }
+  CallbackReturnType operator()(const IterationInfo& i) override {
+    const bool is2d = i.branch == Branch::kSurfels2D;
+    const char* stage = i.stage == Stage::kWarmup ? "warmup" : "mutual";
+    csv_ << stage << "," << i.iteration << "," << (is2d ? "2dgs" : "3dgs") << "," << i.loss << ","
+         << i.num_gaussians << "," << i.num_surfels << "," << i.seconds << ",";
+    // The loss table's active rows: name=weight x value, separated by ';'.
+    for (size_t k = 0; k < i.terms.size(); ++k) {
+      csv_ << (k ? ";" : "") << i.terms[k].name << "=" << i.terms[k].weight * i.terms[k].value;
+    }
+    csv_ << "\n";
+    (is2d ? loss_2d_ : loss_3d_) = i.loss;
+    ++steps_;
+    if (i.iteration % every_ == 0 && is2d != train_3d_) {
+      const double eta = steps_ > 0 ? i.seconds / steps_ * std::max(0, expected_ - steps_) : 0;
+      const std::string loss_2d = train_2d_ ? Format("%.4f", loss_2d_) : "-";
+      const std::string loss_3d = train_3d_ ? Format("%.4f", loss_3d_) : "-";
+      const std::string surfels = train_2d_ ? std::to_string(i.num_surfels) : "-";
+      const std::string gaussians = train_3d_ ? std::to_string(i.num_gaussians) : "-";
+      std::printf(
+          "[%s %5d] loss 2DGS %s 3DGS %s | surfels %s Gaussians %s | %.0f s, ~%.0f s left\n", stage,
+          i.iteration, loss_2d.c_str(), loss_3d.c_str(), surfels.c_str(), gaussians.c_str(),
+          i.seconds, eta);
+      std::fflush(stdout);
+    }
+    return CallbackReturnType::kContinue;
+  }
+
+ private:
+  std::string path_;
+  std::ofstream csv_;
+  static std::string Format(const char* format, double v) {
+    char buffer[32];
+    std::snprintf(buffer, sizeof(buffer), format, v);
+    return buffer;
+  }
+
+  int every_, expected_, steps_ = 0;
+  bool train_2d_, train_3d_;
+  double loss_2d_ = 0, loss_3d_ = 0;
+};
+
+Image Colorize(const Image& one, float lo, float hi) {
+  Image out(one.width(), one.height(), 1);
+  for (size_t i = 0; i < one.size(); ++i)
+    out.data()[i] = hi > lo ? (one.data()[i] - lo) / (hi - lo) : 0.0f;
+  return out;
+}
+
+// Sets both branches' backgrounds from a parsed --background; returns what was chosen and why.
+std::string ChooseBackground(const std::string& flag, double level, const Scene& scene,
+                             SolverOptions* o) {
+  if (level >= 0) {
+    o->background_2d = o->background_3d = static_cast<float>(level);
+    return "grey " + flag + " (both branches, --background)";
+  }
+  if (flag == "auto") {
+    const Backdrop b = EstimateBackdrop(scene);
+    if (b.uniform) {
+      o->background_2d = o->background_3d = b.level;
+      return "the photos' uniform backdrop, grey " + std::to_string(b.level) + " (both branches)";
+    }
+    return "reference (2DGS white, 3DGS black): " + b.reason;
+  }
+  return "reference (2DGS white, 3DGS black)";
+}
+
+}  // namespace
+
+Status ParseBackground(const std::string& background, double* level) {
+  *level = -1;
+  if (background == "auto" || background == "reference") return Status::Ok();
+  char* end = nullptr;
+  const double v = std::strtod(background.c_str(), &end);
+  if (end == background.c_str() || *end != '\0' || !(v >= 0 && v <= 1)) {
+    return Status::Error("--background must be auto, reference or a grey level in [0, 1], not '" +
+                         background + "'");
+  }
+  *level = v;
+  return Status::Ok();
+}
+
+Status ReconstructionOptions::CheckInputsAndOutput() const {
+  if (workspace.empty() == images.empty())
+    return Status::Error("give either --workspace or --images");
+  if (!masks.empty() && images.empty())
+    return Status::Error("--masks goes with --images (a workspace has its own masks/)");
+  if (output.empty() && !(check_only && !resume)) return Status::Error("--output is required");
+  if (check_only && !images.empty())
+    return Status::Error("--check goes with --workspace (--images would run colmap)");
+  if (resume && overwrite) return Status::Error("--resume and --overwrite exclude each other");
+  return Status::Ok();
+}
+
+Status ReconstructionOptions::Validate() const {
+  MGSR_RETURN_IF_ERROR(CheckInputsAndOutput());
+  if (log_every < 1) return Status::Error("--log_every must be >= 1");
+  if (!(surface.voxel_size >= 0)) return Status::Error("--voxel_size must be >= 0");
+  if (surface.resolution_scale < 1 || surface.resolution_scale > 8)
+    return Status::Error("--mesh_resolution_scale must be between 1 and 8");
+  if (!(surface.truncation_voxels > 0)) return Status::Error("--tsdf_truncation must be > 0");
+  if (checkpoint_every < 0) return Status::Error("--checkpoint_every must be >= 0");
+  if (eval_every < 0) return Status::Error("--eval_every must be >= 0");
+  if (max_gaussians < -1 || max_surfels < -1)
+    return Status::Error(
+        "--max_gaussians and --max_surfels must be -1 (from the scene), 0 (none) or a count");
+  double level = 0;
+  MGSR_RETURN_IF_ERROR(ParseBackground(background, &level));
+  return solver.Validate();
+}
+
+void ReconstructionPipeline::RequestStop() {
+  stop_requested_ = 1;
+  MutualBoostedSolver* solver = solver_;
+  if (solver != nullptr) solver->RequestStop();
+}
+
+Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
+  *end = ReconstructionEnd::kFinished;
+  MGSR_RETURN_IF_ERROR(options_.Validate());
+  const ReconstructionOptions& o = options_;
+  SolverOptions options = o.solver;
+  std::string workspace = o.workspace;
+  double background_level = -1;
+  MGSR_RETURN_IF_ERROR(ParseBackground(o.background, &background_level));
+  const std::string ckpt_dir = JoinPath(o.output, "checkpoints");
+  const std::string ckpt = JoinPath(ckpt_dir, "latest.ckpt");
+  if (o.resume && !FileExists(ckpt)) return Status::Error(ckpt + ": no checkpoint to resume from");
+  OutputFolder out;
+  if (!o.check_only) {
+    const Status opened = OutputFolder::Open(o.output,
+                                             o.resume      ? OutputMode::kResume
+                                             : o.overwrite ? OutputMode::kOverwrite
+                                                           : OutputMode::kFresh,
+                                             &out);
+    if (!opened.ok()) return opened;
+  }
+  // From here on a failure takes back the results it wrote: no folder looks finished unless it is.
+  const auto fail = [&out](const std::string& message) {
+    out.Discard();
+    return Status::Error(message);
+  };
+
+  Timer total;
+  nlohmann::json colmap_metrics;
+  if (!o.images.empty()) {
+    ColmapPipelineOptions co = o.colmap;
+    co.images = o.images;
+    co.masks = o.masks;
+    co.workspace = JoinPath(o.output, "colmap");
+    const std::string dense = JoinPath(co.workspace, "dense");
+    if (o.resume && DirectoryExists(JoinPath(dense, "sparse"))) {
+      std::printf("colmap: reusing %s (--resume)\n", dense.c_str());
+    } else {
+      const Status prepared = out.Prepare();  // colmap writes into the output folder
+      if (!prepared.ok()) return fail(prepared.message());
+      ColmapPipelineSummary cs;
+      const Status ran = RunColmapPipeline(co, &cs);
+      if (!ran.ok()) return fail(ran.message());
+      if (o.on_colmap_summary) o.on_colmap_summary(cs);
+      colmap_metrics = {{"images_given", cs.images_given},
+                        {"images_registered", cs.images_registered},
+                        {"unregistered", cs.unregistered},
+                        {"points", cs.points},
+                        {"mean_reprojection_error_px", cs.mean_reprojection_error}};
+      for (const auto& step : cs.steps) colmap_metrics["seconds"][step.name] = step.seconds;
+    }
+    workspace = dense;
+  }
+  Timer load_timer;
+  const SceneOptions& so = o.scene;
+  Scene scene;
+  Status s = LoadScene(workspace, so, &scene);
+  if (!s.ok()) return fail(s.message());
+  for (const std::string& w : scene.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  const double load_seconds = load_timer.ElapsedSeconds();
+  const Camera& cam0 = scene.views.front().camera;
+  std::printf("scene: %s (%s), %zu train / %zu test views, %dx%d, %zu points, masks: %s\n",
+              workspace.c_str(), scene.source.c_str(), scene.TrainIndices().size(),
+              scene.TestIndices().size(), cam0.width, cam0.height, scene.points.size(),
+              scene.has_masks() ? "yes" : "no (gamma = 1, mesh not masked)");
+
+  const std::string background_note =
+      ChooseBackground(o.background, background_level, scene, &options);
+  std::printf("background: %s\n", background_note.c_str());
+  const size_t scene_budget = DefaultPrimitiveBudget(scene);
+  options.max_gaussians = o.max_gaussians < 0 ? scene_budget : o.max_gaussians;
+  options.max_surfels = o.max_surfels < 0 ? scene_budget : o.max_surfels;
+  const auto budget_text = [](size_t n) {
+    return n == 0 ? std::string("none") : std::to_string(n);
+  };
+  std::printf("budget: %s Gaussians, %s surfels%s\n", budget_text(options.max_gaussians).c_str(),
+              budget_text(options.max_surfels).c_str(),
+              o.max_gaussians < 0 || o.max_surfels < 0
+                  ? " (4 per pixel of a training view, at least 500,000, unless given)"
+                  : "");
+
+  MutualBoostedSolver solver(options, scene);
+  if (o.resume) {
+    s = solver.LoadCheckpoint(ckpt);
+    if (!s.ok()) return fail(s.message());
+    std::printf("resuming from %s\n", ckpt.c_str());
+  }
+  if (o.check_only) {
+    std::printf("check: the scene%s can be trained\n", o.resume ? " and the checkpoint" : "");
+    *end = ReconstructionEnd::kChecked;
+    return Status::Ok();
+  }
+  // The previous run's results go only now that the scene and the checkpoint are accepted.
+  s = out.Prepare();
+  if (s.ok()) s = MakeDirectories(out.Path("renders"));
+  if (s.ok()) s = MakeDirectories(ckpt_dir);
+  if (!s.ok()) return fail(s.message());
+  const int trained_branches = (options.train_2d ? 1 : 0) + (options.train_3d ? 1 : 0);
+  ProgressLog log(out.Path("log.csv"), o.log_every,
+                  trained_branches * options.warmup_max_iterations +
+                      (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations,
+                  o.resume, options.train_2d, options.train_3d);
+  s = log.Flush();
+  if (!s.ok()) return fail(s.message());
+  solver.AddCallback(&log);
+  TestEvaluation evaluation(&solver, scene, options.background_3d, o.eval_every);
+  solver.AddCallback(&evaluation);
+  // A checkpoint every --checkpoint_every iterations, the log flushed with it.
+  CheckpointCallback checkpointer(ckpt, o.checkpoint_every, [&log] { return log.Flush(); });
+  solver.AddCallback(&checkpointer);
+  GroundTruthGeometry ground_truth;
+  s = FindGroundTruth(scene.root, &ground_truth);
+  if (!s.ok()) std::fprintf(stderr, "warning: ground truth not used: %s\n", s.message().c_str());
+  std::unique_ptr<RayCaster> gt_caster;
+  if (ground_truth.found()) gt_caster = std::make_unique<RayCaster>(ground_truth.mesh);
+  DepthAfterWarmup depth_after_warmup(&solver, options, scene, gt_caster.get(),
+                                      JoinPath(ckpt_dir, "depth_after_warmup.json"));
+  solver.AddCallback(&depth_after_warmup);
+  solver_ = &solver;
+  // The pointer RequestStop uses goes with the solver, however Run returns.
+  struct Forget {
+    MutualBoostedSolver* volatile* solver;
+    ~Forget() { *solver = nullptr; }
+  } forget{&solver_};
+  SolveSummary summary;
+  s = solver.Solve(&summary);
+  if (!s.ok())
+    return fail(checkpointer.status().ok() ? s.message() : checkpointer.status().message());
+  if (summary.termination_type == TerminationType::kInterrupted) {
+    // Ctrl-C: the state is at an iteration boundary; keep it.
+    s = solver.SaveCheckpoint(ckpt);
+    if (s.ok()) s = log.Flush();
+    if (!s.ok()) return fail(s.message());
+    std::fprintf(stderr,
+                 "interrupted %s: checkpoint written to %s; run again with --resume to "
+                 "continue\n",
+                 summary.message.c_str(), ckpt.c_str());
+    *end = ReconstructionEnd::kInterrupted;
+    return Status::Ok();
+  }
+  std::printf("%s\n", summary.BriefReport().c_str());
+  std::fflush(stdout);  // the end of training shows at once, also when stdout is a file
+  if (o.checkpoint_every > 0) {
+    // The finished state: --resume then skips training and only rebuilds the outputs (e.g. a mesh
+    // with other fusion settings).
+    s = solver.SaveCheckpoint(ckpt);
+    if (!s.ok()) return fail(s.message());
+  }
+  s = log.Flush();
+  if (!s.ok()) return fail(s.message());
+  // Ctrl-C while the outputs are written: the results so far are taken back and the finished
+  // state is kept, so --resume writes them without training again.
+  const auto stop_writing = [&]() {
+    out.Discard();
+    const Status saved = solver.SaveCheckpoint(ckpt);
+    if (!saved.ok()) return fail(saved.message());
+    std::fprintf(stderr,
+                 "interrupted while writing the outputs: the results written so far are removed; "
+                 "the trained state is in %s: run again with --resume to write them\n",
+                 ckpt.c_str());
+    *end = ReconstructionEnd::kInterrupted;
+    return Status::Ok();
+  };
+  if (stop_requested_) return stop_writing();
+
+  // Models: only the branches this method trains (an untrained branch is its initialisation).
+  if (options.train_2d) {
+    s = WriteSurfelPly(out.Path("point_cloud_2d.ply"), solver.surfels());
+    if (s.ok()) s = out.Record("point_cloud_2d.ply");
+  }
+  if (s.ok() && options.train_3d) {
+    s = WriteGaussianPly(out.Path("point_cloud_3d.ply"), solver.gaussians());
+    if (s.ok()) s = out.Record("point_cloud_3d.ply");
+  }
+  if (!s.ok()) return fail(s.message());
+
+  // Test views: PSNR / SSIM of the composite (3DGS, or 2DGS for the 2dgs method) against the
+  // ground truth on its background, and the renders a person looks at.
+  Timer eval_timer;
+  double psnr = 0, ssim = 0, psnr_aligned = 0, ssim_aligned = 0, depth_err = 0;
+  int depth_views = 0;
+  const auto test = scene.TestIndices();
+  nlohmann::json per_view = nlohmann::json::array();
+  for (int i : test) {
+    const View& v = scene.views[i];
+    ViewRender rendered = RenderView(&solver, options, v.camera);
+    const Appearance& g = rendered.appearance;
+    const Geometry& sr = rendered.geometry;
+    const Image gt = CompositeOnBackground(v, g.background);
+    const double p = std::min(100.0, Psnr(g.color, gt)), q = Ssim(g.color, gt);
+    psnr += p;
+    ssim += q;
+    // Exposure-aligned: the test views' light and exposure are not predictable from the training
+    // views.
+    const AlignedScores aligned =
+        ExposureAlignedScores(g.color, gt, v.mask.empty() ? nullptr : &v.mask);
+    psnr_aligned += std::min(100.0, aligned.psnr);
+    ssim_aligned += aligned.ssim;
+    const std::string stem = FileStem(v.name);
+    // Each render is written and then recorded in the manifest.
+    const auto write_render = [&out, &stem](const std::string& suffix, const Image& image) {
+      const std::string name = "renders/" + stem + "_" + suffix + ".png";
+      Status w = WriteImage(out.Path(name), image);
+      if (w.ok()) w = out.Record(name);
+      return w;
+    };
+    float dmin = 1e30f, dmax = 0;
+    for (size_t k = 0; k < sr.depth.size(); ++k) {
+      if (sr.alpha.data()[k] < 0.5f) continue;
+      dmin = std::min(dmin, sr.depth.data()[k]);
+      dmax = std::max(dmax, sr.depth.data()[k]);
+    }
+    Image normal(sr.normal_world.width(), sr.normal_world.height(), 3);
+    for (size_t k = 0; k < normal.size(); ++k)
+      normal.data()[k] = 0.5f + 0.5f * sr.normal_world.data()[k];
+    for (const auto& [suffix, image] :
+         std::vector<std::pair<std::string, const Image*>>{{"composite", &g.color},
+                                                           {"transmitted", &g.tran},
+                                                           {"reflected", &g.ref},
+                                                           {"weight", &g.weight},
+                                                           {"gt", &gt}}) {
+      s = write_render(suffix, *image);
+      if (!s.ok()) return fail(s.message());
+    }
+    s = write_render("depth2d", Colorize(sr.depth, dmin, dmax));
+    if (s.ok()) s = write_render("normal2d", normal);
+    if (!s.ok()) return fail(s.message());
+    if (stop_requested_) return stop_writing();
+    // Depth error against ground-truth depth maps when the scene has them (synthetic scenes).
+    Image gt_depth;
+    double err = 0;
+    int n = 0;
+    if (ReadPfm(JoinPath(scene.root, "gt/depth/" + stem + ".pfm"), &gt_depth).ok() &&
+        gt_depth.SameShape(sr.depth)) {
+      for (size_t k = 0; k < gt_depth.size(); ++k) {
+        if (gt_depth.data()[k] <= 0 || (!v.mask.empty() && v.mask.data()[k] < 0.5f)) continue;
+        err += std::abs(sr.depth.data()[k] - gt_depth.data()[k]);
+        ++n;
+      }
+      if (n > 0) {
+        depth_err += err / n;
+        ++depth_views;
+      }
+    }
+    per_view.push_back({{"name", v.name},
+                        {"psnr", p},
+                        {"ssim", q},
+                        {"psnr_aligned", std::min(100.0, aligned.psnr)},
+                        {"ssim_aligned", aligned.ssim}});
+  }
+  if (!test.empty()) {
+    psnr /= test.size();
+    ssim /= test.size();
+    psnr_aligned /= test.size();
+    ssim_aligned /= test.size();
+  }
+
+  // Mesh: TSDF fusion of the geometry branch's depth over the training views (rendered at
+  // --mesh_resolution_scale times their resolution), foreground and alpha >= 0.5, coloured by the
+  // 3DGS transmitted (reflection-free) render (single-branch methods: that branch's depth and
+  // colour).
+  if (stop_requested_) return stop_writing();
+  Timer mesh_timer;
+  const SurfaceOptions& surface = o.surface;
+  TriangleMesh mesh;
+  s = ExtractSurface(&solver, options, scene, surface, &mesh);
+  const std::string mesh_path = out.Path("mesh.ply");
+  if (s.ok() && mesh.triangles.empty()) {
+    s = Status::Error(mesh_path +
+                      ": the fused mesh is empty (no rendered depth of the foreground reached the "
+                      "fusion volume: check the cameras, the masks and the scene's scale)");
+  }
+  if (s.ok()) s = WriteTriangleMesh(mesh_path, mesh);
+  if (s.ok()) s = out.Record("mesh.ply");
+  if (!s.ok()) {
+    const bool kept = FileExists(ckpt);
+    return fail(s.message() + (kept ? "; the trained state is kept in " + ckpt +
+                                          " (--resume rebuilds the outputs from it)"
+                                    : ""));
+  }
+  const double mesh_seconds = mesh_timer.ElapsedSeconds();
+
+  nlohmann::json metrics = {
+      {"scene", workspace},
+      {"preset", o.preset},
+      {"method", o.method},
+      {"mutual_mode", options.mutual_mode},
+      {"surfel_low_pass", o.surfel_low_pass},
+      {"surfel_filter_sigma", options.surfel_filter_sigma},
+      {"surfel_init", o.surfel_init},
+      {"losses", LossTableToJson(options.LossTable())["losses"]},
+      {"seconds",
+       {{"load", load_seconds},
+        {"warmup", summary.warmup_seconds},
+        {"mutual", summary.mutual_seconds},
+        {"mesh", mesh_seconds},
+        {"total", total.ElapsedSeconds()}}},
+      {"peak_memory_mb", PeakMemoryBytes() / 1048576.0},
+      {"iterations",
+       {{"warmup_2d", summary.branch(Branch::kSurfels2D).warmup_iterations},
+        {"warmup_3d", summary.branch(Branch::kGaussians3D).warmup_iterations},
+        {"auto_stopped_2d", summary.branch(Branch::kSurfels2D).auto_stopped},
+        {"auto_stopped_3d", summary.branch(Branch::kGaussians3D).auto_stopped},
+        {"mutual", summary.mutual_iterations}}},
+      {"counts",
+       {{"gaussians", options.train_3d ? summary.branch(Branch::kGaussians3D).primitives : 0},
+        {"surfels", options.train_2d ? summary.branch(Branch::kSurfels2D).primitives : 0}}},
+      {"test",
+       {{"views", test.size()},
+        {"psnr", psnr},
+        {"ssim", ssim},
+        {"psnr_aligned", psnr_aligned},
+        {"ssim_aligned", ssim_aligned},
+        {"per_view", per_view}}},
+      {"mesh",
+       {{"path", mesh_path},
+        {"vertices", mesh.vertices.size()},
+        {"triangles", mesh.triangles.size()},
+        {"resolution_scale", surface.resolution_scale},
+        {"voxel_size", SurfaceTsdfOptions(scene, surface).voxel_size},
+        {"pixel_footprint", TrainingFootprint(scene)}}}};
+  if (!colmap_metrics.is_null()) metrics["colmap"] = colmap_metrics;
+  metrics["budget"] = {{"gaussians", options.max_gaussians},
+                       {"surfels", options.max_surfels},
+                       {"from_scene", o.max_gaussians < 0 || o.max_surfels < 0}};
+  metrics["background"] = {
+      {"2d", options.background_2d}, {"3d", options.background_3d}, {"choice", background_note}};
+  metrics["exposure"] = {{"mode", ExposureModeName(options.exposure)},
+                         {"per_branch", options.exposure_per_branch},
+                         {"fit_seconds", summary.exposure_fit_seconds}};
+  if (options.exposure != ExposureMode::kOff) {
+    // The learned transforms of the training views (the 3DGS branch's when per branch).
+    nlohmann::json views = nlohmann::json::array();
+    const ExposureModel& ex = solver.exposure(Branch::kGaussians3D);
+    for (int v : scene.TrainIndices()) {
+      const ColorTransform& p = ex.transform(v);
+      views.push_back({{"name", scene.views[v].name},
+                       {"matrix", std::vector<double>(p.begin(), p.begin() + 9)},
+                       {"offset", std::vector<double>(p.begin() + 9, p.end())}});
+    }
+    metrics["exposure"]["views"] = views;
+  }
+  if (depth_views > 0) {
+    metrics["test"]["depth_abs_error"] = depth_err / depth_views;
+    metrics["test"]["depth_abs_error_over_extent"] = depth_err / depth_views / scene.extent;
+  }
+  if (ground_truth.found()) {
+    const Status reported = ReportGeometry(&solver, options, scene, ground_truth, *gt_caster,
+                                           surface, &mesh, depth_after_warmup.path(), &metrics);
+    if (!reported.ok()) std::fprintf(stderr, "warning: %s\n", reported.message().c_str());
+  }
+  if (stop_requested_) return stop_writing();
+  // Last: the manifest of every file this run wrote, so metrics.json vouches for the folder.
+  metrics["files"] = out.Manifest();
+  s = out.Write("metrics.json", metrics.dump(2) + "\n");
+  if (!s.ok()) return fail(s.message());
+  std::printf("test views: PSNR %.2f dB, SSIM %.4f (exposure-aligned %.2f dB, %.4f)", psnr, ssim,
+              psnr_aligned, ssim_aligned);
+  if (depth_views > 0)
+    std::printf(", 2DGS depth error %.4f (%.3f%% of the extent)", depth_err / depth_views,
+                100 * depth_err / depth_views / scene.extent);
+  std::printf("\nmesh: %s (%zu triangles); metrics: %s; total %.0f s\n", mesh_path.c_str(),
+              mesh.triangles.size(), out.Path("metrics.json").c_str(), total.ElapsedSeconds());
+  *end = ReconstructionEnd::kFinished;
+  return Status::Ok();
+}
+
+}  // namespace mgsr

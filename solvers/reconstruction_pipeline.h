@@ -1,0 +1,89 @@
+// The whole job, from a workspace (or photos) to a reconstruction folder, like COLMAP's automatic
+// reconstruction controller: colmap when given photos, loading the scene, choosing the backgrounds
+// and budgets, training (checkpoints, resume, Ctrl-C), the test views' scores and renders, the
+// models, the TSDF mesh, and metrics.json with the exact geometry figures when the scene has a
+// ground truth. mgsr_solve maps its flags onto ReconstructionOptions and runs it.
+#pragma once
+
+#include <csignal>
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include "mgsr/core/status.h"
+#include "mgsr/io/scene.h"
+#include "mgsr/sfm/colmap_pipeline.h"
+#include "solvers/solver_options.h"
+#include "solvers/surface_extraction.h"
+
+namespace mgsr {
+
+class MutualBoostedSolver;
+
+struct ReconstructionOptions {
+  // Input: a workspace (COLMAP, Blender/NeRF or mgsr_synth), or photos (and optional masks) that
+  // colmap turns into one inside the output folder first (`colmap` holds its settings).
+  std::string workspace, images, masks;
+  ColmapPipelineOptions colmap;
+  // Called with colmap's summary when it ran (mgsr_solve prints it).
+  std::function<void(const ColmapPipelineSummary&)> on_colmap_summary;
+  SceneOptions scene;
+  // "auto" (the photos' uniform backdrop when there is one, else the reference's), "reference"
+  // (2DGS white, 3DGS black) or a grey level in [0, 1] for both branches.
+  std::string background = "auto";
+
+  // Output and run control.
+  std::string output;
+  bool overwrite = false;   // replace an earlier run's results (else the folder must be new)
+  bool resume = false;      // continue from output/checkpoints/latest.ckpt
+  bool check_only = false;  // load the scene (and the checkpoint) and stop; writes nothing
+  int checkpoint_every = 500;
+  int log_every = 100;   // a progress line every N iterations
+  int eval_every = 500;  // a test-view PSNR line every N iterations (0: none)
+
+  // Training; max_gaussians / max_surfels: -1 takes the budget from the scene
+  // (DefaultPrimitiveBudget), 0 is none.
+  SolverOptions solver;
+  int64_t max_gaussians = -1, max_surfels = -1;
+
+  // The mesh.
+  SurfaceOptions surface;
+
+  // How `solver` was chosen, recorded in metrics.json.
+  std::string preset = "fast", method = "mgsr", surfel_low_pass = "area",
+              surfel_init = "neighbours";
+
+  // Which input and output: one of workspace and images, masks only with images, an output unless
+  // only checking, not both resume and overwrite. Errors name the option as the command line
+  // spells it.
+  Status CheckInputsAndOutput() const;
+  // That, and every value (the solver's options included).
+  Status Validate() const;
+};
+
+// "background" as ReconstructionOptions takes it: -1 in `level` for auto or reference.
+Status ParseBackground(const std::string& background, double* level);
+
+enum class ReconstructionEnd {
+  kFinished,     // every output written
+  kChecked,      // check_only: the scene (and checkpoint) can be trained
+  kInterrupted,  // RequestStop: the state is checkpointed, --resume continues
+};
+
+class ReconstructionPipeline {
+ public:
+  explicit ReconstructionPipeline(ReconstructionOptions options) : options_(std::move(options)) {}
+  // Runs the job. On an error (one line naming the file or option and the problem) the results
+  // this run wrote are taken back; a trained state stays in the checkpoint.
+  Status Run(ReconstructionEnd* end);
+  // Safe from a signal handler: training stops at the iteration's end and is checkpointed; while
+  // the outputs are written, the ones written so far are taken back and the trained state kept.
+  void RequestStop();
+
+ private:
+  ReconstructionOptions options_;
+  MutualBoostedSolver* volatile solver_ = nullptr;  // while training
+  volatile std::sig_atomic_t stop_requested_ = 0;
+};
+
+}  // namespace mgsr
