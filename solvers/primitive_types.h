@@ -14,17 +14,12 @@
 
 namespace mgsr {
 
-struct SurfelPrimitive {
-  using Model = SurfelModel;
-  using Renderer = SurfelRenderer;
-  using Render = SurfelRender;
-  using RenderOptions = SurfelRenderOptions;
-  using RenderGrad = SurfelRenderGrad;
-  using Gradients = SurfelGradients;
-  static constexpr Branch kBranch = Branch::kSurfels2D;
-
-  static RenderBuffers Buffers(const Camera& camera, const Render& r);
-  static void TakeGradients(RenderGradients* from, RenderGrad* to);
+// What both types share: the screen radii of their renderer's last projection, and density control
+// and opacity resets from solvers/density_control.h.
+template <typename ModelT, typename RendererT>
+struct DensityControlledPrimitive {
+  using Model = ModelT;
+  using Renderer = RendererT;
   static const std::vector<float>& Radii(const Renderer& renderer) {
     return renderer.projected().radius;
   }
@@ -36,9 +31,18 @@ struct SurfelPrimitive {
   static void ResetOpacity(Model* model, Adam* adam) { mgsr::ResetOpacity(model, adam); }
 };
 
-struct GaussianPrimitive {
-  using Model = GaussianModel;
-  using Renderer = GaussianRenderer;
+struct SurfelPrimitive : DensityControlledPrimitive<SurfelModel, SurfelRenderer> {
+  using Render = SurfelRender;
+  using RenderOptions = SurfelRenderOptions;
+  using RenderGrad = SurfelRenderGrad;
+  using Gradients = SurfelGradients;
+  static constexpr Branch kBranch = Branch::kSurfels2D;
+
+  static RenderBuffers Buffers(const Camera& camera, const Render& r);
+  static void TakeGradients(RenderGradients* from, RenderGrad* to);
+};
+
+struct GaussianPrimitive : DensityControlledPrimitive<GaussianModel, GaussianRenderer> {
   using Render = GaussianRender;
   using RenderOptions = GaussianRenderOptions;
   using RenderGrad = GaussianRenderGrad;
@@ -47,15 +51,6 @@ struct GaussianPrimitive {
 
   static RenderBuffers Buffers(const Camera& camera, const Render& r);
   static void TakeGradients(RenderGradients* from, RenderGrad* to);
-  static const std::vector<float>& Radii(const Renderer& renderer) {
-    return renderer.projected().radius;
-  }
-  static DensifyResult DensifyAndPrune(Model* model, Adam* adam, DensityStats* stats,
-                                       const DensityOptions& options, double extent,
-                                       bool prune_large, Rng* rng) {
-    return mgsr::DensifyAndPrune(model, adam, stats, options, extent, prune_large, rng);
-  }
-  static void ResetOpacity(Model* model, Adam* adam) { mgsr::ResetOpacity(model, adam); }
 };
 
 using SurfelTrainer = PrimitiveTrainer<SurfelPrimitive>;
