@@ -7,35 +7,16 @@
 #include <vector>
 
 #include "mgsr/core/separable_blur.h"
-#include "mgsr/loss/loss_term.h"
 #include "mgsr/loss/loss_util.h"
+#include "mgsr/loss/photometric_term.h"
 
 namespace mgsr {
 
-class DssimLoss : public LossTermImpl<DssimLoss> {
+class DssimLoss : public PhotometricTerm<DssimLoss> {
  public:
   explicit DssimLoss(Buffer buffer = Buffer::kColor, TargetKind target = TargetKind::kImage)
-      : buffer_(buffer), target_(target) {}
-  std::string Name() const override {
-    return std::string("dssim(") + BufferName(buffer_) + ", " + TargetName(target_) + ")";
-  }
-  std::vector<Buffer> Inputs() const override { return {buffer_}; }
-  std::vector<OtherBranchTarget> TargetInputs() const override {
-    if (target_ == TargetKind::kTransmitted) return {OtherBranchTarget::kTransmitted};
-    return {};
-  }
-  // Symmetric in the buffer and the target: the swapped gradient.
-  template <typename T>
-  void TargetGradient(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
-                      TargetGradientsT<T>* grad) const {
-    if (target_ == TargetKind::kTransmitted)
-      SwappedTransmittedGradient(*this, buffer_, in, t, scale, grad);
-  }
-  Status Check(const RenderBuffers& in, const Targets& t) const override {
-    MGSR_RETURN_IF_ERROR(RequireImage(Name(), BufferName(buffer_), in.Get(buffer_)));
-    return RequireImage(Name(), TargetName(target_), SelectTarget(t, target_), in.Get(buffer_),
-                        in.Get(buffer_)->channels());
-  }
+      : PhotometricTerm(buffer, target) {}
+  std::string Name() const override { return Describe("dssim"); }
 
   template <typename T>
   double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
@@ -87,10 +68,6 @@ class DssimLoss : public LossTermImpl<DssimLoss> {
     }
     return 1.0 - total / static_cast<double>(x.size());
   }
-
- private:
-  Buffer buffer_;
-  TargetKind target_;
 };
 
 }  // namespace mgsr

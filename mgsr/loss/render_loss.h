@@ -7,30 +7,15 @@
 
 namespace mgsr {
 
-class RenderLoss : public LossTermImpl<RenderLoss> {
+class RenderLoss : public PhotometricTerm<RenderLoss> {
  public:
   explicit RenderLoss(Buffer buffer = Buffer::kColor, TargetKind target = TargetKind::kImage,
                       double lambda = 0.8)
-      : l1_(buffer, target),
+      : PhotometricTerm(buffer, target),
+        l1_(buffer, target),
         dssim_(buffer, target),
-        buffer_(buffer),
-        target_(target),
         lambda_(lambda) {}
-  std::string Name() const override {
-    return std::string("render(") + BufferName(buffer_) + ", " + TargetName(target_) + ")";
-  }
-  std::vector<Buffer> Inputs() const override { return {buffer_}; }
-  std::vector<OtherBranchTarget> TargetInputs() const override {
-    if (target_ == TargetKind::kTransmitted) return {OtherBranchTarget::kTransmitted};
-    return {};
-  }
-  // Symmetric in the buffer and the target: the swapped gradient.
-  template <typename T>
-  void TargetGradient(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
-                      TargetGradientsT<T>* grad) const {
-    if (target_ == TargetKind::kTransmitted)
-      SwappedTransmittedGradient(*this, buffer_, in, t, scale, grad);
-  }
+  std::string Name() const override { return Describe("render"); }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
     return l1_.Check(in, t);
   }
@@ -45,8 +30,6 @@ class RenderLoss : public LossTermImpl<RenderLoss> {
  private:
   L1Loss l1_;
   DssimLoss dssim_;
-  Buffer buffer_;
-  TargetKind target_;
   double lambda_;
 };
 
