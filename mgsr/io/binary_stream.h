@@ -51,7 +51,10 @@ class BinaryReader {
     return Status::Error(path_ + ": truncated (unexpected end of file at byte " +
                          std::to_string(pos_) + " of " + std::to_string(data_.size()) + ")");
   }
-  const std::string& path_;
+  // The name is copied: callers pass literals ("cut.ckpt"), whose temporary std::string would be
+  // gone by the first error (AddressSanitizer: stack-use-after-scope). The data, which can be
+  // large, stays a reference: it must outlive the reader.
+  std::string path_;
   const std::string& data_;
   size_t pos_ = 0;
 };
