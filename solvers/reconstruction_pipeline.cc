@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "mgsr/core/timer.h"
+#include "mgsr/eval/depth_error.h"
 #include "mgsr/eval/exposure_alignment.h"
 #include "mgsr/eval/ground_truth.h"
 #include "mgsr/eval/image_metrics.h"
@@ -28,6 +29,10 @@
 
 namespace mgsr {
 namespace {
+
+// The signed depth-error render (renders/<view>_depth2d_error.png) saturates at this many pixel
+// footprints: the surface biases it shows are fractions of a pixel to a few pixels.
+constexpr double kErrorMapFootprints = 2.0;
 
 // Test-view PSNR of the 3DGS composite every N iterations (after a 3DGS step, when the renderer's
 // state is free to reuse), against the photo on the 3DGS branch's background: the composite the
@@ -538,6 +543,9 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
     int n = 0;
     if (ReadPfm(JoinPath(scene.root, "gt/depth/" + stem + ".pfm"), &gt_depth).ok() &&
         gt_depth.SameShape(sr.depth)) {
+      s = write_render("depth2d_error", SignedDepthErrorImage(sr.depth, gt_depth, &v.mask, v.camera,
+                                                              kErrorMapFootprints));
+      if (!s.ok()) return fail(s.message());
       for (size_t k = 0; k < gt_depth.size(); ++k) {
         if (gt_depth.data()[k] <= 0 || (!v.mask.empty() && v.mask.data()[k] < 0.5f)) continue;
         err += std::abs(sr.depth.data()[k] - gt_depth.data()[k]);

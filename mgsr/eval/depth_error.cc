@@ -31,6 +31,28 @@ void DepthErrorAccumulator::Add(const Image& rendered, const Image& truth, const
   }
 }
 
+Image SignedDepthErrorImage(const Image& rendered, const Image& truth, const Image* mask,
+                            const Camera& camera, double range_footprints) {
+  Image out(truth.width(), truth.height(), 3, 0.0f);
+  if (!rendered.SameShape(truth) || rendered.channels() != 1 || !(range_footprints > 0)) return out;
+  const bool masked = mask != nullptr && !mask->empty() && mask->width() == truth.width() &&
+                      mask->height() == truth.height();
+  const double focal = std::max(camera.fx, camera.fy);
+  const size_t plane = truth.size();
+  for (size_t k = 0; k < plane; ++k) {
+    const float z_true = truth.data()[k], z = rendered.data()[k];
+    if (!(z_true > 0) || !(z > 0) || !std::isfinite(z)) continue;
+    if (masked && mask->data()[k] < 0.5f) continue;
+    const double u =
+        std::clamp((z_true - static_cast<double>(z)) / (z_true / focal) / range_footprints, -1.0,
+                   1.0);  // > 0: in front of the true surface
+    out.data()[k] = static_cast<float>(u > 0 ? 1.0 : 1.0 + u);
+    out.data()[plane + k] = static_cast<float>(1.0 - std::abs(u));
+    out.data()[2 * plane + k] = static_cast<float>(u < 0 ? 1.0 : 1.0 - u);
+  }
+  return out;
+}
+
 DepthErrorStats DepthErrorAccumulator::Finish() const {
   DepthErrorStats s;
   s.pixels = error_.size();

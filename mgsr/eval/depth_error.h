@@ -31,4 +31,12 @@ class DepthErrorAccumulator {
   std::vector<double> error_, footprints_;
 };
 
+// The same signed error as a picture (3 channels): white where the render lies on the true surface,
+// red where it lies in front of it (outside the object), blue behind it (inside), saturating at
+// `range_footprints` pixel footprints; black where a pixel does not count (as in Add). This is the
+// map that shows where a surface is filled in (concavities) or sunk (convex parts): README,
+// surface accuracy.
+Image SignedDepthErrorImage(const Image& rendered, const Image& truth, const Image* mask,
+                            const Camera& camera, double range_footprints = 2.0);
+
 }  // namespace mgsr

@@ -71,7 +71,8 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
       << r.output;
   EXPECT_NE(r.output.find("test views: PSNR"), std::string::npos) << r.output;
   for (const char* f : {"metrics.json", "log.csv", "point_cloud_2d.ply", "point_cloud_3d.ply",
-                        "mesh.ply", "renders/v000_composite.png", "renders/v000_depth2d.png"}) {
+                        "mesh.ply", "renders/v000_composite.png", "renders/v000_depth2d.png",
+                        "renders/v000_depth2d_error.png"}) {  // the scene has gt/depth
     EXPECT_TRUE(FileExists(out + "/" + f)) << f;
   }
   std::string metrics;
