@@ -59,8 +59,10 @@ TEST(SurfelRendererTest, TiledRenderMatchesTheReference) {
         m, cam, 3, bg, low_pass == SurfelLowPass::kAreaPreserving, sigma);
     EXPECT_LT(testing::MaxAbsDiff(out.color, ref.color), 1e-5) << seed;
     EXPECT_LT(testing::MaxAbsDiff(out.alpha, ref.alpha), 1e-5) << seed;
-    EXPECT_LT(testing::MaxAbsDiff(out.normal, ref.normal), 1e-5) << seed;
-    EXPECT_LT(testing::MaxAbsDiff(out.normal_world, ref.normal_world), 1e-5) << seed;
+    // Normals sum up to a few dozen float terms: 2e-5 (the -O1 sanitizer build, which rounds
+    // differently from -O3, measured 1.1e-5 here).
+    EXPECT_LT(testing::MaxAbsDiff(out.normal, ref.normal), 2e-5) << seed;
+    EXPECT_LT(testing::MaxAbsDiff(out.normal_world, ref.normal_world), 2e-5) << seed;
     // Depths: relative 1e-5 (the low-pass branch takes the centre's depth, so no pixel sees the
     // ill-conditioned intersection with a nearly edge-on plane far behind the disk).
     double depth_err = 0, median_err = 0;
