@@ -20,6 +20,7 @@
 #include "mgsr/io/model_ply.h"
 #include "mgsr/io/output_folder.h"
 #include "mgsr/io/ply.h"
+#include "mgsr/mesh/exact_depth_ceiling.h"
 #include "mgsr/synth/ray_caster.h"
 #include "solvers/backdrop.h"
 #include "solvers/checkpoint_callback.h"
@@ -537,15 +538,22 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
     if (s.ok()) s = write_render("normal2d", normal);
     if (!s.ok()) return fail(s.message());
     if (stop_requested_) return stop_writing();
-    // Depth error against ground-truth depth maps when the scene has them (synthetic scenes).
+    // Depth error against ground-truth depth maps when the scene has them (synthetic scenes);
+    // the signed error map also from the exact depth of a ground-truth mesh (suzanne).
     Image gt_depth;
     double err = 0;
     int n = 0;
-    if (ReadPfm(JoinPath(scene.root, "gt/depth/" + stem + ".pfm"), &gt_depth).ok() &&
-        gt_depth.SameShape(sr.depth)) {
-      s = write_render("depth2d_error", SignedDepthErrorImage(sr.depth, gt_depth, &v.mask, v.camera,
-                                                              kErrorMapFootprints));
+    const bool has_depth_map =
+        ReadPfm(JoinPath(scene.root, "gt/depth/" + stem + ".pfm"), &gt_depth).ok() &&
+        gt_depth.SameShape(sr.depth);
+    if (has_depth_map || gt_caster != nullptr) {
+      const Image truth = has_depth_map ? Image() : RenderExactDepth(*gt_caster, v.camera);
+      s = write_render("depth2d_error",
+                       SignedDepthErrorImage(sr.depth, has_depth_map ? gt_depth : truth, &v.mask,
+                                             v.camera, kErrorMapFootprints));
       if (!s.ok()) return fail(s.message());
+    }
+    if (has_depth_map) {
       for (size_t k = 0; k < gt_depth.size(); ++k) {
         if (gt_depth.data()[k] <= 0 || (!v.mask.empty() && v.mask.data()[k] < 0.5f)) continue;
         err += std::abs(sr.depth.data()[k] - gt_depth.data()[k]);

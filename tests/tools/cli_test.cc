@@ -130,7 +130,7 @@ TEST_F(CliTest, SolveRefusesAStaleFolderAndListsWhatItWrote) {
     EXPECT_TRUE(metrics["files"].contains("renders/" + e.path().filename().string())) << e.path();
     ++renders;
   }
-  EXPECT_EQ(renders, 2u * 7u);  // two test views, seven images each
+  EXPECT_EQ(renders, 2u * 8u);  // two test views, eight images each (with the depth error)
   for (const char* f : {"mesh.ply", "point_cloud_2d.ply", "point_cloud_3d.ply"})
     EXPECT_TRUE(metrics["files"].contains(f)) << f;
 
