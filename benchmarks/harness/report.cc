@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -138,12 +139,13 @@ double Primitives(const RunRecord& r) {
 }
 
 // Contact sheet of one scene: a row per method (label, then ground truth, composite, transmitted,
-// reflected, depth, normal of the first test view).
+// reflected, depth, normal and signed depth error of the first test view; grey where a run has
+// no such render).
 bool WriteContactSheet(const std::string& path, const std::string& scene,
                        const std::vector<std::string>& methods,
                        const std::vector<RunRecord>& runs) {
-  static const char* kColumns[] = {"gt",        "composite", "transmitted",
-                                   "reflected", "depth2d",   "normal2d"};
+  static const char* kColumns[] = {"gt",      "composite", "transmitted",  "reflected",
+                                   "depth2d", "normal2d",  "depth2d_error"};
   std::vector<cv::Mat> rows;
   int tile = 0;
   std::string view;
@@ -193,7 +195,7 @@ bool WriteContactSheet(const std::string& path, const std::string& scene,
   }
   if (rows.empty()) return false;
   cv::Mat header(22, rows[0].cols, CV_8UC3, cv::Scalar(255, 255, 255));
-  for (int c = 0; c < 6; ++c) {
+  for (int c = 0; c < static_cast<int>(std::size(kColumns)); ++c) {
     cv::putText(header, kColumns[c], cv::Point(150 + c * tile + 3, 16), cv::FONT_HERSHEY_SIMPLEX,
                 0.4, cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
   }
