@@ -13,10 +13,11 @@ double MedianOf(std::vector<double> v) {
   return v[half];
 }
 
-}  // namespace
-
-void DepthErrorAccumulator::Add(const Image& rendered, const Image& truth, const Image* mask,
-                                const Camera& camera) {
+// Calls f(index, error, error in footprints) for every pixel that counts: a true depth, a finite
+// positive render, and (with a mask of the same size) mask >= 0.5. error = true - rendered.
+template <typename F>
+void ForEachCountedPixel(const Image& rendered, const Image& truth, const Image* mask,
+                         const Camera& camera, F&& f) {
   if (!rendered.SameShape(truth) || rendered.channels() != 1) return;
   const bool masked = mask != nullptr && !mask->empty() && mask->width() == truth.width() &&
                       mask->height() == truth.height();
@@ -26,30 +27,31 @@ void DepthErrorAccumulator::Add(const Image& rendered, const Image& truth, const
     if (!(z_true > 0) || !(z > 0) || !std::isfinite(z)) continue;
     if (masked && mask->data()[k] < 0.5f) continue;
     const double e = static_cast<double>(z_true) - z;
-    error_.push_back(e);
-    footprints_.push_back(e / (z_true / focal));
+    f(k, e, e / (z_true / focal));
   }
+}
+
+}  // namespace
+
+void DepthErrorAccumulator::Add(const Image& rendered, const Image& truth, const Image* mask,
+                                const Camera& camera) {
+  ForEachCountedPixel(rendered, truth, mask, camera, [this](size_t, double e, double px) {
+    error_.push_back(e);
+    footprints_.push_back(px);
+  });
 }
 
 Image SignedDepthErrorImage(const Image& rendered, const Image& truth, const Image* mask,
                             const Camera& camera, double range_footprints) {
   Image out(truth.width(), truth.height(), 3, 0.0f);
-  if (!rendered.SameShape(truth) || rendered.channels() != 1 || !(range_footprints > 0)) return out;
-  const bool masked = mask != nullptr && !mask->empty() && mask->width() == truth.width() &&
-                      mask->height() == truth.height();
-  const double focal = std::max(camera.fx, camera.fy);
+  if (!(range_footprints > 0)) return out;
   const size_t plane = truth.size();
-  for (size_t k = 0; k < plane; ++k) {
-    const float z_true = truth.data()[k], z = rendered.data()[k];
-    if (!(z_true > 0) || !(z > 0) || !std::isfinite(z)) continue;
-    if (masked && mask->data()[k] < 0.5f) continue;
-    const double u =
-        std::clamp((z_true - static_cast<double>(z)) / (z_true / focal) / range_footprints, -1.0,
-                   1.0);  // > 0: in front of the true surface
+  ForEachCountedPixel(rendered, truth, mask, camera, [&](size_t k, double, double px) {
+    const double u = std::clamp(px / range_footprints, -1.0, 1.0);  // > 0: in front of the truth
     out.data()[k] = static_cast<float>(u > 0 ? 1.0 : 1.0 + u);
     out.data()[plane + k] = static_cast<float>(1.0 - std::abs(u));
     out.data()[2 * plane + k] = static_cast<float>(u < 0 ? 1.0 : 1.0 - u);
-  }
+  });
   return out;
 }
 
