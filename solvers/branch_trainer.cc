@@ -3,6 +3,8 @@
 #include <deque>
 #include <limits>
 
+#include "mgsr/core/profiler.h"
+
 namespace mgsr {
 
 const char* BranchLabel(Branch branch) { return branch == Branch::kSurfels2D ? "2DGS" : "3DGS"; }
@@ -30,6 +32,7 @@ void BranchTrainer::AddLossRow(const LossSpec& row, std::unique_ptr<LossTerm> te
 
 double BranchTrainer::EvaluateLoss(Stage stage, int view, int iteration, const RenderBuffers& in,
                                    const Targets& targets, RenderGradients* gradient) {
+  ProfileScope scope("losses");
   StageProblem& sp = ProblemFor(stage);
   for (size_t i = 0; i < sp.rows.size(); ++i)
     sp.problem.SetWeight(i, iteration >= sp.rows[i].first_iteration ? sp.rows[i].weight : 0.0);
@@ -46,6 +49,7 @@ double BranchTrainer::EvaluateLoss(Stage stage, int view, int iteration, const R
   }
   const double loss = sp.problem.Evaluate(branch_, in, targets, gradient, &last_terms_);
   if (!sp.exposure_terms.empty()) {
+    ProfileScope exposure_scope("exposure");
     ColorTransform g{};
     for (const ExposureCompensatedLoss* e : sp.exposure_terms) {
       for (int k = 0; k < kColorTransformSize; ++k) g[k] += e->parameter_gradient()[k];
@@ -70,12 +74,18 @@ std::string BranchTrainer::OptimizeAndControlDensity(const Camera& camera,
   // then density control and opacity resets on the branch's schedule.
   const BranchSchedule& s = options_.schedule;
   if (it < s.densify_until) {
+    ProfileScope scope("density control");
     std::vector<float> norms;
     ScreenGradientNorms(mean2d, camera.width, camera.height, &norms);
     stats_.Accumulate(norms, radii);
   }
-  const std::string nonfinite = adam_.Step(params, gradients, options_.learning_rates(it));
+  std::string nonfinite;
+  {
+    ProfileScope scope("adam");
+    nonfinite = adam_.Step(params, gradients, options_.learning_rates(it));
+  }
   if (!nonfinite.empty()) return nonfinite;  // the run stops: no density decisions on bad data
+  ProfileScope scope("density control");
   if (it > s.densify_from && it < s.densify_until && it % s.densify_interval == 0) {
     DensityOptions d = options_.density;
     d.min_opacity = s.min_opacity;

@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "mgsr/core/camera.h"
+#include "mgsr/core/profiler.h"
 #include "mgsr/core/rng.h"
 #include "mgsr/core/status.h"
 #include "mgsr/io/binary_stream.h"
@@ -222,6 +223,7 @@ class PrimitiveTrainer : public BranchTrainer {
 
   double Step(Stage stage, int view, const Camera& camera, int iteration,
               const Targets& targets) override {
+    ProfileContext context(name());
     const typename P::RenderOptions ro = RenderOptionsFor(camera);
     typename P::Render render;
     renderer_.Forward(model_, ro, &render);
@@ -240,6 +242,7 @@ class PrimitiveTrainer : public BranchTrainer {
   }
 
   RenderBuffers Hold(const Camera& camera) override {
+    ProfileContext context(name());
     held_options_ = RenderOptionsFor(camera);
     renderer_.Forward(model_, held_options_, &held_);
     held_current_ = true;
@@ -247,6 +250,7 @@ class PrimitiveTrainer : public BranchTrainer {
   }
 
   Status BackpropHeld(RenderGradients* gradient, int iteration) override {
+    ProfileContext context(name());
     if (!held_current_) {
       return Status::Error(std::string(name()) +
                            " trainer: the held render's forward state is gone (the branch "
@@ -256,6 +260,7 @@ class PrimitiveTrainer : public BranchTrainer {
     P::TakeGradients(gradient, &rg);
     typename P::Gradients grads;
     renderer_.Backward(model_, held_options_, held_, rg, &grads);
+    ProfileScope scope("adam");
     adam_.Step(model_.Blocks(), grads.params.Blocks(), options_.learning_rates(iteration));
     return Status::Ok();
   }

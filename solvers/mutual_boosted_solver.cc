@@ -296,8 +296,13 @@ Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* te
   const float background =
       learner->branch() == Branch::kSurfels2D ? options_.background_2d : options_.background_3d;
   // The teacher's render, a constant target (reference 1.5).
-  Image target = *teacher->Hold(v.camera).Get(sup.buffer);
-  if (sup.background_outside_mask && !v.mask.empty()) FillOutsideMask(v.mask, background, &target);
+  Image target;
+  {
+    ProfileScope scope("mutual targets");
+    target = *teacher->Hold(v.camera).Get(sup.buffer);
+    if (sup.background_outside_mask && !v.mask.empty())
+      FillOutsideMask(v.mask, background, &target);
+  }
   const Targets targets = LossTargets(learner->branch(), view, &target);
   // Bidirectional: the learner's render the loss compares, before its step.
   RenderBuffers before;
@@ -342,7 +347,12 @@ Status MutualBoostedSolver::CheckFinite(const BranchTrainer& t, int iteration, d
 
 Status MutualBoostedSolver::Solve(SolveSummary* summary) {
   summary_.message.clear();
+  summary_.profile.clear();
+  Profiler::Take();  // what was recorded before (loading, initialisation) is not the solve's
+  profile_iterations_ = 0;
+  profile_timer_.Restart();
   const Status s = Run();
+  CloseStageProfile(stage_);
   if (!s.ok()) {
     if (summary_.termination_type != TerminationType::kUserAbort)
       summary_.termination_type = TerminationType::kFailure;
@@ -357,8 +367,24 @@ Status MutualBoostedSolver::Solve(SolveSummary* summary) {
   return s;
 }
 
+void MutualBoostedSolver::CloseStageProfile(Stage stage) {
+  if (!Profiler::Enabled()) return;
+  StageProfile p;
+  p.stage = stage;
+  p.iterations = profile_iterations_;
+  p.seconds = profile_timer_.ElapsedSeconds();
+  p.entries = Profiler::Take();
+  if (p.iterations > 0) summary_.profile.push_back(std::move(p));
+  profile_iterations_ = 0;
+  profile_timer_.Restart();
+}
+
 bool MutualBoostedSolver::EndIteration(Stage stage, int iteration, bool last, Status* status) {
-  NotifyIterationEnd(stage, iteration);
+  ++profile_iterations_;
+  {
+    ProfileScope scope("callbacks");
+    NotifyIterationEnd(stage, iteration);
+  }
   const std::string where = std::string(stage == Stage::kWarmup ? "warm-up" : "mutual") +
                             " iteration " + std::to_string(iteration);
   const CallbackReturnType request = callback_request_;
@@ -414,9 +440,11 @@ Status MutualBoostedSolver::Run() {
           !Trains(t->branch()) || b.auto_stopped || b.warmup_iterations >= o.warmup_max_iterations;
     }
     if (done[0] && done[1]) {
+      CloseStageProfile(Stage::kWarmup);
       if (o.exposure != ExposureMode::kOff && o.exposure_fit_at_mutual && o.train_2d &&
           o.train_3d) {
         Timer fit;
+        ProfileScope scope("exposure fit");
         SetShDegree(o.sh_degree);
         FitExposures();
         sum.exposure_fit_seconds = fit.ElapsedSeconds();

@@ -13,7 +13,9 @@
 #include <vector>
 
 #include "mgsr/core/image.h"
+#include "mgsr/core/profiler.h"
 #include "mgsr/core/rng.h"
+#include "mgsr/core/timer.h"
 #include "mgsr/io/scene.h"
 #include "mgsr/loss/problem.h"
 #include "mgsr/model/gaussian_model.h"
@@ -75,6 +77,14 @@ enum class TerminationType {
 };
 const char* TerminationTypeName(TerminationType type);
 
+// Where one stage's time went in one Solve call, when Profiler::Enabled() (mgsr_solve --profile).
+struct StageProfile {
+  Stage stage = Stage::kWarmup;
+  int iterations = 0;                 // run in this Solve call
+  double seconds = 0;                 // their wall time, including what no scope names
+  std::vector<ProfileEntry> entries;  // per branch ("2DGS", "3DGS", "" for the solver) and scope
+};
+
 struct SolveSummary {
   TerminationType termination_type = TerminationType::kNotRun;
   std::string message;  // why it ended, one line
@@ -84,6 +94,8 @@ struct SolveSummary {
   int mutual_iterations = 0;
   double warmup_seconds = 0, mutual_seconds = 0;
   double exposure_fit_seconds = 0;  // the Ceres fits at the start of the mutual stage
+  // With Profiler::Enabled(): one per stage this Solve call ran (not kept in checkpoints).
+  std::vector<StageProfile> profile;
   std::string BriefReport() const;
   // Several lines: termination, iterations and time per stage, counts, final losses.
   std::string FullReport() const;
@@ -160,6 +172,11 @@ class MutualBoostedSolver {
   bool EndIteration(Stage stage, int iteration, bool last, Status* status);
   // Solve's body; Solve fills the summary's termination from it.
   Status Run();
+  // With profiling on: closes the current stage's profile (what the profiler recorded since the
+  // last call) into the summary.
+  void CloseStageProfile(Stage stage);
+  int profile_iterations_ = 0;
+  Timer profile_timer_;
   CallbackReturnType callback_request_ = CallbackReturnType::kContinue;
 
   SolverOptions options_;

@@ -26,6 +26,7 @@
 #include "solvers/checkpoint_callback.h"
 #include "solvers/density_control.h"
 #include "solvers/mutual_boosted_solver.h"
+#include "solvers/profile_report.h"
 #include "solvers/trained_views.h"
 
 namespace mgsr {
@@ -435,7 +436,9 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
     ~Forget() { *solver = nullptr; }
   } forget{&solver_};
   SolveSummary summary;
+  Profiler::SetEnabled(o.profile);
   s = solver.Solve(&summary);
+  Profiler::SetEnabled(false);
   if (!s.ok())
     return fail(checkpointer.status().ok() ? s.message() : checkpointer.status().message());
   if (summary.termination_type == TerminationType::kInterrupted) {
@@ -451,6 +454,7 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
     return Status::Ok();
   }
   std::printf("%s\n", summary.BriefReport().c_str());
+  if (o.profile) std::printf("%s", FormatProfile(summary.profile).c_str());
   std::fflush(stdout);  // the end of training shows at once, also when stdout is a file
   if (o.checkpoint_every > 0) {
     // The finished state: --resume then skips training and only rebuilds the outputs (e.g. a mesh
@@ -642,6 +646,7 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
         {"voxel_size", SurfaceTsdfOptions(scene, surface).voxel_size},
         {"pixel_footprint", TrainingFootprint(scene)}}}};
   if (!colmap_metrics.is_null()) metrics["colmap"] = colmap_metrics;
+  if (o.profile) metrics["profile"] = ProfileToJson(summary.profile);
   metrics["budget"] = {{"gaussians", options.max_gaussians},
                        {"surfels", options.max_surfels},
                        {"from_scene", o.max_gaussians < 0 || o.max_surfels < 0}};

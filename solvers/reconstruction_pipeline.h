@@ -40,6 +40,9 @@ struct ReconstructionOptions {
   int checkpoint_every = 500;
   int log_every = 100;   // a progress line every N iterations
   int eval_every = 500;  // a test-view PSNR line every N iterations (0: none)
+  // Time every stage of an iteration (projection, binning, raster, losses, Adam, ...) and print
+  // ms per iteration per stage and branch at the end of training (also in metrics.json "profile").
+  bool profile = false;
 
   // Training; max_gaussians / max_surfels: -1 takes the budget from the scene
   // (DefaultPrimitiveBudget), 0 is none.

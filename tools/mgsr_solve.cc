@@ -115,6 +115,10 @@ DEFINE_int32(auto_stop_window, -1, "Auto-stop window in iterations (-1: preset).
 DEFINE_double(auto_stop_range, 0.01,
               "Auto-stop when max - min of the window's losses falls below this.");
 DEFINE_int32(log_every, 100, "Print progress every N iterations.");
+DEFINE_bool(profile, false,
+            "Time every stage of an iteration (projection, binning, raster forward/backward, "
+            "losses, Adam, density control, exposure) and print ms per iteration per stage and "
+            "branch after training (also metrics.json \"profile\").");
 DEFINE_int32(eval_every, 500, "Print the test-view PSNR every N iterations (0: only at the end).");
 DEFINE_string(mesh_depth, "expected",
               "Depth fused into the mesh: expected (MGSR) | median (2DGS).");
@@ -187,7 +191,8 @@ int main(int argc, char** argv) {
        {"Photos to cameras (with --images)",
         {"colmap", "per_image_cameras", "camera_model", "exhaustive_max_images", "max_image_size"}},
        {"Output and run control",
-        {"output", "overwrite", "resume", "check", "checkpoint_every", "log_every", "eval_every"}},
+        {"output", "overwrite", "resume", "check", "checkpoint_every", "log_every", "eval_every",
+         "profile"}},
        {"Method and schedule",
         {"preset", "method", "mutual_mode", "warmup_max_iterations", "warmup_min_iterations",
          "mutual_iterations", "auto_stop", "auto_stop_window", "auto_stop_range", "bidirectional",
@@ -279,6 +284,7 @@ int main(int argc, char** argv) {
   ro.checkpoint_every = FLAGS_checkpoint_every;
   ro.log_every = FLAGS_log_every;
   ro.eval_every = FLAGS_eval_every;
+  ro.profile = FLAGS_profile;
   ro.background = FLAGS_background;
   ro.scene.downscale = FLAGS_downscale;
   ro.scene.max_width = FLAGS_max_width;

@@ -1,11 +1,14 @@
 #include "mgsr/loss/problem.h"
 
+#include "mgsr/core/profiler.h"
+
 namespace mgsr {
 
 void Problem::AddTerm(std::unique_ptr<LossTerm> term, double weight, Branch branch,
                       std::string label) {
   if (label.empty()) label = term->Name();
-  entries_.push_back({std::move(term), weight, branch, std::move(label)});
+  std::string profile_name = "loss: " + label;
+  entries_.push_back({std::move(term), weight, branch, std::move(label), std::move(profile_name)});
 }
 
 bool Problem::SetWeight(const std::string& name, Branch branch, double weight) {
@@ -34,6 +37,7 @@ double Problem::Evaluate(Branch branch, const RenderBuffers& in, const Targets& 
   double total = 0;
   for (const Entry& e : entries_) {
     if (e.branch != branch || e.weight == 0) continue;
+    ProfileScope scope(e.profile_name.c_str());
     const double v = e.term->Evaluate(in, targets, e.weight, grad);
     total += e.weight * v;
     if (breakdown != nullptr) breakdown->push_back({e.label, e.weight, v});

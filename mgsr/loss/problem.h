@@ -22,7 +22,8 @@ class Problem {
     std::unique_ptr<LossTerm> term;
     double weight;
     Branch branch;
-    std::string label;  // the breakdown's name for the entry (default: the term's name)
+    std::string label;         // the breakdown's name for the entry (default: the term's name)
+    std::string profile_name;  // "loss: <label>", the entry's scope in a profile
   };
   struct TermValue {
     std::string name;

@@ -2,13 +2,22 @@
 
 #include <glog/logging.h>
 
+#include "mgsr/core/profiler.h"
+
 namespace mgsr {
 
 void GaussianRenderer::Forward(const GaussianModel& model, const GaussianRenderOptions& options,
                                GaussianRender* out) {
-  ProjectGaussians(model, options.camera, options.sh_degree, options.reflection, &projected_);
-  BinPrimitives(projected_.rects, projected_.depth.data(), options.camera.width,
-                options.camera.height, &bins_);
+  {
+    ProfileScope scope("projection & SH");
+    ProjectGaussians(model, options.camera, options.sh_degree, options.reflection, &projected_);
+  }
+  {
+    ProfileScope scope("binning");
+    BinPrimitives(projected_.rects, projected_.depth.data(), options.camera.width,
+                  options.camera.height, &bins_);
+  }
+  ProfileScope scope("raster forward");
   RasterizeGaussians(projected_, bins_, options, out, &scratch_);
 }
 
@@ -16,8 +25,12 @@ void GaussianRenderer::Backward(const GaussianModel& model, const GaussianRender
                                 const GaussianRender& render, const GaussianRenderGrad& grad,
                                 GaussianGradients* grads) {
   CHECK_EQ(projected_.size(), model.size()) << "Backward without a matching Forward";
-  d_projected_.ResizeAndZero(model.size());
-  RasterizeGaussiansBackward(projected_, bins_, options, render, grad, &d_projected_, &scratch_);
+  {
+    ProfileScope scope("raster backward");
+    d_projected_.ResizeAndZero(model.size());
+    RasterizeGaussiansBackward(projected_, bins_, options, render, grad, &d_projected_, &scratch_);
+  }
+  ProfileScope scope("projection & SH backward");
   grads->ResizeAndZero(model);
   ProjectGaussiansBackward(model, options.camera, options.sh_degree, options.reflection, projected_,
                            d_projected_, grads);

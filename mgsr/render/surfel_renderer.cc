@@ -2,13 +2,22 @@
 
 #include <glog/logging.h>
 
+#include "mgsr/core/profiler.h"
+
 namespace mgsr {
 
 void SurfelRenderer::Forward(const SurfelModel& model, const SurfelRenderOptions& options,
                              SurfelRender* out) {
-  ProjectSurfels(model, options.camera, options.sh_degree, &projected_, options.filter_sigma);
-  BinPrimitives(projected_.rects, projected_.depth.data(), options.camera.width,
-                options.camera.height, &bins_);
+  {
+    ProfileScope scope("projection & SH");
+    ProjectSurfels(model, options.camera, options.sh_degree, &projected_, options.filter_sigma);
+  }
+  {
+    ProfileScope scope("binning");
+    BinPrimitives(projected_.rects, projected_.depth.data(), options.camera.width,
+                  options.camera.height, &bins_);
+  }
+  ProfileScope scope("raster forward");
   RasterizeSurfels(projected_, bins_, options, out, &scratch_);
 }
 
@@ -16,8 +25,12 @@ void SurfelRenderer::Backward(const SurfelModel& model, const SurfelRenderOption
                               const SurfelRender& render, const SurfelRenderGrad& grad,
                               SurfelGradients* grads) {
   CHECK_EQ(projected_.size(), model.size()) << "Backward without a matching Forward";
-  d_projected_.ResizeAndZero(model.size());
-  RasterizeSurfelsBackward(projected_, bins_, options, render, grad, &d_projected_, &scratch_);
+  {
+    ProfileScope scope("raster backward");
+    d_projected_.ResizeAndZero(model.size());
+    RasterizeSurfelsBackward(projected_, bins_, options, render, grad, &d_projected_, &scratch_);
+  }
+  ProfileScope scope("projection & SH backward");
   grads->ResizeAndZero(model);
   ProjectSurfelsBackward(model, options.camera, options.sh_degree, projected_, d_projected_, grads);
 }

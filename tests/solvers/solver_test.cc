@@ -182,6 +182,53 @@ TEST(MutualBoostedSolverTest, EndToEndLossFallsAndPsnrRises) {
   EXPECT_EQ(summary.mutual_iterations, 20);
 }
 
+TEST(MutualBoostedSolverTest, ProfileAccountsForEachStage) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  SolverOptions o = TinyOptions();
+  o.warmup_max_iterations = 30;
+  o.mutual_iterations = 10;
+  MutualBoostedSolver solver(o, scene);
+  SolveSummary summary;
+  Profiler::SetEnabled(true);
+  const Status s = solver.Solve(&summary);
+  Profiler::SetEnabled(false);
+  ASSERT_TRUE(s.ok()) << s.message();
+  ASSERT_EQ(summary.profile.size(), 2u);
+  const StageProfile& warmup = summary.profile[0];
+  const StageProfile& mutual = summary.profile[1];
+  EXPECT_EQ(warmup.stage, Stage::kWarmup);
+  EXPECT_EQ(warmup.iterations, 30);
+  EXPECT_EQ(mutual.stage, Stage::kMutual);
+  EXPECT_EQ(mutual.iterations, 10);
+  for (const StageProfile& p : summary.profile) {
+    std::map<std::string, int64_t> calls;
+    double named = 0;
+    for (const ProfileEntry& e : p.entries) {
+      calls[e.context + "/" + e.name] += e.calls;
+      named += e.seconds;
+    }
+    // Exclusive times never add up to more than the stage's wall time.
+    EXPECT_LE(named, p.seconds * 1.001 + 1e-4);
+    if (p.stage == Stage::kWarmup) {
+      // Both branches step every warm-up iteration.
+      EXPECT_EQ(calls["2DGS/raster forward"], 30);
+      EXPECT_EQ(calls["3DGS/raster backward"], 30);
+      EXPECT_EQ(calls["3DGS/loss: photo"], 30);
+      EXPECT_EQ(calls["2DGS/adam"], 30);
+    } else {
+      // Alternate: each branch learns on every other iteration and supervises on the others.
+      EXPECT_EQ(calls["2DGS/raster backward"], 5);
+      EXPECT_EQ(calls["2DGS/raster forward"], 10);
+      EXPECT_EQ(calls["/mutual targets"], 10);
+      EXPECT_EQ(calls["/exposure fit"], 1);
+    }
+  }
+  // Off again: the next solve records nothing.
+  MutualBoostedSolver quiet(o, scene);
+  ASSERT_TRUE(quiet.Solve(&summary).ok());
+  EXPECT_TRUE(summary.profile.empty());
+}
+
 TEST(MutualBoostedSolverTest, AlternateAndJointCallOrder) {
   const Scene scene = TinyScene(testing::ScratchDir());
   for (const char* mode : {"alternate", "joint"}) {
