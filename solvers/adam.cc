@@ -7,6 +7,33 @@
 #include <cstring>
 
 namespace mgsr {
+namespace {
+
+// Subnormal floats. An entry whose gradient stays zero (a primitive the views do not see, a
+// colour band that does not matter) decays its first moment by beta1 per step, and after about
+// 700 such steps it is subnormal: x86 arithmetic on subnormals takes a microcode assist, and the
+// moment never reaches zero (0.9 x the smallest subnormal rounds back to it). Measured on 4M
+// entries with zero gradients, one Adam step with 2 threads: 12 ms until step 600, 470 ms from
+// step 800. So every kFlushInterval steps moments below kFlushMoment are set to zero: between
+// two flushes a moment shrinks by at most 0.9^64 ~ 1e-3, so it never gets near the subnormal
+// range (below 1.2e-38). A flushed entry's step would have been below rate x 1e-30 / eps =
+// rate x 1e-15. A pass every 64 steps costs far less than a test per entry in every step (the
+// update loop is ~30% slower with one).
+constexpr int64_t kFlushInterval = 64;
+constexpr float kFlushMoment = 1e-30f;
+
+void FlushTinyMoments(std::vector<float>* m, std::vector<float>* v) {
+  const int64_t n = static_cast<int64_t>(m->size());
+  float* pm = m->data();
+  float* pv = v->data();
+#pragma omp parallel for schedule(static) if (n > 100000)
+  for (int64_t i = 0; i < n; ++i) {
+    if (std::fabs(pm[i]) < kFlushMoment) pm[i] = 0.0f;
+    if (pv[i] < kFlushMoment) pv[i] = 0.0f;
+  }
+}
+
+}  // namespace
 
 std::string Adam::Step(const std::vector<ParamBlock>& params, const std::vector<ParamBlock>& grads,
                        const LearningRates& learning_rates) {
@@ -56,6 +83,7 @@ std::string Adam::Step(const std::vector<ParamBlock>& params, const std::vector<
       }
     }
     if (nonfinite_bits != 0 && nonfinite.empty()) nonfinite = p.name;
+    if (s.step % kFlushInterval == 0) FlushTinyMoments(&s.m, &s.v);
   }
   return nonfinite;
 }

@@ -34,6 +34,13 @@ DEFINE_bool(report_only, false,
             "Rebuild README.md, charts and contact sheets from --output's results.csv and "
             "context.json (and the renders under --work) without running anything.");
 DEFINE_string(title, "MGSR-CPU benchmark", "Title of the report.");
+DEFINE_bool(profile, false,
+            "Instead of the suite: where an iteration's time goes. Generates a 256 px, 48-view "
+            "specular object (or --size/--views), runs mgsr_solve --profile on it and writes "
+            "profile.txt (ms per iteration per stage and branch) and the run under --output.");
+DEFINE_int32(profile_iterations, 0,
+             "With --profile: iterations of the warm-up and of the mutual stage (0: the fast "
+             "preset's whole schedule, auto-stop included, which is what a user's run costs).");
 
 namespace {
 
@@ -118,6 +125,65 @@ int Fail(const std::string& message) {
   return 1;
 }
 
+// --profile: one object scene, one profiled run; profile.txt is the run's profile tables.
+int RunProfile(const std::string& synth, const std::string& solve, const std::string& out,
+               const std::string& command) {
+  const int size = FLAGS_size > 0 ? FLAGS_size : 256;
+  const int views = FLAGS_views > 0 ? FLAGS_views : 48;
+  const std::string scene = mgsr::JoinPath(out, "scene"), run = mgsr::JoinPath(out, "run");
+  std::error_code ec;
+  fs::remove_all(scene, ec);
+  fs::remove_all(run, ec);
+  const std::string synth_log = mgsr::JoinPath(out, "synth.log"),
+                    log = mgsr::JoinPath(out, "run.log");
+  std::printf("mgsr_bench --profile: %d px, %d views (dented object, specular, changing light)\n",
+              size, views);
+  std::fflush(stdout);
+  const mgsr::ProgramResult made =
+      mgsr::RunProgram({synth, "--output", scene, "--shape", "dented", "--seed", "11", "--mirror",
+                        "0.3", "--width", std::to_string(size), "--height", std::to_string(size),
+                        "--num_views", std::to_string(views)},
+                       {}, synth_log);
+  if (made.exit_code != 0) return Fail("mgsr_synth failed; see " + synth_log);
+  std::vector<std::string> cmd = {
+      solve,       "--workspace",  scene, "--output",           run, "--preset", "fast",
+      "--profile", "--eval_every", "0",   "--checkpoint_every", "0"};
+  if (FLAGS_profile_iterations > 0) {
+    const std::string n = std::to_string(FLAGS_profile_iterations);
+    cmd.insert(cmd.end(), {"--auto_stop=false", "--warmup_min_iterations", n,
+                           "--warmup_max_iterations", n, "--mutual_iterations", n});
+  }
+  const std::vector<std::string> extra = Split(FLAGS_solve_flags, ' ');
+  cmd.insert(cmd.end(), extra.begin(), extra.end());
+  mgsr::Timer timer;
+  const mgsr::ProgramResult pr = mgsr::RunProgram(cmd, {}, log, FLAGS_timeout);
+  if (pr.exit_code != 0 || pr.timed_out)
+    return Fail("mgsr_solve failed" + std::string(pr.timed_out ? " (timed out)" : "") + "; see " +
+                log);
+  // The profile tables are the lines from "profile, " to the rasterizer summary of each stage.
+  std::string text;
+  if (!mgsr::ReadFileToString(log, &text).ok()) return Fail(log + ": cannot read");
+  std::string table;
+  bool in_table = false;
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.rfind("profile, ", 0) == 0) in_table = true;
+    if (in_table) table += line + "\n";
+    if (line.find("rasterizers (binning") != std::string::npos) in_table = false;
+  }
+  if (table.empty()) return Fail(log + ": the run printed no profile");
+  const std::string header = "Made by `" + command + "` on " + Now() + ", commit `" +
+                             Commit(mgsr::JoinPath(out, ".scratch.txt")) +
+                             "`.\nMachine: " + Machine() + "; the run took " +
+                             std::to_string(static_cast<int>(timer.ElapsedSeconds())) + " s.\n\n";
+  const mgsr::Status s =
+      mgsr::WriteStringToFileAtomic(mgsr::JoinPath(out, "profile.txt"), header + table);
+  if (!s.ok()) return Fail(s.message());
+  std::printf("%s%sprofile: %s/profile.txt, run: %s\n", header.c_str(), table.c_str(), out.c_str(),
+              run.c_str());
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -126,6 +192,7 @@ int main(int argc, char** argv) {
   mgsr_tools::ParseToolFlags(
       "mgsr_bench --output DIR [--quick] [--scenes a,b] [--methods x,y]",
       {{"What to run", {"scenes", "methods", "quick", "size", "views", "solve_flags", "timeout"}},
+       {"Profile", {"profile", "profile_iterations"}},
        {"Output", {"output", "work", "title", "report_only", "nc_threshold"}}},
       &argc, &argv);
   if (FLAGS_output.empty()) return Fail("--output is required");
@@ -134,6 +201,11 @@ int main(int argc, char** argv) {
   const std::string synth = tools + "/mgsr_synth", solve = tools + "/mgsr_solve";
   if (mgsr::FindProgram(synth).empty() || mgsr::FindProgram(solve).empty())
     return Fail(tools + ": mgsr_synth and mgsr_solve must be next to mgsr_bench");
+  if (FLAGS_profile) {
+    const mgsr::Status made = mgsr::MakeDirectories(FLAGS_output);
+    if (!made.ok()) return Fail(made.message());
+    return RunProfile(synth, solve, FLAGS_output, command);
+  }
 
   namespace b = mgsr::bench;
   b::ReportContext context;
