@@ -111,4 +111,15 @@ void Adam::ResetBlock(const std::string& name) {
   std::fill(it->second.v.begin(), it->second.v.end(), 0.0f);
 }
 
+void Adam::ZeroRows(const std::vector<int>& rows) {
+  for (auto& [name, s] : state_) {
+    if (s.m.empty()) continue;
+    for (int r : rows) {
+      const size_t begin = static_cast<size_t>(r) * s.width;
+      std::fill(s.m.begin() + begin, s.m.begin() + begin + s.width, 0.0f);
+      std::fill(s.v.begin() + begin, s.v.begin() + begin + s.width, 0.0f);
+    }
+  }
+}
+
 }  // namespace mgsr

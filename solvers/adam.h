@@ -35,6 +35,8 @@ class Adam {
   void AppendZeroRows(size_t count);
   // Zeroes the moments of one block (the reference does this on opacity resets).
   void ResetBlock(const std::string& name);
+  // Zeroes the moments of some rows in every block (relocated primitives start afresh).
+  void ZeroRows(const std::vector<int>& rows);
 
   std::map<std::string, BlockState>& state() { return state_; }
   const std::map<std::string, BlockState>& state() const { return state_; }

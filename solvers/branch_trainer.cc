@@ -1,5 +1,7 @@
 #include "solvers/branch_trainer.h"
 
+#include <glog/logging.h>
+
 #include <deque>
 #include <limits>
 
@@ -16,7 +18,21 @@ BranchTrainer::BranchTrainer(Branch branch, const BranchTrainerOptions& options,
       exposure_(exposure),
       rng_(rng),
       auto_stop_(options.auto_stop_min_iteration, options.auto_stop_window,
-                 options.auto_stop_range) {}
+                 options.auto_stop_range) {
+  DensityContext context;
+  context.schedule = options.schedule;
+  context.density = options.density;
+  context.extent = options.extent;
+  Status status;
+  density_ = DensityStrategyRegistry::Get().Create(options.density_strategy, context,
+                                                   options.density_config, &status);
+  CHECK(density_ != nullptr) << BranchLabel(branch) << ": " << status.message();
+}
+
+void BranchTrainer::BeginDensity(std::vector<ParamBlock> params) {
+  PrimitiveRows rows(std::move(params), &adam_, &Layout());
+  density_->Begin(&rows, rng_);
+}
 
 void BranchTrainer::AddLossRow(const LossSpec& row, std::unique_ptr<LossTerm> term,
                                bool behind_exposure) {
@@ -70,28 +86,31 @@ std::string BranchTrainer::OptimizeAndControlDensity(const Camera& camera,
                                                      const std::vector<float>& radii,
                                                      std::vector<ParamBlock> params,
                                                      std::vector<ParamBlock> gradients, int it) {
-  // Reference 1.10: view-averaged screen-gradient statistics while densifying, the Adam step,
-  // then density control and opacity resets on the branch's schedule.
-  const BranchSchedule& s = options_.schedule;
-  if (it < s.densify_until) {
+  // The strategy's statistics and regulariser gradient (reference 1.10: view-averaged screen
+  // gradients while densifying), the Adam step, then the strategy's row operations.
+  const Adam::LearningRates rates = options_.learning_rates(it);
+  DensityStep step;
+  step.iteration = it;
+  step.camera = &camera;
+  step.mean2d = &mean2d;
+  step.radii = &radii;
+  std::vector<float> position_rates;
+  rates("means", 3, &position_rates);
+  step.position_lr = position_rates.empty() ? 0.0f : position_rates[0];
+  PrimitiveRows rows(std::move(params), &adam_, &Layout());
+  {
     ProfileScope scope("density control");
-    std::vector<float> norms;
-    ScreenGradientNorms(mean2d, camera.width, camera.height, &norms);
-    stats_.Accumulate(norms, radii);
+    const double regulariser = density_->BeforeStep(step, rows, gradients);
+    if (regulariser != 0) last_terms_.push_back({"density_regulariser", 1.0, regulariser});
   }
   std::string nonfinite;
   {
     ProfileScope scope("adam");
-    nonfinite = adam_.Step(params, gradients, options_.learning_rates(it));
+    nonfinite = adam_.Step(rows.blocks(), gradients, rates);
   }
   if (!nonfinite.empty()) return nonfinite;  // the run stops: no density decisions on bad data
   ProfileScope scope("density control");
-  if (it > s.densify_from && it < s.densify_until && it % s.densify_interval == 0) {
-    DensityOptions d = options_.density;
-    d.min_opacity = s.min_opacity;
-    Densify(d, it > s.opacity_reset_interval);
-  }
-  if (it < s.densify_until && it % s.opacity_reset_interval == 0) ResetOpacities();
+  last_density_ = density_->AfterStep(step, &rows, rng_);
   return "";
 }
 
@@ -102,8 +121,7 @@ void BranchTrainer::Save(BinaryWriter* w) const {
   WriteVector(w, std::vector<double>(auto_stop_.window().begin(), auto_stop_.window().end()));
   SaveModel(w);
   WriteAdamState(w, adam_);
-  WriteVector(w, stats_.grad_sum);
-  WriteVector(w, stats_.count);
+  density_->Save(w);
 }
 
 Status BranchTrainer::Read(BinaryReader* r) {
@@ -121,8 +139,7 @@ Status BranchTrainer::Read(BinaryReader* r) {
     return Status::Error(r->path() + ": corrupt checkpoint (" + name() + " iteration count)");
   MGSR_RETURN_IF_ERROR(ReadModel(r));
   MGSR_RETURN_IF_ERROR(ReadAdamState(r, &p.adam));
-  MGSR_RETURN_IF_ERROR(ReadVector(r, &p.stats.grad_sum));
-  MGSR_RETURN_IF_ERROR(ReadVector(r, &p.stats.count));
+  MGSR_RETURN_IF_ERROR(density_->Read(r));
   pending_ = std::move(p);
   return Status::Ok();
 }
@@ -130,7 +147,7 @@ Status BranchTrainer::Read(BinaryReader* r) {
 void BranchTrainer::CommitRead() {
   CommitModel();
   adam_ = std::move(pending_.adam);
-  stats_ = std::move(pending_.stats);
+  density_->CommitRead();
   auto_stop_.set_window(std::deque<double>(pending_.window.begin(), pending_.window.end()));
   summary_ = pending_.summary;
   pending_ = Pending();

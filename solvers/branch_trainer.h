@@ -12,9 +12,7 @@
 //   static RenderBuffers Buffers(const Camera&, const Render&);     // what loss terms read
 //   static void TakeGradients(RenderGradients* from, RenderGrad* to);  // d loss / d buffers
 //   static const std::vector<float>& Radii(const Renderer&);       // > 0 where drawn, last render
-//   static DensifyResult DensifyAndPrune(Model*, Adam*, DensityStats*, const DensityOptions&,
-//                                        double extent, bool prune_large, Rng*);
-//   static void ResetOpacity(Model*, Adam*);
+//   static PrimitiveLayout Layout();  // what density strategies see of the rows
 // Model: size(), Blocks(), max_sh_degree, Resize(n). Renderer: Forward(model, options, &render),
 // Backward(model, options, render, render_grad, &gradients). Gradients: params (a Model: d loss /
 // d parameter) and mean2d (2 per primitive: the densification statistic). RenderOptions: camera,
@@ -39,6 +37,7 @@
 #include "solvers/auto_stop.h"
 #include "solvers/checkpoint_io.h"
 #include "solvers/density_control.h"
+#include "solvers/density_strategy.h"
 #include "solvers/exposure_model.h"
 #include "solvers/loss_table.h"
 #include "solvers/solver_options.h"
@@ -63,6 +62,9 @@ struct BranchTrainerOptions {
   // Thresholds of density control; max_primitives is the branch's budget (0 = none), min_opacity
   // is taken from the schedule.
   DensityOptions density;
+  // The density strategy by its DensityStrategyRegistry name, and its config.
+  std::string density_strategy = "reference";
+  nlohmann::json density_config;
   double extent = 1;     // the scene's extent: density control's and the position rate's scale
   float background = 0;  // the grey level the branch renders and compares on
   // The Adam learning rates at a step, per block and column.
@@ -78,7 +80,8 @@ class BranchTrainer {
  public:
   // `exposure`: the per-view colour transforms the branch's exposure rows are behind (owned by the
   // solver; the two branches may share one). `rng`: the solver's generator, which density control
-  // draws from (shared so a run is one reproducible sequence).
+  // draws from (shared so a run is one reproducible sequence). The density strategy must exist
+  // (SolverOptions::Validate checks the names and configs).
   BranchTrainer(Branch branch, const BranchTrainerOptions& options, ExposureModel* exposure,
                 Rng* rng);
   virtual ~BranchTrainer() = default;
@@ -108,8 +111,11 @@ class BranchTrainer {
   // stage's first step); NonfiniteBlock() names a parameter block whose gradient was not finite.
   const Status& StepStatus() const { return step_error_; }
   const std::string& NonfiniteBlock() const { return nonfinite_block_; }
-  // The active rows of the last step: label, weight, unweighted value.
+  // The active rows of the last step: label, weight, unweighted value (and the density
+  // strategy's regulariser, "density_regulariser", when it has one).
   const std::vector<Problem::TermValue>& LastTerms() const { return last_terms_; }
+  // What the last step's density control did.
+  const DensifyResult& LastDensity() const { return last_density_; }
   // The warm-up's auto-stop: records the loss of `iteration`; true once it has flattened.
   bool UpdateAutoStop(int iteration, double loss) { return auto_stop_.Update(iteration, loss); }
   BranchSummary& summary() { return summary_; }
@@ -143,17 +149,19 @@ class BranchTrainer {
   // cannot be fed.
   double EvaluateLoss(Stage stage, int view, int iteration, const RenderBuffers& in,
                       const Targets& targets, RenderGradients* gradient);
-  // After the backward pass: density statistics, Adam, density control, opacity resets.
+  // After the backward pass: the density strategy's statistics and regulariser, Adam, then its
+  // row operations.
   std::string OptimizeAndControlDensity(const Camera& camera, const std::vector<float>& mean2d,
                                         const std::vector<float>& radii,
                                         std::vector<ParamBlock> params,
                                         std::vector<ParamBlock> gradients, int iteration);
+  // The density strategy's first look at the initial model (the derived constructor calls it).
+  void BeginDensity(std::vector<ParamBlock> params);
   virtual void SaveModel(BinaryWriter* w) const = 0;
   virtual Status ReadModel(BinaryReader* r) = 0;
   virtual void CommitModel() = 0;
-  // Density control and opacity resets of the primitive type.
-  virtual void Densify(const DensityOptions& options, bool prune_large) = 0;
-  virtual void ResetOpacities() = 0;
+  // What density strategies see of the primitive type's rows.
+  virtual const PrimitiveLayout& Layout() const = 0;
 
   const Branch branch_;
   const BranchTrainerOptions options_;
@@ -161,7 +169,8 @@ class BranchTrainer {
   Rng* const rng_;
   int sh_degree_ = 0;
   Adam adam_;
-  DensityStats stats_;
+  std::unique_ptr<DensityStrategy> density_;
+  DensifyResult last_density_;
   Status step_error_;            // of the last step
   std::string nonfinite_block_;  // of the last step
 
@@ -182,7 +191,6 @@ class BranchTrainer {
   // Read, not yet committed.
   struct Pending {
     Adam adam;
-    DensityStats stats;
     std::vector<double> window;
     BranchSummary summary;
   } pending_;
@@ -200,7 +208,7 @@ class PrimitiveTrainer : public BranchTrainer {
         model_(std::move(initial)),
         render_options_(std::move(render_options)) {
     for (float& b : render_options_.background) b = options.background;
-    stats_.Reset(model_.size());
+    BeginDensity(model_.Blocks());
   }
 
   size_t size() const override { return model_.size(); }
@@ -281,10 +289,10 @@ class PrimitiveTrainer : public BranchTrainer {
     pending_model_ = Model();
     held_current_ = false;
   }
-  void Densify(const DensityOptions& options, bool prune_large) override {
-    P::DensifyAndPrune(&model_, &adam_, &stats_, options, options_.extent, prune_large, rng_);
+  const PrimitiveLayout& Layout() const override {
+    static const PrimitiveLayout layout = P::Layout();
+    return layout;
   }
-  void ResetOpacities() override { P::ResetOpacity(&model_, &adam_); }
 
  private:
   Model model_, pending_model_;

@@ -1,18 +1,18 @@
-// Density control of both branches (reference 1.10): view-averaged screen-gradient statistics,
-// clone (small primitives) and split (large ones, two children scaled by 1/1.6 sampled from the
-// primitive's own Gaussian), pruning by opacity and world size, opacity resets (3DGS: also the
-// reflected opacity, and beta capped at 0.1), and a primitive budget so a model never grows past
-// what the user allows. The optimiser state follows every row operation.
+// The reference's density control of both branches (reference 1.10), the "reference" density
+// strategy: view-averaged screen-gradient statistics, clone (small primitives) and split (large
+// ones, two children scaled by 1/1.6 sampled from the primitive's own Gaussian), pruning by opacity
+// and world size, opacity resets (3DGS: also the reflected opacity, and beta capped at 0.1), and a
+// primitive budget so a model never grows past what the user allows. The optimiser state follows
+// every row operation.
 #pragma once
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "mgsr/core/rng.h"
 #include "mgsr/io/scene.h"
-#include "mgsr/model/gaussian_model.h"
-#include "mgsr/model/surfel_model.h"
-#include "solvers/adam.h"
+#include "solvers/primitive_rows.h"
 
 namespace mgsr {
 
@@ -43,15 +43,14 @@ struct DensityStats {
   }
 };
 
+// What one density-control event did (a strategy fills the fields it uses).
 struct DensifyResult {
   size_t cloned = 0, split = 0, pruned = 0;
+  size_t relocated = 0, added = 0;  // MCMC: dead primitives moved, new ones sampled
 };
 
 // One densify-and-prune step; `prune_large` enables the world-size test. Resets `stats`.
-DensifyResult DensifyAndPrune(GaussianModel* model, Adam* adam, DensityStats* stats,
-                              const DensityOptions& options, double extent, bool prune_large,
-                              Rng* rng);
-DensifyResult DensifyAndPrune(SurfelModel* model, Adam* adam, DensityStats* stats,
+DensifyResult DensifyAndPrune(PrimitiveRows* rows, DensityStats* stats,
                               const DensityOptions& options, double extent, bool prune_large,
                               Rng* rng);
 
@@ -65,8 +64,17 @@ constexpr size_t kBudgetPerPixel = 4;
 constexpr size_t kMinBudget = 500000;
 size_t DefaultPrimitiveBudget(const Scene& scene);
 
-// Opacity reset: opacity <= 0.01 (3DGS: reflected opacity too, beta <= 0.1); moments zeroed.
-void ResetOpacity(GaussianModel* model, Adam* adam);
-void ResetOpacity(SurfelModel* model, Adam* adam);
+// `--budget auto`: a budget from what the training views show. A branch gets its rate x the
+// median over training views of the foreground pixels in a view (the mask, else the alpha, else
+// every pixel), and at least kMinAutoBudget. `why` says how, for the log and metrics.json.
+constexpr double kAutoGaussiansPerPixel = 0.5;
+constexpr double kAutoSurfelsPerPixel = 0.3;
+constexpr size_t kMinAutoBudget = 1000;
+struct SceneBudget {
+  size_t gaussians = 0, surfels = 0;
+  double foreground_pixels = 0;  // the median per training view
+  std::string why;
+};
+SceneBudget AutoPrimitiveBudget(const Scene& scene);
 
 }  // namespace mgsr

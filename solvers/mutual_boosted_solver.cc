@@ -175,6 +175,8 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   BranchTrainerOptions common;
   common.density.grad_threshold = options.densify_grad_threshold;
   common.density.percent_dense = options.percent_dense;
+  common.density_strategy = options.density;
+  common.density_config = options.density_config;
   common.extent = scene.extent;
   const SolverOptions* o = &options_;
   const double extent = scene.extent;

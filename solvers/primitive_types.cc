@@ -9,6 +9,21 @@ Image Take(RenderGradients* g, Buffer b) { return std::move(g->images[static_cas
 
 }  // namespace
 
+PrimitiveLayout SurfelPrimitive::Layout() {
+  PrimitiveLayout l;
+  l.scale_axes = 2;
+  return l;
+}
+
+PrimitiveLayout GaussianPrimitive::Layout() {
+  PrimitiveLayout l;
+  l.scale_axes = 3;
+  l.opacity_blocks = {"opacity_logits", "ref_opacity_logits"};
+  l.opacity_reset_caps = {
+      {"opacity_logits", 0.01f}, {"ref_opacity_logits", 0.01f}, {"beta_logits", 0.1f}};
+  return l;
+}
+
 RenderBuffers SurfelPrimitive::Buffers(const Camera& camera, const Render& r) {
   RenderBuffers in;
   in.camera = &camera;

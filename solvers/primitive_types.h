@@ -10,44 +10,42 @@
 #include "mgsr/render/gaussian_renderer.h"
 #include "mgsr/render/surfel_renderer.h"
 #include "solvers/branch_trainer.h"
-#include "solvers/density_control.h"
+#include "solvers/primitive_rows.h"
 
 namespace mgsr {
 
-// What both types share: the screen radii of their renderer's last projection, and density control
-// and opacity resets from solvers/density_control.h.
+// What both types share: the screen radii of their renderer's last projection.
 template <typename ModelT, typename RendererT>
-struct DensityControlledPrimitive {
+struct ProjectedPrimitive {
   using Model = ModelT;
   using Renderer = RendererT;
   static const std::vector<float>& Radii(const Renderer& renderer) {
     return renderer.projected().radius;
   }
-  static DensifyResult DensifyAndPrune(Model* model, Adam* adam, DensityStats* stats,
-                                       const DensityOptions& options, double extent,
-                                       bool prune_large, Rng* rng) {
-    return mgsr::DensifyAndPrune(model, adam, stats, options, extent, prune_large, rng);
-  }
-  static void ResetOpacity(Model* model, Adam* adam) { mgsr::ResetOpacity(model, adam); }
 };
 
-struct SurfelPrimitive : DensityControlledPrimitive<SurfelModel, SurfelRenderer> {
+struct SurfelPrimitive : ProjectedPrimitive<SurfelModel, SurfelRenderer> {
   using Render = SurfelRender;
   using RenderOptions = SurfelRenderOptions;
   using RenderGrad = SurfelRenderGrad;
   using Gradients = SurfelGradients;
   static constexpr Branch kBranch = Branch::kSurfels2D;
+  // Flat disks: two scale axes; the opacity reset caps the opacity at 0.01.
+  static PrimitiveLayout Layout();
 
   static RenderBuffers Buffers(const Camera& camera, const Render& r);
   static void TakeGradients(RenderGradients* from, RenderGrad* to);
 };
 
-struct GaussianPrimitive : DensityControlledPrimitive<GaussianModel, GaussianRenderer> {
+struct GaussianPrimitive : ProjectedPrimitive<GaussianModel, GaussianRenderer> {
   using Render = GaussianRender;
   using RenderOptions = GaussianRenderOptions;
   using RenderGrad = GaussianRenderGrad;
   using Gradients = GaussianGradients;
   static constexpr Branch kBranch = Branch::kGaussians3D;
+  // Three scale axes; the reflected opacity follows the primitive's; the opacity reset caps both
+  // opacities at 0.01 and beta at 0.1 (reference 1.10).
+  static PrimitiveLayout Layout();
 
   static RenderBuffers Buffers(const Camera& camera, const Render& r);
   static void TakeGradients(RenderGradients* from, RenderGrad* to);

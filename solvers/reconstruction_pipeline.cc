@@ -300,10 +300,19 @@ Status ReconstructionOptions::Validate() const {
   if (eval_every < 0) return Status::Error("--eval_every must be >= 0");
   if (max_gaussians < -1 || max_surfels < -1)
     return Status::Error(
-        "--max_gaussians and --max_surfels must be -1 (from the scene), 0 (none) or a count");
+        "--max_gaussians and --max_surfels must be -1 (from --budget), 0 (none) or a count");
+  if (!budget.empty() && budget != "auto" && budget != "scene" && budget != "none" &&
+      (budget.find_first_not_of("0123456789") != std::string::npos || budget.size() > 12))
+    return Status::Error("--budget must be auto, scene, none or a count, not '" + budget + "'");
   double level = 0;
   MGSR_RETURN_IF_ERROR(ParseBackground(background, &level));
-  return solver.Validate();
+  // The budgets are set once the scene is read; until then a placeholder stands for each one that
+  // will come from --budget (none stays none, so "mcmc needs a budget" shows before any work).
+  SolverOptions check = solver;
+  const size_t placeholder = budget == "none" ? 0 : 1;
+  check.max_gaussians = max_gaussians >= 0 ? max_gaussians : placeholder;
+  check.max_surfels = max_surfels >= 0 ? max_surfels : placeholder;
+  return check.Validate();
 }
 
 void ReconstructionPipeline::RequestStop() {
@@ -380,17 +389,36 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   const std::string background_note =
       ChooseBackground(o.background, background_level, scene, &options);
   std::printf("background: %s\n", background_note.c_str());
-  const size_t scene_budget = DefaultPrimitiveBudget(scene);
-  options.max_gaussians = o.max_gaussians < 0 ? scene_budget : o.max_gaussians;
-  options.max_surfels = o.max_surfels < 0 ? scene_budget : o.max_surfels;
+  // The budget: --budget for both branches unless --max_gaussians / --max_surfels give one.
+  const std::string budget_mode =
+      !o.budget.empty() ? o.budget : (options.density == "mcmc" ? "auto" : "scene");
+  size_t budget_3d = 0, budget_2d = 0;
+  std::string budget_why;
+  if (budget_mode == "auto") {
+    const SceneBudget b = AutoPrimitiveBudget(scene);
+    budget_3d = b.gaussians;
+    budget_2d = b.surfels;
+    budget_why = b.why;
+  } else if (budget_mode == "scene") {
+    budget_3d = budget_2d = DefaultPrimitiveBudget(scene);
+    budget_why = "scene: 4 per pixel of a training view, at least 500,000 (a bound, not a target)";
+  } else if (budget_mode == "none") {
+    budget_why = "none";
+  } else {
+    budget_3d = budget_2d = std::stoull(budget_mode);
+    budget_why = "given: --budget " + budget_mode;
+  }
+  options.max_gaussians = o.max_gaussians < 0 ? budget_3d : o.max_gaussians;
+  options.max_surfels = o.max_surfels < 0 ? budget_2d : o.max_surfels;
+  if (o.max_gaussians >= 0 || o.max_surfels >= 0) budget_why += "; per branch as given";
   const auto budget_text = [](size_t n) {
     return n == 0 ? std::string("none") : std::to_string(n);
   };
-  std::printf("budget: %s Gaussians, %s surfels%s\n", budget_text(options.max_gaussians).c_str(),
-              budget_text(options.max_surfels).c_str(),
-              o.max_gaussians < 0 || o.max_surfels < 0
-                  ? " (4 per pixel of a training view, at least 500,000, unless given)"
-                  : "");
+  std::printf("budget: %s Gaussians, %s surfels (%s), density: %s\n",
+              budget_text(options.max_gaussians).c_str(), budget_text(options.max_surfels).c_str(),
+              budget_why.c_str(), options.density.c_str());
+  s = options.Validate();
+  if (!s.ok()) return fail(s.message());
 
   MutualBoostedSolver solver(options, scene);
   if (o.resume) {
@@ -649,7 +677,10 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   if (o.profile) metrics["profile"] = ProfileToJson(summary.profile);
   metrics["budget"] = {{"gaussians", options.max_gaussians},
                        {"surfels", options.max_surfels},
-                       {"from_scene", o.max_gaussians < 0 || o.max_surfels < 0}};
+                       {"mode", budget_mode},
+                       {"why", budget_why},
+                       {"density", options.density},
+                       {"density_config", options.density_config}};
   metrics["background"] = {
       {"2d", options.background_2d}, {"3d", options.background_3d}, {"choice", background_note}};
   metrics["exposure"] = {{"mode", ExposureModeName(options.exposure)},

@@ -44,9 +44,12 @@ struct ReconstructionOptions {
   // ms per iteration per stage and branch at the end of training (also in metrics.json "profile").
   bool profile = false;
 
-  // Training; max_gaussians / max_surfels: -1 takes the budget from the scene
-  // (DefaultPrimitiveBudget), 0 is none.
+  // Training. The primitive budget of each branch: max_gaussians / max_surfels when >= 0 (0 is
+  // none), else from `budget`: "auto" (AutoPrimitiveBudget: from the foreground the views show),
+  // "scene" (DefaultPrimitiveBudget: a safety bound far above need), "none", or a count for both;
+  // empty is the density strategy's own default (mcmc: auto; reference: scene).
   SolverOptions solver;
+  std::string budget;
   int64_t max_gaussians = -1, max_surfels = -1;
 
   // The mesh.

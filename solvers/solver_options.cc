@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include "solvers/density_strategy.h"
+
 namespace mgsr {
 namespace {
 
@@ -89,6 +91,15 @@ Status SolverOptions::Validate() const {
   if (!(exposure_offset_prior >= 0) || !std::isfinite(exposure_offset_prior))
     return Status::Error("--exposure_offset_prior must be finite and >= 0");
   if (max_init_points < 1) return Status::Error("--max_init_points must be >= 1");
+  for (const auto& [trains, budget] :
+       {std::make_pair(train_2d, max_surfels), std::make_pair(train_3d, max_gaussians)}) {
+    if (!trains) continue;
+    DensityContext context;
+    context.density.max_primitives = budget;
+    Status s;
+    if (DensityStrategyRegistry::Get().Create(density, context, density_config, &s) == nullptr)
+      return s.WithContext("--density: ");
+  }
   if (!(background_2d >= 0 && background_2d <= 1) || !(background_3d >= 0 && background_3d <= 1))
     return Status::Error("background levels must be in [0, 1]");
   return Status::Ok();
@@ -141,6 +152,8 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"percent_dense", Text(percent_dense)},
           {"max_gaussians", Text(static_cast<double>(max_gaussians))},
           {"max_surfels", Text(static_cast<double>(max_surfels))},
+          {"density", density},
+          {"density_config", density_config.dump()},
           {"position_lr_init", Text(position_lr_init)},
           {"position_lr_final", Text(position_lr_final)},
           {"position_lr_max_steps", Text(position_lr_max_steps)},

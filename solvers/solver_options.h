@@ -69,6 +69,10 @@ struct SolverOptions {
   float densify_grad_threshold = 2e-4f;
   float percent_dense = 0.01f;
   size_t max_gaussians = 0, max_surfels = 0;  // 0 = no budget
+  // The density strategy of both branches (DensityStrategyRegistry: "reference", "mcmc", ...) and
+  // its config (null: the strategy's defaults). "mcmc" needs a budget in each branch it trains.
+  std::string density = "reference";
+  nlohmann::json density_config;
   // Learning rates (reference 1.8); positions scale with the scene extent and decay log-linearly.
   double position_lr_init = 1.6e-4, position_lr_final = 1.6e-6;
   int position_lr_max_steps = 30000;

@@ -67,12 +67,19 @@ DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");
 DEFINE_bool(auto_stop, true, "Stop each warm-up when its loss window flattens.");
 DEFINE_bool(bidirectional, false,
             "Ablation K: the supervising branch also learns from the supervision.");
-DEFINE_int64(max_gaussians, -1,
-             "Budget of 3DGS primitives (-1: 4 per pixel of a training view, at least 500,000; "
-             "0: none).");
-DEFINE_int64(max_surfels, -1,
-             "Budget of 2DGS primitives (-1: 4 per pixel of a training view, at least 500,000; "
-             "0: none).");
+DEFINE_string(budget, "",
+              "Primitive budget of each branch: auto (from the foreground pixels the training "
+              "views show) | scene (4 per pixel of a view, at least 500,000: a bound, not a "
+              "target) | none | a count. Empty: the density strategy's default (mcmc: auto, "
+              "reference: scene).");
+DEFINE_int64(max_gaussians, -1, "Budget of 3DGS primitives (-1: from --budget; 0: none).");
+DEFINE_int64(max_surfels, -1, "Budget of 2DGS primitives (-1: from --budget; 0: none).");
+DEFINE_string(density, "reference",
+              "Density strategy of both branches: reference (clone/split/prune, the authors') | "
+              "mcmc (relocation under a fixed budget, Kheradmand et al. 2024).");
+DEFINE_string(density_config, "",
+              "JSON config of the density strategy, e.g. '{\"growth\": 0.05}' for mcmc "
+              "(keys: dead_opacity, growth, noise_lr, opacity_reg, scale_reg).");
 DEFINE_double(w_2d, 0.5, "Weight of the 2DGS loss in the mutual stage.");
 DEFINE_double(w_3d, 0.5, "Weight of the 3DGS loss in the mutual stage.");
 DEFINE_double(w_depth, 0.01, "Weight of the mutual depth loss.");
@@ -205,7 +212,8 @@ int main(int argc, char** argv) {
         {"exposure", "exposure_lr", "exposure_prior", "exposure_offset_prior",
          "exposure_mean_prior", "exposure_per_branch", "exposure_fit"}},
        {"Primitives",
-        {"max_gaussians", "max_surfels", "surfel_low_pass", "surfel_filter_sigma", "surfel_init"}},
+        {"density", "density_config", "budget", "max_gaussians", "max_surfels", "surfel_low_pass",
+         "surfel_filter_sigma", "surfel_init"}},
        {"Mesh",
         {"mesh_depth", "mesh_color", "voxel_size", "mesh_resolution_scale", "tsdf_truncation"}}},
       &argc, &argv);
@@ -243,6 +251,13 @@ int main(int argc, char** argv) {
     return Fail("unknown --method '" + FLAGS_method + "' (mgsr, 2dgs, 3dgs or 3dgs-ref)");
   options.auto_stop = FLAGS_auto_stop;
   options.bidirectional = FLAGS_bidirectional;
+  options.density = FLAGS_density;
+  if (!FLAGS_density_config.empty()) {
+    options.density_config = nlohmann::json::parse(FLAGS_density_config, nullptr, false);
+    if (options.density_config.is_discarded())
+      return Fail("--density_config is not valid JSON: " + FLAGS_density_config);
+  }
+  ro.budget = FLAGS_budget;
   ro.max_gaussians = FLAGS_max_gaussians;
   ro.max_surfels = FLAGS_max_surfels;
   options.w_2d = FLAGS_w_2d;

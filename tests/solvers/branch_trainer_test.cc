@@ -97,16 +97,51 @@ struct BandPrimitive {
     to->color = std::move(from->images[static_cast<int>(Buffer::kColor)]);
   }
   static const std::vector<float>& Radii(const Renderer& r) { return r.radius(); }
-  static DensifyResult DensifyAndPrune(Model*, Adam*, DensityStats*, const DensityOptions&, double,
-                                       bool, Rng*) {
-    ++densify_calls;
+  static PrimitiveLayout Layout() {
+    PrimitiveLayout l;
+    l.scale_axes = 0;
+    l.opacity_blocks.clear();
+    l.opacity_reset_caps.clear();
+    return l;
+  }
+};
+
+// A density strategy registered by the test, as a researcher's would be: it records which steps
+// reach it and what it sees of the rows.
+struct CountingDensity : DensityStrategy {
+  static int begin_calls, before_calls, after_calls, events;
+  static size_t rows_seen;
+  explicit CountingDensity(const DensityContext& c) : context(c) {}
+  void Begin(PrimitiveRows* rows, Rng*) override {
+    ++begin_calls;
+    rows_seen = rows->size();
+  }
+  double BeforeStep(const DensityStep& step, const PrimitiveRows& rows,
+                    const std::vector<ParamBlock>& gradients) override {
+    ++before_calls;
+    rows_seen = rows.size();
+    EXPECT_EQ(step.mean2d->size(), 2 * rows.size());
+    EXPECT_EQ(gradients.size(), rows.blocks().size());
+    return 0;
+  }
+  DensifyResult AfterStep(const DensityStep& step, PrimitiveRows*, Rng*) override {
+    ++after_calls;
+    const BranchSchedule& s = context.schedule;
+    if (step.iteration > s.densify_from && step.iteration < s.densify_until &&
+        step.iteration % s.densify_interval == 0)
+      ++events;
     return {};
   }
-  static void ResetOpacity(Model*, Adam*) { ++reset_calls; }
-  static int densify_calls, reset_calls;
+  void Save(BinaryWriter*) const override {}
+  Status Read(BinaryReader*) override { return Status::Ok(); }
+  void CommitRead() override {}
+  DensityContext context;
 };
-int BandPrimitive::densify_calls = 0;
-int BandPrimitive::reset_calls = 0;
+int CountingDensity::begin_calls = 0;
+int CountingDensity::before_calls = 0;
+int CountingDensity::after_calls = 0;
+int CountingDensity::events = 0;
+size_t CountingDensity::rows_seen = 0;
 
 using BandTrainer = PrimitiveTrainer<BandPrimitive>;
 
@@ -145,6 +180,11 @@ BranchTrainerOptions StubOptions() {
   o.auto_stop_min_iteration = 0;
   o.auto_stop_window = 10;
   o.auto_stop_range = 1e-3;
+  DensityStrategyRegistry::Get().Register(
+      "counting", [](const DensityContext& c, const nlohmann::json&, Status*) {
+        return std::make_unique<CountingDensity>(c);
+      });
+  o.density_strategy = "counting";
   return o;
 }
 
@@ -167,6 +207,8 @@ std::unique_ptr<BandTrainer> MakeTrainer(ExposureModel* exposure, Rng* rng) {
 }
 
 TEST(BranchTrainerTest, AStubPrimitiveTrainsChecksPointsAndSupervisesThroughTheGenericTrainer) {
+  CountingDensity::begin_calls = CountingDensity::before_calls = CountingDensity::after_calls =
+      CountingDensity::events = 0;
   const Camera camera = SmallCamera();
   const Image photo = BandPhoto(camera);
   Targets targets;
@@ -188,8 +230,11 @@ TEST(BranchTrainerTest, AStubPrimitiveTrainsChecksPointsAndSupervisesThroughTheG
   EXPECT_GT(first, 0.1);
   EXPECT_LT(loss, 0.01 * first);
   for (int k = 0; k < 4; ++k) EXPECT_NEAR(t->model().colour[3 * k], 0.2f + 0.2f * k, 0.02f);
-  EXPECT_EQ(BandPrimitive::densify_calls, 2);
-  EXPECT_EQ(BandPrimitive::reset_calls, 1);
+  EXPECT_EQ(CountingDensity::begin_calls, 1);
+  EXPECT_EQ(CountingDensity::before_calls, 60);
+  EXPECT_EQ(CountingDensity::after_calls, 60);
+  EXPECT_EQ(CountingDensity::events, 2);
+  EXPECT_EQ(CountingDensity::rows_seen, 4u);
   ASSERT_EQ(t->LastTerms().size(), 1u);
   EXPECT_EQ(t->LastTerms()[0].name, "photo_l1");
 

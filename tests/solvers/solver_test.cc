@@ -20,6 +20,7 @@
 #include "solvers/exposure_fit.h"
 #include "solvers/loss_table.h"
 #include "solvers/mutual_boosted_solver.h"
+#include "solvers/primitive_types.h"
 #include "test_util.h"
 
 namespace mgsr {
@@ -119,7 +120,9 @@ TEST(DensityControlTest, ClonesSplitsPrunesAndKeepsTheBudget) {
   stats.Accumulate({1e-3f, 1e-3f, 1e-6f, 1e-6f}, {1, 1, 1, 1});
   DensityOptions o;
   Rng rng(1);
-  const DensifyResult r = DensifyAndPrune(&m, &adam, &stats, o, /*extent=*/1.0, false, &rng);
+  const PrimitiveLayout layout = GaussianPrimitive::Layout();
+  PrimitiveRows rows(m.Blocks(), &adam, &layout);
+  const DensifyResult r = DensifyAndPrune(&rows, &stats, o, /*extent=*/1.0, false, &rng);
   EXPECT_EQ(r.cloned, 1u);
   EXPECT_EQ(r.split, 1u);
   EXPECT_EQ(r.pruned, 1u);
@@ -132,13 +135,17 @@ TEST(DensityControlTest, ClonesSplitsPrunesAndKeepsTheBudget) {
   std::vector<float> high(m.size(), 1e-3f), radii(m.size(), 1.0f);
   stats.Accumulate(high, radii);
   o.max_primitives = m.size() + 1;
-  DensifyAndPrune(&m, &adam, &stats, o, 1.0, false, &rng);
+  DensifyAndPrune(&rows, &stats, o, 1.0, false, &rng);
   EXPECT_LE(m.size(), o.max_primitives);
-  // Opacity reset caps opacity, reflected opacity and beta.
-  ResetOpacity(&m, &adam);
+  // Opacity reset caps opacity, reflected opacity and beta, and zeroes their moments.
+  rows.ResetOpacity();
   for (size_t i = 0; i < m.size(); ++i) {
     EXPECT_LE(Sigmoid(m.opacity_logits[i]), 0.0100001f);
+    EXPECT_LE(Sigmoid(m.ref_opacity_logits[i]), 0.0100001f);
     EXPECT_LE(Sigmoid(m.beta_logits[i]), 0.100001f);
+  }
+  for (const char* block : {"opacity_logits", "ref_opacity_logits", "beta_logits"}) {
+    for (float v : adam.state().at(block).m) EXPECT_EQ(v, 0.0f) << block;
   }
 }
 
@@ -403,10 +410,15 @@ void ExpectSameModels(const MutualBoostedSolver& a, const MutualBoostedSolver& b
 TEST(CheckpointTest, InterruptedAndResumedRunEqualsAnUninterruptedOne) {
   const std::string dir = testing::ScratchDir();
   const Scene scene = TinyScene(dir + "/scene");
-  for (ExposureMode exposure : {ExposureMode::kOff, ExposureMode::kAffine}) {
-    SCOPED_TRACE(ExposureModeName(exposure));
+  for (const auto& [exposure, density] : {std::make_pair(ExposureMode::kOff, "reference"),
+                                          std::make_pair(ExposureMode::kAffine, "reference"),
+                                          std::make_pair(ExposureMode::kOff, "mcmc")}) {
+    SCOPED_TRACE(std::string(ExposureModeName(exposure)) + " " + density);
     SolverOptions o = TinyOptions();
     o.exposure = exposure;
+    o.density = density;
+    o.max_gaussians = 400;  // MCMC's caps (the reference stays below them here)
+    o.max_surfels = 300;
     o.warmup_max_iterations = 60;
     o.mutual_iterations = 16;
     o.schedule_2d = {10, 50, 10, 30, 0.05f};

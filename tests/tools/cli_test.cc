@@ -83,11 +83,12 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
             std::string::npos);  // the synthetic scene has a ground-truth mesh
   // Without --max_*, each branch's budget comes from the scene: 4 per pixel of a 32 x 32 view
   // is below the floor of 500,000.
-  EXPECT_NE(r.output.find("budget: 500000 Gaussians, 500000 surfels"), std::string::npos)
+  EXPECT_NE(r.output.find("budget: 500000 Gaussians, 500000 surfels (scene: "), std::string::npos)
       << r.output;
   const nlohmann::json parsed = nlohmann::json::parse(metrics);
   EXPECT_EQ(parsed["budget"]["gaussians"], 500000);
-  EXPECT_TRUE(parsed["budget"]["from_scene"].get<bool>());
+  EXPECT_EQ(parsed["budget"]["mode"], "scene");
+  EXPECT_EQ(parsed["budget"]["density"], "reference");
   // mgsr_eval scores the run folder: NC, CD, PSNR, SSIM, time.
   const auto e =
       testing::RunCommand(kTools + "/mgsr_eval --run " + out + " --json " + out + "/eval.json");
@@ -315,6 +316,24 @@ TEST_F(CliTest, SolveRejectsBadOptions) {
                           " --output /tmp/x --lambda_distortion nan");
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_EQ(r.output, "error: --lambda_distortion must be >= 0 (or -1 for the default)\n");
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --budget lots");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.output, "error: --budget must be auto, scene, none or a count, not 'lots'\n");
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --density mcmc --budget none");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("--density: density strategy \"mcmc\": needs a budget"),
+            std::string::npos)
+      << r.output;
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --density mcmc --density_config '{\"noise\": 1}'");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("unknown key \"noise\""), std::string::npos) << r.output;
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --density_config '{oops'");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("--density_config is not valid JSON"), std::string::npos) << r.output;
   for (const char* bad : {"1.5", "grey", "0.5x"}) {
     r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
                             " --output /tmp/x --background " + bad);

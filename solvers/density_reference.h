@@ -1,0 +1,29 @@
+// The "reference" density strategy (reference 1.10, the authors' schedule): screen-gradient
+// statistics while densifying, clone / split / prune every densify_interval iterations, opacity
+// resets, the branch's budget as a cap (solvers/density_control.h has the row operations).
+#pragma once
+
+#include "solvers/density_control.h"
+#include "solvers/density_strategy.h"
+
+namespace mgsr {
+
+class ReferenceDensity : public DensityStrategy {
+ public:
+  explicit ReferenceDensity(const DensityContext& context) : context_(context) {}
+
+  double BeforeStep(const DensityStep& step, const PrimitiveRows& rows,
+                    const std::vector<ParamBlock>& gradients) override;
+  DensifyResult AfterStep(const DensityStep& step, PrimitiveRows* rows, Rng* rng) override;
+  void Save(BinaryWriter* w) const override;
+  Status Read(BinaryReader* r) override;
+  void CommitRead() override;
+
+  const DensityStats& stats() const { return stats_; }
+
+ private:
+  const DensityContext context_;
+  DensityStats stats_, pending_;
+};
+
+}  // namespace mgsr
