@@ -54,6 +54,7 @@ struct BranchSummary {
   bool auto_stopped = false;
   double final_loss = 0;  // of its last step
   size_t primitives = 0;
+  size_t pruned_by_contribution = 0;  // over the stage ends of this process (not checkpointed)
 };
 
 // A branch's settings; the same for every primitive type.
@@ -136,6 +137,10 @@ class BranchTrainer {
                       TargetGradients* gradient) const;
   // The branch's colour of a view (exposure fits).
   virtual Image RenderColor(const Camera& camera) = 0;
+  // Pruning by contribution: renders every camera, sums each primitive's blend weights over all of
+  // them (pixel-weights: 1 is one pixel fully covered once), and drops the primitives whose sum
+  // is below `min_weight` (never all of them). Returns how many it dropped.
+  virtual size_t PruneByContribution(const std::vector<Camera>& cameras, double min_weight) = 0;
 
   // --- Checkpoints: everything needed to continue exactly (model, optimiser state, density
   // statistics, auto-stop window, summary). Read checks every value and keeps what it read aside;
@@ -271,6 +276,34 @@ class PrimitiveTrainer : public BranchTrainer {
     ProfileScope scope("adam");
     adam_.Step(model_.Blocks(), grads.params.Blocks(), options_.learning_rates(iteration));
     return Status::Ok();
+  }
+
+  size_t PruneByContribution(const std::vector<Camera>& cameras, double min_weight) override {
+    ProfileContext context(name());
+    ProfileScope scope("contribution pruning");
+    std::vector<double> total(model_.size(), 0.0);
+    typename P::Render r;
+    for (const Camera& camera : cameras) {
+      typename P::RenderOptions o = RenderOptionsFor(camera);
+      o.record_contribution = true;
+      renderer_.Forward(model_, o, &r);
+      for (size_t i = 0; i < total.size() && i < r.contribution.size(); ++i)
+        total[i] += r.contribution[i];
+    }
+    held_current_ = false;
+    std::vector<uint8_t> keep(total.size(), 1);
+    size_t dropped = 0;
+    for (size_t i = 0; i < total.size(); ++i) {
+      if (total[i] < min_weight) {
+        keep[i] = 0;
+        ++dropped;
+      }
+    }
+    if (dropped == 0 || dropped == total.size()) return 0;
+    PrimitiveRows rows(model_.Blocks(), &adam_, &Layout());
+    rows.KeepRows(keep);
+    summary().pruned_by_contribution += dropped;
+    return dropped;
   }
 
   Image RenderColor(const Camera& camera) override {

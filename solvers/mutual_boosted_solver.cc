@@ -442,6 +442,7 @@ Status MutualBoostedSolver::Run() {
           !Trains(t->branch()) || b.auto_stopped || b.warmup_iterations >= o.warmup_max_iterations;
     }
     if (done[0] && done[1]) {
+      PruneByContribution();
       CloseStageProfile(Stage::kWarmup);
       if (o.exposure != ExposureMode::kOff && o.exposure_fit_at_mutual && o.train_2d &&
           o.train_3d) {
@@ -496,9 +497,19 @@ Status MutualBoostedSolver::Run() {
     if (EndIteration(Stage::kMutual, it, next_iteration_ > o.mutual_iterations, &ended))
       return ended;
   }
+  if (both) PruneByContribution();  // (a single branch was pruned at the end of its warm-up)
   finished_ = true;
   sum.termination_type = TerminationType::kFinished;
   return Status::Ok();
+}
+
+void MutualBoostedSolver::PruneByContribution() {
+  if (options_.prune_contribution <= 0) return;
+  std::vector<Camera> cameras;
+  for (int v : train_) cameras.push_back(scene_.views[v].camera);
+  for (BranchTrainer* t : trainers_) {
+    if (Trains(t->branch())) t->PruneByContribution(cameras, options_.prune_contribution);
+  }
 }
 
 }  // namespace mgsr

@@ -163,6 +163,8 @@ class MutualBoostedSolver {
   Status BuildProblems();
   // Ceres fit of every training view's transform against the current renders.
   void FitExposures();
+  // Pruning by contribution of every training branch over the training views (end of a stage).
+  void PruneByContribution();
   // Calls the callbacks; what they ask is kept in callback_request_ for the iteration's end.
   void Notify(Stage stage, int iteration, const BranchTrainer& trainer, double loss);
   void NotifyIterationEnd(Stage stage, int iteration);

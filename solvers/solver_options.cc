@@ -91,6 +91,8 @@ Status SolverOptions::Validate() const {
   if (!(exposure_offset_prior >= 0) || !std::isfinite(exposure_offset_prior))
     return Status::Error("--exposure_offset_prior must be finite and >= 0");
   if (max_init_points < 1) return Status::Error("--max_init_points must be >= 1");
+  if (!(prune_contribution >= 0) || !std::isfinite(prune_contribution))
+    return Status::Error("--prune_contribution must be finite and >= 0");
   for (const auto& [trains, budget] :
        {std::make_pair(train_2d, max_surfels), std::make_pair(train_3d, max_gaussians)}) {
     if (!trains) continue;
@@ -154,6 +156,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"max_surfels", Text(static_cast<double>(max_surfels))},
           {"density", density},
           {"density_config", density_config.dump()},
+          {"prune_contribution", Text(prune_contribution)},
           {"position_lr_init", Text(position_lr_init)},
           {"position_lr_final", Text(position_lr_final)},
           {"position_lr_max_steps", Text(position_lr_max_steps)},

@@ -73,6 +73,10 @@ struct SolverOptions {
   // its config (null: the strategy's defaults). "mcmc" needs a budget in each branch it trains.
   std::string density = "reference";
   nlohmann::json density_config;
+  // Pruning by contribution at the end of each stage: a primitive whose blend weights, summed
+  // over every pixel of every training view, stay below this is dropped (0: off), so the saved
+  // models hold only what renders.
+  double prune_contribution = 0;
   // Learning rates (reference 1.8); positions scale with the scene extent and decay log-linearly.
   double position_lr_init = 1.6e-4, position_lr_final = 1.6e-6;
   int position_lr_max_steps = 30000;

@@ -80,6 +80,9 @@ DEFINE_string(density, "reference",
 DEFINE_string(density_config, "",
               "JSON config of the density strategy, e.g. '{\"growth\": 0.05}' for mcmc "
               "(keys: dead_opacity, growth, noise_lr, opacity_reg, scale_reg).");
+DEFINE_double(prune_contribution, 0,
+              "At the end of each stage, drop primitives whose blend weights summed over every "
+              "pixel of every training view stay below this (0: off).");
 DEFINE_double(w_2d, 0.5, "Weight of the 2DGS loss in the mutual stage.");
 DEFINE_double(w_3d, 0.5, "Weight of the 3DGS loss in the mutual stage.");
 DEFINE_double(w_depth, 0.01, "Weight of the mutual depth loss.");
@@ -212,8 +215,8 @@ int main(int argc, char** argv) {
         {"exposure", "exposure_lr", "exposure_prior", "exposure_offset_prior",
          "exposure_mean_prior", "exposure_per_branch", "exposure_fit"}},
        {"Primitives",
-        {"density", "density_config", "budget", "max_gaussians", "max_surfels", "surfel_low_pass",
-         "surfel_filter_sigma", "surfel_init"}},
+        {"density", "density_config", "budget", "prune_contribution", "max_gaussians",
+         "max_surfels", "surfel_low_pass", "surfel_filter_sigma", "surfel_init"}},
        {"Mesh",
         {"mesh_depth", "mesh_color", "voxel_size", "mesh_resolution_scale", "tsdf_truncation"}}},
       &argc, &argv);
@@ -258,6 +261,7 @@ int main(int argc, char** argv) {
       return Fail("--density_config is not valid JSON: " + FLAGS_density_config);
   }
   ro.budget = FLAGS_budget;
+  options.prune_contribution = FLAGS_prune_contribution;
   ro.max_gaussians = FLAGS_max_gaussians;
   ro.max_surfels = FLAGS_max_surfels;
   options.w_2d = FLAGS_w_2d;

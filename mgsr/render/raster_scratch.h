@@ -62,6 +62,14 @@ class PixelArrays {
   float* arrays_[kMaxArrays] = {};
 };
 
+// Per-primitive sums of per-entry values (entries in bins order, one per tile list slot), in
+// entry order whatever the thread count: the contribution a forward pass records.
+inline void SumEntriesPerPrimitive(const TileBins& bins, const std::vector<float>& entry,
+                                   size_t num, std::vector<float>* out) {
+  out->assign(num, 0.0f);
+  for (size_t k = 0; k < entry.size(); ++k) (*out)[bins.ids[k]] += entry[k];
+}
+
 }  // namespace raster_internal
 
 // Sums the per-entry gradients of every tile into per-primitive rows (N x stride), in tile and

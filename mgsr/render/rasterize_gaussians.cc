@@ -94,6 +94,7 @@ using raster_internal::EnsureImage;
 using raster_internal::EnsureScratch;
 using raster_internal::kTilePixels;
 using raster_internal::PixelArrays;
+using raster_internal::SumEntriesPerPrimitive;
 using simd::F16;
 using simd::I16;
 
@@ -169,6 +170,8 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
   const F16 lanes = simd::Lanes();
   PackGaussians(p, &scratch->packed);
   const float* packed = scratch->packed.data();
+  // Per tile entry: the entry's summed blend weights (only when recording contributions).
+  std::vector<float> entry_weight(o.record_contribution ? bins.ids.size() : 0, 0.0f);
 
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int tile = 0; tile < bins.num_tiles(); ++tile) {
@@ -176,6 +179,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
     const int tx = tile % bins.tiles_x, ty = tile / bins.tiles_x;
     const uint32_t begin = bins.tile_start[tile];
     const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
+    float* const weights = o.record_contribution ? entry_weight.data() + begin : nullptr;
     std::vector<float>& buffer = scratch->tile_data[thread];
     GatherTile(packed, bins.ids.data() + begin, n, &buffer);
     const float* f = buffer.data();
@@ -249,6 +253,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
         simd::Store(st[aLastT] + k,
                     simd::Select(blend_t, simd::Splat(jp1), simd::Load(st[aLastT] + k)));
         simd::Store(st[aLiveT] + k, simd::Select(term_t, F16{}, live));
+        if (weights != nullptr) weights[j] += simd::Sum(wt);
         if (!refl) continue;
         // Reflected chain.
         const F16 Tr = simd::Load(st[aTr] + k), live_r = simd::Load(st[aLiveR] + k);
@@ -265,6 +270,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
         simd::Store(st[aLastR] + k,
                     simd::Select(blend_r, simd::Splat(jp1), simd::Load(st[aLastR] + k)));
         simd::Store(st[aLiveR] + k, simd::Select(term_r, F16{}, live_r));
+        if (weights != nullptr) weights[j] += simd::Sum(wr);
       }
     }
     for (int y = y0; y < y_end; ++y) {
@@ -291,6 +297,11 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
         out->last_r[pix] = static_cast<uint32_t>(st[aLastR][k]);
       }
     }
+  }
+  if (o.record_contribution) {
+    SumEntriesPerPrimitive(bins, entry_weight, p.size(), &out->contribution);
+  } else {
+    out->contribution.clear();
   }
 }
 

@@ -34,6 +34,9 @@ struct GaussianRenderOptions {
   int sh_degree = 3;
   bool reflection = true;  // false: plain 3DGS (C = C_tran; C_ref and W are zero)
   float background[3] = {0, 0, 0};
+  // Also sum each Gaussian's blend weights over the image (GaussianRender::contribution): what
+  // pruning by contribution reads. Off in training steps (it costs a reduction per row).
+  bool record_contribution = false;
 };
 
 struct GaussianRender {
@@ -43,6 +46,9 @@ struct GaussianRender {
   std::vector<float> final_t, final_tr, depth_sum;
   std::vector<uint32_t> last_t,
       last_r;  // per pixel: 1 + index (within its tile list) of the last blended
+  // With options.record_contribution, per Gaussian: the sum over pixels of its blend weights in
+  // the transmitted chain plus those in the reflected chain (else empty).
+  std::vector<float> contribution;
 };
 
 // Upstream gradients; an empty image means zero.

@@ -15,6 +15,7 @@ using raster_internal::EnsureImage;
 using raster_internal::EnsureScratch;
 using raster_internal::kTilePixels;
 using raster_internal::PixelArrays;
+using raster_internal::SumEntriesPerPrimitive;
 using simd::F16;
 using simd::I16;
 
@@ -208,6 +209,8 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   const F16 lanes = simd::Lanes();
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
+  // Per tile entry: the entry's summed blend weights (only when recording contributions).
+  std::vector<float> entry_weight(o.record_contribution ? bins.ids.size() : 0, 0.0f);
 
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int tile = 0; tile < bins.num_tiles(); ++tile) {
@@ -215,6 +218,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
     const int tx = tile % bins.tiles_x, ty = tile / bins.tiles_x;
     const uint32_t begin = bins.tile_start[tile];
     const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
+    float* const weights = o.record_contribution ? entry_weight.data() + begin : nullptr;
     std::vector<float>& buffer = scratch->tile_data[thread];
     GatherTile(p, bins.ids.data() + begin, n, &buffer);
     const float* f = buffer.data();
@@ -306,6 +310,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
         simd::Store(st[aLast] + k,
                     simd::Select(blend, simd::Splat(jp1), simd::Load(st[aLast] + k)));
         simd::Store(st[aLive] + k, simd::Select(term, F16{}, live));
+        if (weights != nullptr) weights[j] += simd::Sum(w);
       }
     }
     for (int y = y0; y < y_end; ++y) {
@@ -338,6 +343,11 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
         out->median_index[pix] = static_cast<uint32_t>(st[aMed][k]);
       }
     }
+  }
+  if (o.record_contribution) {
+    SumEntriesPerPrimitive(bins, entry_weight, p.size(), &out->contribution);
+  } else {
+    out->contribution.clear();
   }
 }
 

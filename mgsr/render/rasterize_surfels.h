@@ -47,6 +47,9 @@ struct SurfelRenderOptions {
   // silhouette draws the object's outline about a sigma too far out, and the fit pulls the surface
   // in to compensate (README, surface accuracy).
   float filter_sigma = kReferenceSurfelFilterSigma;
+  // Also sum each surfel's blend weights over the image (SurfelRender::contribution): what pruning
+  // by contribution reads. Off in training steps (it costs a reduction per row).
+  bool record_contribution = false;
 };
 
 struct SurfelRender {
@@ -62,6 +65,9 @@ struct SurfelRender {
   // where the alpha is small: the expected depth is depth_sum / weight_sum.
   std::vector<float> final_t, depth_sum, weight_sum, m1, m2, m_ref;  // m1, m2: see .cc
   std::vector<uint32_t> last, median_index;  // 1 + index within the tile list (0: none)
+  // With options.record_contribution, per surfel: the sum over pixels of its blend weights (else
+  // empty).
+  std::vector<float> contribution;
 };
 
 // Upstream gradients; an empty image means zero.

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 
@@ -71,6 +72,34 @@ TEST_P(GaussianRendererTest, TiledRenderMatchesTheReference) {
     for (size_t i = 0; i < out.alpha.size(); ++i) covered += out.alpha.data()[i] > 0.1f;
     EXPECT_GT(covered, 0.3 * out.alpha.size());
   }
+}
+
+// Recording contributions leaves the image bitwise unchanged, and the per-Gaussian sums add up to
+// the image's summed blend weights: 1 - T per pixel (plus 1 - Tr with reflection); a Gaussian
+// behind the camera contributes nothing.
+TEST_P(GaussianRendererTest, ContributionsSumToTheBlendedWeights) {
+  const bool reflection = GetParam();
+  const Camera cam = testing::RenderTestCamera(40, 36);
+  GaussianModel m = RandomScene(30, 5);
+  m.means[0] = 0.6f;
+  m.means[1] = -6.0f;  // behind the camera (at y = -3, looking along +y)
+  GaussianRenderer renderer;
+  GaussianRender plain, recorded;
+  GaussianRenderOptions o = Options(cam, reflection);
+  renderer.Forward(m, o, &plain);
+  EXPECT_TRUE(plain.contribution.empty());
+  o.record_contribution = true;
+  renderer.Forward(m, o, &recorded);
+  EXPECT_TRUE(std::equal(plain.color.data(), plain.color.data() + plain.color.size(),
+                         recorded.color.data()));
+  ASSERT_EQ(recorded.contribution.size(), m.size());
+  double sum = 0, expected = 0;
+  for (float c : recorded.contribution) sum += c;
+  for (size_t p = 0; p < recorded.final_t.size(); ++p)
+    expected += (1.0 - recorded.final_t[p]) + (reflection ? 1.0 - recorded.final_tr[p] : 0.0);
+  EXPECT_NEAR(sum, expected, 1e-4 * expected);
+  EXPECT_GT(expected, 100.0);
+  EXPECT_EQ(recorded.contribution[0], 0.0f);
 }
 
 INSTANTIATE_TEST_SUITE_P(WithAndWithoutReflection, GaussianRendererTest, ::testing::Bool());

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 
 #include "mgsr/core/rng.h"
@@ -169,6 +170,30 @@ void CheckGradients(const SurfelModel& m, const Camera& cam, const char* label,
       }
     }
   }
+}
+
+// Recording contributions leaves the render bitwise unchanged, and the per-surfel sums add up to
+// the image's summed blend weights; a surfel behind the camera contributes nothing.
+TEST(SurfelRendererTest, ContributionsSumToTheBlendedWeights) {
+  const Camera cam = testing::RenderTestCamera(40, 36);
+  SurfelModel m = RandomSurfels(30, 6);
+  m.means[1] = -6.0f;  // behind the camera (at y = -3, looking along +y)
+  SurfelRenderer renderer;
+  SurfelRender plain, recorded;
+  SurfelRenderOptions o = Options(cam);
+  renderer.Forward(m, o, &plain);
+  EXPECT_TRUE(plain.contribution.empty());
+  o.record_contribution = true;
+  renderer.Forward(m, o, &recorded);
+  EXPECT_TRUE(std::equal(plain.depth.data(), plain.depth.data() + plain.depth.size(),
+                         recorded.depth.data()));
+  ASSERT_EQ(recorded.contribution.size(), m.size());
+  double sum = 0, expected = 0;
+  for (float c : recorded.contribution) sum += c;
+  for (float w : recorded.weight_sum) expected += w;
+  EXPECT_NEAR(sum, expected, 1e-4 * expected);
+  EXPECT_GT(expected, 100.0);
+  EXPECT_EQ(recorded.contribution[0], 0.0f);
 }
 
 TEST(SurfelRendererGradientTest, AllParametersAllOutputsMatchNumericDifferentiation) {

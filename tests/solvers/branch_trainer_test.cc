@@ -27,10 +27,12 @@ struct BandRenderOptions {
   Camera camera;
   int sh_degree = 0;
   float background[3] = {0, 0, 0};
+  bool record_contribution = false;
 };
 
 struct BandRender {
   Image color;
+  std::vector<float> contribution;  // empty: the stub never prunes
 };
 
 struct BandRenderGrad {

@@ -315,6 +315,39 @@ TEST(DensityStrategyTest, AutoBudgetCountsTheForegroundOfTheMedianView) {
   EXPECT_NE(b.why.find("every pixel"), std::string::npos) << b.why;
 }
 
+// Pruning by contribution drops what no training view sees (behind every camera, hidden behind
+// an opaque Gaussian) and keeps what renders, with the optimiser state.
+TEST(DensityStrategyTest, PruningByContributionDropsWhatNoViewShows) {
+  GaussianModel m;
+  m.max_sh_degree = 0;
+  m.Resize(3);
+  for (int i = 0; i < 3; ++i) {
+    m.quats[4 * i] = 1;
+    for (int k = 0; k < 3; ++k) m.log_scales[3 * i + k] = std::log(0.3f);
+    m.opacity_logits[i] = 8.0f;        // opaque
+    m.ref_opacity_logits[i] = -30.0f;  // no reflected layer
+  }
+  m.means[3 * 1 + 1] = -9.0f;  // 1: behind the camera
+  m.means[3 * 2 + 1] = 1.0f;   // 2: right behind 0, small and hidden
+  for (int k = 0; k < 3; ++k) m.log_scales[3 * 2 + k] = std::log(0.05f);
+  const Camera camera =
+      LookAtCamera({0, -3, 0}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 32, 32, 40, 40);
+  ExposureModel exposure;
+  exposure.Reset(1, ExposureMode::kOff);
+  Rng rng(1);
+  BranchTrainerOptions bo;
+  GaussianRenderOptions ro;
+  ro.reflection = false;
+  GaussianTrainer t(m, ro, bo, &exposure, &rng);
+  EXPECT_EQ(t.PruneByContribution({camera}, 1.0), 2u);
+  ASSERT_EQ(t.size(), 1u);
+  EXPECT_EQ(t.model().means[1], 0.0f);
+  EXPECT_EQ(t.summary().pruned_by_contribution, 2u);
+  // Never everything.
+  EXPECT_EQ(t.PruneByContribution({camera}, 1e9), 0u);
+  EXPECT_EQ(t.size(), 1u);
+}
+
 TEST(DensityStrategyTest, AnMcmcSolveKeepsEachBranchWithinItsBudgetAndTrains) {
   SynthOptions so = testing::SmallSynthOptions();
   so.width = so.height = 48;
@@ -341,6 +374,7 @@ TEST(DensityStrategyTest, AnMcmcSolveKeepsEachBranchWithinItsBudgetAndTrains) {
   ASSERT_TRUE(solver.Solve(&summary).ok());
   EXPECT_EQ(summary.branch(Branch::kGaussians3D).primitives, 300u);
   EXPECT_EQ(summary.branch(Branch::kSurfels2D).primitives, 200u);
+  EXPECT_EQ(summary.branch(Branch::kGaussians3D).pruned_by_contribution, 0u);
   EXPECT_TRUE(std::isfinite(summary.branch(Branch::kGaussians3D).final_loss));
 }
 
