@@ -110,7 +110,7 @@ std::string BranchTrainer::OptimizeAndControlDensity(const Camera& camera,
   }
   if (!nonfinite.empty()) return nonfinite;  // the run stops: no density decisions on bad data
   ProfileScope scope("density control");
-  last_density_ = density_->AfterStep(step, &rows, rng_);
+  density_->AfterStep(step, &rows, rng_);
   return "";
 }
 

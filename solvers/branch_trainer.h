@@ -115,8 +115,6 @@ class BranchTrainer {
   // The active rows of the last step: label, weight, unweighted value (and the density
   // strategy's regulariser, "density_regulariser", when it has one).
   const std::vector<Problem::TermValue>& LastTerms() const { return last_terms_; }
-  // What the last step's density control did.
-  const DensifyResult& LastDensity() const { return last_density_; }
   // The warm-up's auto-stop: records the loss of `iteration`; true once it has flattened.
   bool UpdateAutoStop(int iteration, double loss) { return auto_stop_.Update(iteration, loss); }
   BranchSummary& summary() { return summary_; }
@@ -175,7 +173,6 @@ class BranchTrainer {
   int sh_degree_ = 0;
   Adam adam_;
   std::unique_ptr<DensityStrategy> density_;
-  DensifyResult last_density_;
   Status step_error_;            // of the last step
   std::string nonfinite_block_;  // of the last step
 

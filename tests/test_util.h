@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <string>
 
+#include "mgsr/io/scene.h"
 #include "mgsr/synth/synthetic_scene.h"
 
 namespace mgsr::testing {
@@ -37,6 +38,19 @@ inline SynthOptions SmallSynthOptions() {
   o.num_points = 200;
   o.supersampling = 1;
   return o;
+}
+
+// A 48 px, 16-view scene under constant light (so test views are predictable), written to `dir`
+// and loaded: what the solver tests train on.
+inline Scene TinySolverScene(const std::string& dir) {
+  SynthOptions so = SmallSynthOptions();
+  so.width = so.height = 48;
+  so.varying_light = false;
+  so.num_views = 16;
+  EXPECT_TRUE(WriteSyntheticScene(so, dir).ok());
+  Scene scene;
+  EXPECT_TRUE(LoadScene(dir, SceneOptions(), &scene).ok());
+  return scene;
 }
 
 struct CommandResult {

@@ -349,14 +349,8 @@ TEST(DensityStrategyTest, PruningByContributionDropsWhatNoViewShows) {
 }
 
 TEST(DensityStrategyTest, AnMcmcSolveKeepsEachBranchWithinItsBudgetAndTrains) {
-  SynthOptions so = testing::SmallSynthOptions();
-  so.width = so.height = 48;
-  so.varying_light = false;
-  so.num_views = 16;
-  const std::string dir = testing::ScratchDir();
-  ASSERT_TRUE(WriteSyntheticScene(so, dir).ok());
-  Scene scene;
-  ASSERT_TRUE(LoadScene(dir, SceneOptions(), &scene).ok());
+  const Scene scene = testing::TinySolverScene(testing::ScratchDir());
+  ASSERT_FALSE(scene.views.empty());
   SolverOptions o;
   SolverOptions::FromPreset("fast", &o);
   o.warmup_min_iterations = 0;

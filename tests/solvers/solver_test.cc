@@ -171,17 +171,7 @@ SolverOptions TinyOptions() {
   return o;
 }
 
-// A small scene under constant light, so test views are predictable.
-Scene TinyScene(const std::string& dir) {
-  SynthOptions so = testing::SmallSynthOptions();
-  so.width = so.height = 48;
-  so.varying_light = false;
-  so.num_views = 16;
-  EXPECT_TRUE(WriteSyntheticScene(so, dir).ok());
-  Scene scene;
-  EXPECT_TRUE(LoadScene(dir, SceneOptions(), &scene).ok());
-  return scene;
-}
+Scene TinyScene(const std::string& dir) { return testing::TinySolverScene(dir); }
 
 double TestPsnr(MutualBoostedSolver* solver, const Scene& scene) {
   double psnr = 0;
