@@ -34,6 +34,14 @@ DEFINE_bool(report_only, false,
             "Rebuild README.md, charts and contact sheets from --output's results.csv and "
             "context.json (and the renders under --work) without running anything.");
 DEFINE_string(title, "MGSR-CPU benchmark", "Title of the report.");
+DEFINE_string(budgets, "",
+              "Instead of the methods: the quality-size study. Runs the MCMC density strategy at "
+              "each budget of the list (a count per branch, e.g. 2k,5k,10k,20k,auto) and the "
+              "reference strategy once, on the main scene (or --scenes / --workspace), and adds "
+              "the curve and the smallest budget reaching the reference's quality to the report.");
+DEFINE_string(workspace, "",
+              "Run on this existing workspace (COLMAP or NeRF layout, e.g. ../shared/data/suzanne) "
+              "instead of the generated scenes; the scene is named after its folder.");
 DEFINE_bool(profile, false,
             "Instead of the suite: where an iteration's time goes. Generates a 256 px, 48-view "
             "specular object (or --size/--views), runs mgsr_solve --profile on it and writes "
@@ -191,7 +199,9 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) command += std::string(" ") + argv[i];
   mgsr_tools::ParseToolFlags(
       "mgsr_bench --output DIR [--quick] [--scenes a,b] [--methods x,y]",
-      {{"What to run", {"scenes", "methods", "quick", "size", "views", "solve_flags", "timeout"}},
+      {{"What to run",
+        {"scenes", "methods", "quick", "size", "views", "solve_flags", "timeout", "budgets",
+         "workspace"}},
        {"Profile", {"profile", "profile_iterations"}},
        {"Output", {"output", "work", "title", "report_only", "nc_threshold"}}},
       &argc, &argv);
@@ -212,11 +222,33 @@ int main(int argc, char** argv) {
   context.title = FLAGS_title;
   context.nc_threshold = FLAGS_nc_threshold;
   context.main_scene = "main";
-  for (const b::SceneSpec& s : b::Scenes(FLAGS_quick)) {
-    if (Selected(FLAGS_scenes, s.name)) context.scenes.push_back(s);
+  if (!FLAGS_workspace.empty()) {
+    if (!fs::is_directory(FLAGS_workspace))
+      return Fail("--workspace " + FLAGS_workspace + ": not a folder");
+    b::SceneSpec external;
+    external.name = fs::path(FLAGS_workspace).lexically_normal().filename().string();
+    if (external.name.empty())
+      external.name =
+          fs::path(FLAGS_workspace).lexically_normal().parent_path().filename().string();
+    external.stresses = "the workspace " + FLAGS_workspace;
+    context.scenes.push_back(external);
+    context.main_scene = external.name;
+  } else {
+    // The quality-size study runs on the main scene unless --scenes says otherwise.
+    const std::string scenes =
+        FLAGS_scenes.empty() && !FLAGS_budgets.empty() ? "main" : FLAGS_scenes;
+    for (const b::SceneSpec& s : b::Scenes(FLAGS_quick)) {
+      if (Selected(scenes, s.name)) context.scenes.push_back(s);
+    }
   }
-  for (const b::MethodSpec& m : b::Methods(FLAGS_quick)) {
-    if (Selected(FLAGS_methods, m.name)) context.methods.push_back(m);
+  if (!FLAGS_budgets.empty()) {
+    const mgsr::Status parsed = b::BudgetMethods(FLAGS_budgets, &context.methods);
+    if (!parsed.ok()) return Fail(parsed.message());
+    context.budget_study = true;
+  } else {
+    for (const b::MethodSpec& m : b::Methods(FLAGS_quick)) {
+      if (Selected(FLAGS_methods, m.name)) context.methods.push_back(m);
+    }
   }
   if (context.scenes.empty()) return Fail("--scenes: no scene of the suite is selected");
   if (context.methods.empty()) return Fail("--methods: no method of the suite is selected");
@@ -265,8 +297,10 @@ int main(int argc, char** argv) {
   mgsr::Timer all;
   for (const b::SceneSpec& sc : context.scenes) {
     // Scenes are generated afresh: nothing from an earlier run is reused.
-    const std::string scene_dir = mgsr::JoinPath(work, "scenes/" + sc.name);
-    fs::remove_all(scene_dir, ec);
+    const bool external = !FLAGS_workspace.empty();  // then it is the only scene
+    const std::string scene_dir = external ? fs::absolute(FLAGS_workspace).string()
+                                           : mgsr::JoinPath(work, "scenes/" + sc.name);
+    if (!external) fs::remove_all(scene_dir, ec);
     std::vector<std::string> args = {synth,
                                      "--output",
                                      scene_dir,
@@ -283,9 +317,11 @@ int main(int argc, char** argv) {
     if (!s.ok()) return Fail(s.message());
     const std::string synth_log = mgsr::JoinPath(work, "runs/" + sc.name + "/synth.log");
     fs::remove(synth_log, ec);
-    const mgsr::ProgramResult made = mgsr::RunProgram(args, {}, synth_log);
-    if (made.exit_code != 0)
-      return Fail("mgsr_synth failed for scene " + sc.name + "; see " + synth_log);
+    if (!external) {
+      const mgsr::ProgramResult made = mgsr::RunProgram(args, {}, synth_log);
+      if (made.exit_code != 0)
+        return Fail("mgsr_synth failed for scene " + sc.name + "; see " + synth_log);
+    }
 
     for (const b::MethodSpec& m : context.methods) {
       if (!b::Covers(m, sc, "main")) continue;

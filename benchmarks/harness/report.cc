@@ -81,11 +81,13 @@ const char* kTableHeader =
     "---: | ---: | ---: | ---: | ---: | --- |\n";
 
 // Charts with gnuplot: one point per run, a colour per method, the Pareto front as a dashed step
-// line. Returns false when gnuplot is not installed.
+// line (y higher is better, or lower with `lower_is_better`). Returns false when gnuplot is not
+// installed.
 bool WriteChart(const std::string& dir, const std::string& name, const std::string& title,
                 const std::string& xlabel, const std::string& ylabel,
                 const std::vector<std::string>& methods, const std::vector<RunRecord>& runs,
-                double (*x_of)(const RunRecord&), double (*y_of)(const RunRecord&)) {
+                double (*x_of)(const RunRecord&), double (*y_of)(const RunRecord&),
+                bool lower_is_better = false) {
   const std::string gnuplot = FindProgram("gnuplot");
   if (gnuplot.empty()) return false;
   const std::string data = JoinPath(dir, name + ".dat");
@@ -108,7 +110,11 @@ bool WriteChart(const std::string& dir, const std::string& name, const std::stri
       d << "\n\n";
     }
   }
-  const std::vector<int> front = ParetoFront(xs, ys);
+  std::vector<double> quality = ys;
+  if (lower_is_better) {
+    for (double& q : quality) q = -q;
+  }
+  const std::vector<int> front = ParetoFront(xs, quality);
   for (int i : front) d << xs[i] << " " << ys[i] << "\n";
   d.close();
   if (xs.empty()) return true;
@@ -133,6 +139,7 @@ bool WriteChart(const std::string& dir, const std::string& name, const std::stri
 double TotalSeconds(const RunRecord& r) { return r.t_total; }
 double NcX100(const RunRecord& r) { return 100 * r.nc; }
 double AlignedPsnr(const RunRecord& r) { return r.psnr_aligned; }
+double CdX1000(const RunRecord& r) { return 1000 * r.cd; }
 double Primitives(const RunRecord& r) {
   return (std::isfinite(r.gaussians) ? r.gaussians : 0) +
          (std::isfinite(r.surfels) ? r.surfels : 0);
@@ -268,6 +275,81 @@ void WriteExposureComparison(const ReportContext& c, const std::vector<RunRecord
      << rows.str();
 }
 
+// The quality-size study: per scene, the runs by model size, and the smallest budget that reaches
+// the reference strategy's quality (NC and aligned PSNR each within 0.2 of it, or better).
+void WriteBudgetStudy(const ReportContext& c, const std::vector<RunRecord>& runs,
+                      std::ostringstream& md) {
+  constexpr double kNcTolerance = 0.2, kPsnrTolerance = 0.2;  // NC x100 points, dB
+  md << "\n## Quality against model size\n\n"
+        "Each scene at every budget (a count per branch) with the MCMC strategy, and the "
+        "reference strategy's run. \"Reaches the reference\" means NC x100 and aligned PSNR "
+        "within "
+     << Fixed(kNcTolerance, 1) << " points / " << Fixed(kPsnrTolerance, 1)
+     << " dB of the reference run or better. ms/it is the training time (warm-up and mutual "
+        "stage) per iteration.\n";
+  for (const SceneSpec& s : c.scenes) {
+    std::vector<const RunRecord*> rows;
+    for (const RunRecord& r : runs) {
+      if (r.scene == s.name && r.measured) rows.push_back(&r);
+    }
+    if (rows.empty()) continue;
+    std::stable_sort(rows.begin(), rows.end(), [](const RunRecord* a, const RunRecord* b) {
+      return Primitives(*a) < Primitives(*b);
+    });
+    const RunRecord* ref = FindRun(runs, s.name, "reference");
+    const auto reaches_run = [&](const RunRecord& r, const RunRecord* target) {
+      return target != nullptr && 100 * r.nc >= 100 * target->nc - kNcTolerance &&
+             r.psnr_aligned >= target->psnr_aligned - kPsnrTolerance;
+    };
+    const auto reaches = [&](const RunRecord& r) { return reaches_run(r, ref); };
+    md << "\n### " << s.name << "\n\n"
+       << "| method | Gaussians | surfels | of the reference | NC x100 | CD x1000 | F 1px | "
+          "offset px | PSNR aligned | ms/it | total s | reaches the reference |\n"
+          "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n";
+    for (const RunRecord* r : rows) {
+      const std::string share =
+          ref != nullptr && Primitives(*ref) > 0
+              ? Fixed(100 * Primitives(*r) / Primitives(*ref), 0) + "%"
+              : "-";
+      md << "| " << r->method << " | " << Fixed(r->gaussians, 0) << " | " << Fixed(r->surfels, 0)
+         << " | " << share << " | " << Fixed(100 * r->nc, 2) << " | " << Fixed(1000 * r->cd, 2)
+         << " | " << Fixed(r->fscore_1px, 3) << " | " << Fixed(r->offset_px, 2) << " | "
+         << Fixed(r->psnr_aligned, 2) << " | " << Fixed(MsPerIteration(*r), 1) << " | "
+         << Fixed(r->t_total, 0) << " | "
+         << (r == ref ? "(the reference)" : reaches(*r) ? "yes" : "no") << " |\n";
+    }
+    // --budget auto against the curve: the smallest budget that reaches auto's own quality.
+    const RunRecord* automatic = FindRun(runs, s.name, "mcmc-auto");
+    const RunRecord* smallest_at_auto = nullptr;
+    for (const RunRecord* r : rows) {
+      if (r != ref && smallest_at_auto == nullptr && reaches_run(*r, automatic))
+        smallest_at_auto = r;
+    }
+    if (automatic != nullptr && smallest_at_auto != nullptr) {
+      md << "\n`--budget auto` chose " << Fixed(Primitives(*automatic), 0)
+         << " primitives; the smallest run reaching its quality is " << smallest_at_auto->method
+         << " with " << Fixed(Primitives(*smallest_at_auto), 0) << " ("
+         << Signed(100 * (Primitives(*automatic) / Primitives(*smallest_at_auto) - 1), 0)
+         << "%: auto's count against it).\n";
+    }
+    const RunRecord* smallest = nullptr;
+    for (const RunRecord* r : rows) {
+      if (r != ref && smallest == nullptr && reaches(*r)) smallest = r;
+    }
+    if (ref == nullptr) continue;
+    md << "\n";
+    if (smallest == nullptr) {
+      md << "No budget reaches the reference's quality on " << s.name << ".\n";
+    } else {
+      md << "Smallest run that reaches the reference on " << s.name << ": **" << smallest->method
+         << "**, " << Fixed(Primitives(*smallest), 0) << " primitives ("
+         << Fixed(100 * Primitives(*smallest) / Primitives(*ref), 0)
+         << "% of the reference's), " << Fixed(MsPerIteration(*smallest), 1) << " ms/it against "
+         << Fixed(MsPerIteration(*ref), 1) << ".\n";
+    }
+  }
+}
+
 // Splits one CSV line (quoted fields with doubled quotes, as CsvEscape writes them).
 std::vector<std::string> SplitCsvLine(const std::string& line) {
   std::vector<std::string> out(1);
@@ -294,9 +376,14 @@ std::vector<std::string> SplitCsvLine(const std::string& line) {
   return out;
 }
 
-constexpr char kCsvHeader[] =
+// The columns before `iterations` are the older reports' whole header; those still read back.
+constexpr char kCsvHeaderV1[] =
     "scene,method,status,failure,nc,cd,psnr,ssim,psnr_aligned,ssim_aligned,warmup_s,mutual_s,"
     "mesh_s,total_s,wall_s,peak_mb,gaussians,surfels,offset_px,fscore_1px,ceiling_nc,ceiling_cd";
+constexpr char kCsvHeader[] =
+    "scene,method,status,failure,nc,cd,psnr,ssim,psnr_aligned,ssim_aligned,warmup_s,mutual_s,"
+    "mesh_s,total_s,wall_s,peak_mb,gaussians,surfels,offset_px,fscore_1px,ceiling_nc,ceiling_cd,"
+    "iterations";
 
 }  // namespace
 
@@ -317,7 +404,8 @@ RunRecord::RunRecord()
       t_total(kNaN),
       peak_mb(kNaN),
       gaussians(kNaN),
-      surfels(kNaN) {}
+      surfels(kNaN),
+      iterations(kNaN) {}
 
 void ReadRunResult(int exit_code, int signal, bool timed_out, double timeout_seconds,
                    const std::string& log_tail, double nc_threshold, RunRecord* r) {
@@ -372,6 +460,11 @@ void ReadRunResult(int exit_code, int signal, bool timed_out, double timeout_sec
   r->peak_mb = Get(m, {"peak_memory_mb"});
   r->gaussians = Get(m, {"counts", "gaussians"});
   r->surfels = Get(m, {"counts", "surfels"});
+  const double warmup = std::max(Get(m, {"iterations", "warmup_2d"}),
+                                 Get(m, {"iterations", "warmup_3d"})),
+               mutual = Get(m, {"iterations", "mutual"});
+  if (std::isfinite(warmup) || std::isfinite(mutual))
+    r->iterations = (std::isfinite(warmup) ? warmup : 0) + (std::isfinite(mutual) ? mutual : 0);
   const double triangles = Get(m, {"mesh", "triangles"});
   r->measured = true;
   // NaN is written as null by the JSON writer: a missing test score means a NaN somewhere.
@@ -392,17 +485,19 @@ Status ReadResultsCsv(const std::string& path, const std::string& work,
   MGSR_RETURN_IF_ERROR(ReadFileToString(path, &text));
   std::istringstream in(text);
   std::string line;
-  if (!std::getline(in, line) || line != kCsvHeader)
+  if (!std::getline(in, line) || (line != kCsvHeader && line != kCsvHeaderV1))
     return Status::Error(path + ": not a results.csv of this harness (header differs)");
+  const size_t columns = line == kCsvHeader ? 23 : 22;
   runs->clear();
   int line_number = 1;
   while (std::getline(in, line)) {
     ++line_number;
     if (line.empty()) continue;
     const std::vector<std::string> f = SplitCsvLine(line);
-    if (f.size() != 22)
+    if (f.size() != columns)
       return Status::Error(path + ": line " + std::to_string(line_number) + " has " +
-                           std::to_string(f.size()) + " fields, expected 22");
+                           std::to_string(f.size()) + " fields, expected " +
+                           std::to_string(columns));
     RunRecord r;
     r.scene = f[0];
     r.method = f[1];
@@ -412,8 +507,8 @@ Status ReadResultsCsv(const std::string& path, const std::string& work,
     double* fields[] = {&r.nc,           &r.cd,         &r.psnr,      &r.ssim,    &r.psnr_aligned,
                         &r.ssim_aligned, &r.t_warmup,   &r.t_mutual,  &r.t_mesh,  &r.t_total,
                         &r.wall_seconds, &r.peak_mb,    &r.gaussians, &r.surfels, &r.offset_px,
-                        &r.fscore_1px,   &r.ceiling_nc, &r.ceiling_cd};
-    for (int k = 0; k < 18; ++k) {
+                        &r.fscore_1px,   &r.ceiling_nc, &r.ceiling_cd, &r.iterations};
+    for (size_t k = 0; k + 4 < columns; ++k) {
       const std::string& v = f[4 + k];
       if (v.empty()) continue;
       char* end = nullptr;
@@ -442,10 +537,16 @@ Status ReadReportContext(const std::string& path, ReportContext* c) {
     c->threads = j.at("threads").get<int>();
     c->nc_threshold = j.at("nc_threshold").get<double>();
     c->main_scene = j.at("main_scene").get<std::string>();
+    c->budget_study = j.value("budget_study", false);
   } catch (const nlohmann::json::exception& e) {
     return Status::Error(path + ": " + e.what());
   }
   return Status::Ok();
+}
+
+double MsPerIteration(const RunRecord& r) {
+  if (!(r.iterations > 0)) return kNaN;
+  return 1000 * (r.t_warmup + r.t_mutual) / r.iterations;
 }
 
 std::vector<int> ParetoFront(const std::vector<double>& x, const std::vector<double>& y) {
@@ -478,7 +579,8 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
         << CsvEscape(r.failure);
     for (double v : {r.nc, r.cd, r.psnr, r.ssim, r.psnr_aligned, r.ssim_aligned, r.t_warmup,
                      r.t_mutual, r.t_mesh, r.t_total, r.wall_seconds, r.peak_mb, r.gaussians,
-                     r.surfels, r.offset_px, r.fscore_1px, r.ceiling_nc, r.ceiling_cd}) {
+                     r.surfels, r.offset_px, r.fscore_1px, r.ceiling_nc, r.ceiling_cd,
+                     r.iterations}) {
       csv << "," << (std::isfinite(v) ? Precise(v) : "");
     }
     csv << "\n";
@@ -491,7 +593,8 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
                                   {"machine", c.machine},
                                   {"threads", c.threads},
                                   {"nc_threshold", c.nc_threshold},
-                                  {"main_scene", c.main_scene}};
+                                  {"main_scene", c.main_scene},
+                                  {"budget_study", c.budget_study}};
   MGSR_RETURN_IF_ERROR(
       WriteStringToFileAtomic(JoinPath(dir, "context.json"), context.dump(2) + "\n"));
 
@@ -510,6 +613,14 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
   have_gnuplot = WriteChart(charts, "count_vs_psnr", "Model size against test PSNR (aligned)",
                             "primitives (Gaussians + surfels)", "PSNR aligned (dB)", method_names,
                             runs, Primitives, AlignedPsnr) &&
+                 have_gnuplot;
+  have_gnuplot = WriteChart(charts, "count_vs_nc", "Model size against mesh normal consistency",
+                            "primitives (Gaussians + surfels)", "NC x100", method_names, runs,
+                            Primitives, NcX100) &&
+                 have_gnuplot;
+  have_gnuplot = WriteChart(charts, "count_vs_cd", "Model size against Chamfer distance (exact)",
+                            "primitives (Gaussians + surfels)", "CD x1000 (lower is better)",
+                            method_names, runs, Primitives, CdX1000, true) &&
                  have_gnuplot;
 
   // README.md
@@ -575,6 +686,7 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
 
   WriteMainCase(c, runs, md);
   WriteExposureComparison(c, runs, md);
+  if (c.budget_study) WriteBudgetStudy(c, runs, md);
 
   md << "\n## Stability matrix\n\n| method |";
   for (const SceneSpec& s : c.scenes) md << " " << s.name << " |";
@@ -599,7 +711,9 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
     md << "One point per run that was measured (runs failed on the NC threshold included). "
           "Dashed: the Pareto front (no other run is both faster, or smaller, and better).\n\n"
        << "![time vs NC](charts/time_vs_nc.png)\n\n![time vs PSNR](charts/time_vs_psnr.png)\n\n"
-       << "![primitives vs PSNR](charts/count_vs_psnr.png)\n";
+       << "![primitives vs PSNR](charts/count_vs_psnr.png)\n\n"
+       << "![primitives vs NC](charts/count_vs_nc.png)\n\n"
+       << "![primitives vs CD](charts/count_vs_cd.png)\n";
   } else {
     md << "gnuplot is not installed, so no charts were drawn (the data is in results.csv).\n";
   }

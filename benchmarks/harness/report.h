@@ -25,6 +25,10 @@ struct RunRecord {
   double offset_px, fscore_1px, ceiling_nc, ceiling_cd;
   double t_warmup, t_mutual, t_mesh, t_total, peak_mb;
   double gaussians, surfels;
+  // Training iterations: the longer branch's warm-up plus the mutual stage (an iteration steps
+  // every branch that trains in that stage), so (t_warmup + t_mutual) / iterations is the
+  // cost of one.
+  double iterations;
   RunRecord();
 };
 
@@ -38,6 +42,9 @@ struct ReportContext {
   std::vector<MethodSpec> methods;
   std::string main_scene;
   std::string rebuilt;  // when the report was rebuilt from results.csv (--report_only), else ""
+  // A quality-size study (mgsr_bench --budgets): the report adds, per scene, the runs ordered by
+  // model size and the smallest budget that reaches the reference strategy's quality.
+  bool budget_study = false;
 };
 
 // Classifies a finished run from its exit and metrics.json: fills ok / failure and the numbers.
@@ -58,6 +65,9 @@ Status ReadResultsCsv(const std::string& path, const std::string& work,
 // The report's context (title, command, commit, date, machine, threads, threshold, main scene)
 // as WriteReport stores it in context.json; scenes and methods are left to the caller.
 Status ReadReportContext(const std::string& path, ReportContext* context);
+
+// Milliseconds per training iteration (NaN when unknown).
+double MsPerIteration(const RunRecord& r);
 
 // Pareto front of points (cost x lower is better, quality y higher is better): indices of the
 // points no other point beats in both, sorted by x.

@@ -1,5 +1,7 @@
 #include "benchmarks/harness/suite.h"
 
+#include <sstream>
+
 namespace mgsr::bench {
 
 std::vector<SceneSpec> Scenes(bool quick) {
@@ -104,6 +106,48 @@ std::vector<MethodSpec> Methods(bool quick) {
   };
   m.insert(m.end(), more.begin(), more.end());
   return m;
+}
+
+Status BudgetMethods(const std::string& list, std::vector<MethodSpec>* methods) {
+  methods->clear();
+  std::istringstream in(list);
+  for (std::string item; std::getline(in, item, ',');) {
+    const auto bad = [&](const std::string& why) {
+      return Status::Error("--budgets: '" + item + "' " + why);
+    };
+    std::string count;
+    if (item == "auto") {
+      count = "auto";
+    } else {
+      std::string digits = item;
+      long long scale = 1;
+      if (!digits.empty() && (digits.back() == 'k' || digits.back() == 'K')) {
+        scale = 1000;
+        digits.pop_back();
+      }
+      if (digits.empty() || digits.size() > 9 ||
+          digits.find_first_not_of("0123456789") != std::string::npos)
+        return bad("is not a count (like 5000 or 5k) or auto");
+      const long long n = std::stoll(digits) * scale;
+      if (n < 1) return bad("must be at least 1");
+      count = std::to_string(n);
+    }
+    const std::string name = "mcmc-" + item;
+    for (const MethodSpec& m : *methods) {
+      if (m.name == name || m.solve_args.back() == count) return bad("is given twice");
+    }
+    methods->push_back({name,
+                        count == "auto" ? "MCMC density, budget from the scene (--budget auto)"
+                                        : "MCMC density, at most " + count + " per branch",
+                        {"--density", "mcmc", "--budget", count},
+                        Coverage::kAll});
+  }
+  if (methods->empty()) return Status::Error("--budgets: no budget given");
+  methods->push_back({"reference",
+                      "reference density control (clone, split, prune; scene-sized bound)",
+                      {"--density", "reference"},
+                      Coverage::kAll});
+  return Status::Ok();
 }
 
 bool Covers(const MethodSpec& method, const SceneSpec& scene, const std::string& main_scene) {

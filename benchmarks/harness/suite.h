@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "mgsr/core/status.h"
+
 namespace mgsr::bench {
 
 struct SceneSpec {
@@ -31,6 +33,13 @@ std::vector<SceneSpec> Scenes(bool quick);
 // The four methods of the comparison, then (full suite only) the ablations and the exposure
 // variant, which run on fewer scenes (see Coverage).
 std::vector<MethodSpec> Methods(bool quick);
+// The quality-size study (mgsr_bench --budgets): the MCMC strategy at each budget of a
+// comma-separated list (a count per branch: "5000", "5k", or "auto" for the scene's own rule),
+// named "mcmc-5k", "mcmc-auto", ..., then the reference strategy at its scene-sized bound
+// ("reference"), the point the curve is read against. An empty list, a repeated or malformed entry
+// is an error naming it.
+Status BudgetMethods(const std::string& list, std::vector<MethodSpec>* methods);
+
 bool Covers(const MethodSpec& method, const SceneSpec& scene, const std::string& main_scene);
 
 }  // namespace mgsr::bench

@@ -160,6 +160,91 @@ TEST(HarnessTest, SuiteCoversTheStressCasesAndMethods) {
   EXPECT_EQ(Methods(true).size(), 4u);
 }
 
+TEST(HarnessTest, BudgetListsBecomeMcmcRunsAndTheReference) {
+  std::vector<MethodSpec> m;
+  ASSERT_TRUE(BudgetMethods("2k,5000,auto", &m).ok());
+  ASSERT_EQ(m.size(), 4u);
+  EXPECT_EQ(m[0].name, "mcmc-2k");
+  EXPECT_EQ(m[0].solve_args, (std::vector<std::string>{"--density", "mcmc", "--budget", "2000"}));
+  EXPECT_EQ(m[1].solve_args.back(), "5000");
+  EXPECT_EQ(m[2].solve_args.back(), "auto");
+  EXPECT_EQ(m[3].name, "reference");
+  EXPECT_EQ(m[3].solve_args, (std::vector<std::string>{"--density", "reference"}));
+  for (const char* bad : {"", "2k,2000", "lots", "0", "5m", "2k,,"}) {
+    const Status s = BudgetMethods(bad, &m);
+    EXPECT_FALSE(s.ok()) << bad;
+    EXPECT_EQ(s.message().rfind("--budgets: ", 0), 0u) << s.message();
+  }
+}
+
+// The quality-size section: rows by size, the share of the reference, which runs reach it, the
+// smallest that does, and auto against the curve; an old 22-column results.csv still reads.
+TEST(HarnessTest, BudgetStudyFindsTheSmallestRunReachingTheReference) {
+  const std::string dir = testing::ScratchDir();
+  ReportContext c;
+  c.main_scene = "main";
+  c.budget_study = true;
+  c.scenes = {{"main", "specular", {}, 0, true}};
+  ASSERT_TRUE(BudgetMethods("2k,5k,10k,auto", &c.methods).ok());
+  auto record = [&](const std::string& method, double g, double s, double nc, double psnr) {
+    RunRecord r;
+    r.scene = "main";
+    r.method = method;
+    r.run_dir = JoinPath(dir, "runs/main/" + method);
+    r.ok = r.measured = true;
+    r.nc = nc;
+    r.cd = 0.005;
+    r.psnr = r.psnr_aligned = psnr;
+    r.ssim = 0.9;
+    r.gaussians = g;
+    r.surfels = s;
+    r.t_warmup = 30;
+    r.t_mutual = 20;
+    r.t_total = 60;
+    r.iterations = 1000;
+    return r;
+  };
+  // 5k reaches the reference (NC -0.15 points, PSNR -0.1 dB); 2k does not (NC -0.5).
+  const std::vector<RunRecord> runs = {
+      record("reference", 20000, 20000, 0.9600, 26.0), record("mcmc-10k", 10000, 10000, 0.9610, 26.1),
+      record("mcmc-2k", 2000, 2000, 0.9550, 25.5), record("mcmc-5k", 5000, 5000, 0.9585, 25.9),
+      record("mcmc-auto", 5500, 5500, 0.9586, 25.9)};
+  ASSERT_TRUE(WriteReport(dir, c, runs).ok());
+  std::string md;
+  ASSERT_TRUE(ReadFileToString(JoinPath(dir, "README.md"), &md).ok());
+  const size_t section = md.find("## Quality against model size");
+  ASSERT_NE(section, std::string::npos) << md;
+  const size_t at2 = md.find("| mcmc-2k | 2000 | 2000 | 10% |", section),
+               at5 = md.find("| mcmc-5k |", section);
+  ASSERT_NE(at2, std::string::npos) << md;
+  EXPECT_LT(at2, at5);  // ordered by size
+  EXPECT_NE(md.find("| 25.50 | 50.0 | 60 | no |"), std::string::npos) << md;
+  EXPECT_NE(md.find("**mcmc-5k**, 10000 primitives (25% of the reference's)"), std::string::npos)
+      << md;
+  EXPECT_NE(md.find("`--budget auto` chose 11000 primitives; the smallest run reaching its "
+                    "quality is mcmc-5k with 10000 (+10%"),
+            std::string::npos)
+      << md;
+  ReportContext saved;
+  ASSERT_TRUE(ReadReportContext(JoinPath(dir, "context.json"), &saved).ok());
+  EXPECT_TRUE(saved.budget_study);
+
+  // A results.csv of the older layout (no iterations column) still reads back.
+  std::string csv;
+  ASSERT_TRUE(ReadFileToString(JoinPath(dir, "results.csv"), &csv).ok());
+  std::string old;
+  std::istringstream lines(csv);
+  for (std::string line; std::getline(lines, line);) old += line.substr(0, line.rfind(',')) + "\n";
+  ASSERT_TRUE(WriteStringToFileAtomic(JoinPath(dir, "old.csv"), old).ok());
+  std::vector<RunRecord> back;
+  ASSERT_TRUE(ReadResultsCsv(JoinPath(dir, "old.csv"), dir, &back).ok());
+  ASSERT_EQ(back.size(), runs.size());
+  EXPECT_TRUE(std::isnan(back[0].iterations));
+  EXPECT_DOUBLE_EQ(back[0].nc, 0.96);
+  ASSERT_TRUE(ReadResultsCsv(JoinPath(dir, "results.csv"), dir, &back).ok());
+  EXPECT_DOUBLE_EQ(back[0].iterations, 1000);
+}
+
 // A tiny --quick run end to end: every report file exists and parses.
 TEST(HarnessTest, QuickRunWritesAReportThatParses) {
   const std::string out = testing::ScratchDir();
@@ -177,14 +262,14 @@ TEST(HarnessTest, QuickRunWritesAReportThatParses) {
   int rows = 0;
   while (std::getline(lines, line)) {
     const size_t commas = std::count(line.begin(), line.end(), ',');
-    EXPECT_EQ(commas, 21u) << line;
+    EXPECT_EQ(commas, 22u) << line;
     if (rows > 0) {
       // Every run has a mesh here: its signed offset and the exact-depth ceiling are filled in.
       std::vector<std::string> fields;
       std::istringstream f(line);
       for (std::string v; std::getline(f, v, ',');) fields.push_back(v);
-      ASSERT_EQ(fields.size(), 22u) << line;
-      for (int k : {18, 20, 21}) EXPECT_FALSE(fields[k].empty()) << k << ": " << line;
+      ASSERT_EQ(fields.size(), 23u) << line;
+      for (int k : {18, 20, 21, 22}) EXPECT_FALSE(fields[k].empty()) << k << ": " << line;
       EXPECT_TRUE(line.rfind("control,", 0) == 0 || line.rfind("main,", 0) == 0) << line;
       EXPECT_TRUE(line.find(",ok,") != std::string::npos ||
                   line.find(",failed,") != std::string::npos)
