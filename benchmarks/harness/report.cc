@@ -318,11 +318,11 @@ void WriteBudgetStudy(const ReportContext& c, const std::vector<RunRecord>& runs
          << Fixed(r->t_total, 0) << " | "
          << (r == ref ? "(the reference)" : reaches(*r) ? "yes" : "no") << " |\n";
     }
-    // --budget auto against the curve: the smallest budget that reaches auto's own quality.
+    // --budget auto against the curve: the smallest given budget that reaches auto's quality.
     const RunRecord* automatic = FindRun(runs, s.name, "mcmc-auto");
     const RunRecord* smallest_at_auto = nullptr;
     for (const RunRecord* r : rows) {
-      if (r != ref && smallest_at_auto == nullptr && reaches_run(*r, automatic))
+      if (r != ref && r != automatic && smallest_at_auto == nullptr && reaches_run(*r, automatic))
         smallest_at_auto = r;
     }
     if (automatic != nullptr && smallest_at_auto != nullptr) {
