@@ -119,17 +119,18 @@ SceneBudget AutoPrimitiveBudget(const Scene& scene) {
     std::nth_element(counts.begin(), counts.begin() + counts.size() / 2, counts.end());
     b.foreground_pixels = counts[counts.size() / 2];
   }
+  const double size = std::sqrt(b.foreground_pixels);
   auto budget = [&](double rate) {
-    return std::max(kMinAutoBudget, static_cast<size_t>(std::lround(rate * b.foreground_pixels)));
+    return std::max(kMinAutoBudget, static_cast<size_t>(std::lround(rate * size)));
   };
-  b.gaussians = budget(kAutoGaussiansPerPixel);
-  b.surfels = budget(kAutoSurfelsPerPixel);
+  b.gaussians = budget(kAutoGaussiansPerSqrtPixel);
+  b.surfels = budget(kAutoSurfelsPerSqrtPixel);
   char why[256];
   std::snprintf(why, sizeof(why),
-                "auto: %.2f Gaussians and %.2f surfels per foreground pixel of the median training "
-                "view (%.0f px by %s), at least %zu",
-                kAutoGaussiansPerPixel, kAutoSurfelsPerPixel, b.foreground_pixels, source.c_str(),
-                kMinAutoBudget);
+                "auto: %.0f Gaussians and %.0f surfels x sqrt(foreground pixels of the median "
+                "training view: %.0f by %s), at least %zu",
+                kAutoGaussiansPerSqrtPixel, kAutoSurfelsPerSqrtPixel, b.foreground_pixels,
+                source.c_str(), kMinAutoBudget);
   b.why = why;
   return b;
 }

@@ -65,10 +65,17 @@ constexpr size_t kMinBudget = 500000;
 size_t DefaultPrimitiveBudget(const Scene& scene);
 
 // `--budget auto`: a budget from what the training views show. A branch gets its rate x the
-// median over training views of the foreground pixels in a view (the mask, else the alpha, else
-// every pixel), and at least kMinAutoBudget. `why` says how, for the log and metrics.json.
-constexpr double kAutoGaussiansPerPixel = 0.5;
-constexpr double kAutoSurfelsPerPixel = 0.3;
+// square root of F, the median over training views of the foreground pixels in a view (the mask,
+// else the alpha, else every pixel): a count proportional to the object's size in pixels, not to
+// its area. Why not the area: flat primitives that follow a surface of curvature radius R to
+// within a fixed part of a pixel footprint f can be at most ~sqrt(R f) across, so a surface of
+// area A needs ~A / (R f) of them, which for one shape (A / R^2 fixed) grows as R / f, i.e. as
+// sqrt(F). Measured (BENCHMARKS.md, quality against model size): suzanne at 256 px (F 12,271)
+// keeps its NC and PSNR from ~15,000 surfels and ~20,000 Gaussians, the 64 px torus (F 1,114)
+// from ~5,000 of each: 2.5x the count for 11x the pixels. At least kMinAutoBudget. `why` says
+// how, for the log and metrics.json.
+constexpr double kAutoGaussiansPerSqrtPixel = 180;
+constexpr double kAutoSurfelsPerSqrtPixel = 135;
 constexpr size_t kMinAutoBudget = 1000;
 struct SceneBudget {
   size_t gaussians = 0, surfels = 0;

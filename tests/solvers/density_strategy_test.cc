@@ -304,10 +304,10 @@ TEST(DensityStrategyTest, AutoBudgetCountsTheForegroundOfTheMedianView) {
   }
   SceneBudget b = AutoPrimitiveBudget(scene);
   EXPECT_EQ(b.foreground_pixels, 4000);
-  EXPECT_EQ(b.gaussians,
-            std::max(kMinAutoBudget, static_cast<size_t>(4000 * kAutoGaussiansPerPixel)));
-  EXPECT_EQ(b.surfels, std::max(kMinAutoBudget, static_cast<size_t>(4000 * kAutoSurfelsPerPixel)));
-  EXPECT_NE(b.why.find("4000 px by mask"), std::string::npos) << b.why;
+  // 180 and 135 x sqrt(4000) = 11,384 and 8,538.
+  EXPECT_EQ(b.gaussians, 11384u);
+  EXPECT_EQ(b.surfels, 8538u);
+  EXPECT_NE(b.why.find("4000 by mask"), std::string::npos) << b.why;
   // Without masks or alpha every pixel counts.
   for (View& v : scene.views) v.mask = Image();
   b = AutoPrimitiveBudget(scene);
