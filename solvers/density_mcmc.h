@@ -25,12 +25,12 @@ struct McmcOptions {
   // to reach the cap from the initial count within its first half (the fast preset's 2DGS
   // schedule has 9 events: 5% per event would end at 1.5x the initial count).
   float growth = 0.05f;
-  float noise_lr = 5e5f;      // position noise: noise_lr x position rate x covariance
+  float noise_lr = 5e5f;  // position noise: noise_lr x position rate x covariance
   // x mean opacity. Off by default (gsplat uses 0.01): on suzanne at 20,000 per branch 0.01 cost
   // the mesh 0.54 NC points and 0.9 CD x1000 for no gain in aligned PSNR (25.88 vs 25.83 dB);
   // pulling every opacity down leaves surfels semi-transparent, and their blended depth blurs.
   float opacity_reg = 0.0f;
-  float scale_reg = 0.01f;    // x mean scale / scene extent
+  float scale_reg = 0.01f;  // x mean scale / scene extent
 
   // Keys "dead_opacity", "growth", "noise_lr", "opacity_reg", "scale_reg"; unknown keys are an
   // error (a typo must not silently train with defaults).

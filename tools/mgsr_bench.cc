@@ -288,9 +288,8 @@ int main(int argc, char** argv) {
     for (const b::MethodSpec& m : context.methods) total_runs += b::Covers(m, sc, "main");
   }
   const std::string scene_size =
-      FLAGS_workspace.empty()
-          ? std::to_string(size) + " px, " + std::to_string(views) + " views"
-          : "the workspace's own images";
+      FLAGS_workspace.empty() ? std::to_string(size) + " px, " + std::to_string(views) + " views"
+                              : "the workspace's own images";
   std::printf("mgsr_bench: %zu scenes, %zu methods, %d runs, %s\n", context.scenes.size(),
               context.methods.size(), total_runs, scene_size.c_str());
   std::fflush(stdout);

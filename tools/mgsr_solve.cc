@@ -69,7 +69,8 @@ DEFINE_bool(bidirectional, false,
             "Ablation K: the supervising branch also learns from the supervision.");
 DEFINE_string(budget, "",
               "Primitive budget of each branch: auto (from the object's size in pixels: 180 "
-              "Gaussians and 135 surfels x sqrt(foreground pixels of the median view)) | scene (4 per pixel of a view, at least 500,000: a bound, not a "
+              "Gaussians and 135 surfels x sqrt(foreground pixels of the median view)) | scene (4 "
+              "per pixel of a view, at least 500,000: a bound, not a "
               "target) | none | a count. Empty: the density strategy's default (mcmc: auto, "
               "reference: scene).");
 DEFINE_int64(max_gaussians, -1, "Budget of 3DGS primitives (-1: from --budget; 0: none).");

@@ -307,16 +307,18 @@ void WriteBudgetStudy(const ReportContext& c, const std::vector<RunRecord>& runs
           "offset px | PSNR aligned | ms/it | total s | reaches the reference |\n"
           "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n";
     for (const RunRecord* r : rows) {
-      const std::string share =
-          ref != nullptr && Primitives(*ref) > 0
-              ? Fixed(100 * Primitives(*r) / Primitives(*ref), 0) + "%"
-              : "-";
+      const std::string share = ref != nullptr && Primitives(*ref) > 0
+                                    ? Fixed(100 * Primitives(*r) / Primitives(*ref), 0) + "%"
+                                    : "-";
       md << "| " << r->method << " | " << Fixed(r->gaussians, 0) << " | " << Fixed(r->surfels, 0)
          << " | " << share << " | " << Fixed(100 * r->nc, 2) << " | " << Fixed(1000 * r->cd, 2)
          << " | " << Fixed(r->fscore_1px, 3) << " | " << Fixed(r->offset_px, 2) << " | "
          << Fixed(r->psnr_aligned, 2) << " | " << Fixed(MsPerIteration(*r), 1) << " | "
          << Fixed(r->t_total, 0) << " | "
-         << (r == ref ? "(the reference)" : reaches(*r) ? "yes" : "no") << " |\n";
+         << (r == ref      ? "(the reference)"
+             : reaches(*r) ? "yes"
+                           : "no")
+         << " |\n";
     }
     // --budget auto against the curve: the smallest given budget that reaches auto's quality.
     const RunRecord* automatic = FindRun(runs, s.name, "mcmc-auto");
@@ -343,8 +345,8 @@ void WriteBudgetStudy(const ReportContext& c, const std::vector<RunRecord>& runs
     } else {
       md << "Smallest run that reaches the reference on " << s.name << ": **" << smallest->method
          << "**, " << Fixed(Primitives(*smallest), 0) << " primitives ("
-         << Fixed(100 * Primitives(*smallest) / Primitives(*ref), 0)
-         << "% of the reference's), " << Fixed(MsPerIteration(*smallest), 1) << " ms/it against "
+         << Fixed(100 * Primitives(*smallest) / Primitives(*ref), 0) << "% of the reference's), "
+         << Fixed(MsPerIteration(*smallest), 1) << " ms/it against "
          << Fixed(MsPerIteration(*ref), 1) << ".\n";
     }
   }
@@ -504,10 +506,11 @@ Status ReadResultsCsv(const std::string& path, const std::string& work,
     r.ok = f[2] == "ok";
     r.failure = f[3];
     r.run_dir = JoinPath(work, "runs/" + r.scene + "/" + r.method);
-    double* fields[] = {&r.nc,           &r.cd,         &r.psnr,      &r.ssim,    &r.psnr_aligned,
-                        &r.ssim_aligned, &r.t_warmup,   &r.t_mutual,  &r.t_mesh,  &r.t_total,
-                        &r.wall_seconds, &r.peak_mb,    &r.gaussians, &r.surfels, &r.offset_px,
-                        &r.fscore_1px,   &r.ceiling_nc, &r.ceiling_cd, &r.iterations};
+    double* fields[] = {&r.nc,           &r.cd,           &r.psnr,         &r.ssim,
+                        &r.psnr_aligned, &r.ssim_aligned, &r.t_warmup,     &r.t_mutual,
+                        &r.t_mesh,       &r.t_total,      &r.wall_seconds, &r.peak_mb,
+                        &r.gaussians,    &r.surfels,      &r.offset_px,    &r.fscore_1px,
+                        &r.ceiling_nc,   &r.ceiling_cd,   &r.iterations};
     for (size_t k = 0; k + 4 < columns; ++k) {
       const std::string& v = f[4 + k];
       if (v.empty()) continue;
@@ -577,10 +580,10 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
   for (const RunRecord& r : runs) {
     csv << r.scene << "," << r.method << "," << (r.ok ? "ok" : "failed") << ","
         << CsvEscape(r.failure);
-    for (double v : {r.nc, r.cd, r.psnr, r.ssim, r.psnr_aligned, r.ssim_aligned, r.t_warmup,
-                     r.t_mutual, r.t_mesh, r.t_total, r.wall_seconds, r.peak_mb, r.gaussians,
-                     r.surfels, r.offset_px, r.fscore_1px, r.ceiling_nc, r.ceiling_cd,
-                     r.iterations}) {
+    for (double v :
+         {r.nc, r.cd, r.psnr, r.ssim, r.psnr_aligned, r.ssim_aligned, r.t_warmup, r.t_mutual,
+          r.t_mesh, r.t_total, r.wall_seconds, r.peak_mb, r.gaussians, r.surfels, r.offset_px,
+          r.fscore_1px, r.ceiling_nc, r.ceiling_cd, r.iterations}) {
       csv << "," << (std::isfinite(v) ? Precise(v) : "");
     }
     csv << "\n";

@@ -206,9 +206,9 @@ TEST(HarnessTest, BudgetStudyFindsTheSmallestRunReachingTheReference) {
   };
   // 5k reaches the reference (NC -0.15 points, PSNR -0.1 dB); 2k does not (NC -0.5).
   const std::vector<RunRecord> runs = {
-      record("reference", 20000, 20000, 0.9600, 26.0), record("mcmc-10k", 10000, 10000, 0.9610, 26.1),
-      record("mcmc-2k", 2000, 2000, 0.9550, 25.5), record("mcmc-5k", 5000, 5000, 0.9585, 25.9),
-      record("mcmc-auto", 5500, 5500, 0.9586, 25.9)};
+      record("reference", 20000, 20000, 0.9600, 26.0),
+      record("mcmc-10k", 10000, 10000, 0.9610, 26.1), record("mcmc-2k", 2000, 2000, 0.9550, 25.5),
+      record("mcmc-5k", 5000, 5000, 0.9585, 25.9), record("mcmc-auto", 5500, 5500, 0.9586, 25.9)};
   ASSERT_TRUE(WriteReport(dir, c, runs).ok());
   std::string md;
   ASSERT_TRUE(ReadFileToString(JoinPath(dir, "README.md"), &md).ok());
