@@ -12,6 +12,7 @@
 #include <sstream>
 #include <thread>
 
+#include "benchmarks/harness/finished_runs.h"
 #include "benchmarks/harness/report.h"
 #include "benchmarks/harness/suite.h"
 #include "mgsr/core/subprocess.h"
@@ -33,6 +34,9 @@ DEFINE_double(nc_threshold, 0.8, "A mesh with NC below this counts as a failed r
 DEFINE_bool(report_only, false,
             "Rebuild README.md, charts and contact sheets from --output's results.csv and "
             "context.json (and the renders under --work) without running anything.");
+DEFINE_bool(resume, false,
+            "Keep the runs of an earlier, stopped mgsr_bench into the same --work folder that "
+            "finished with the same mgsr_solve command at the same commit; run only the rest.");
 DEFINE_string(title, "MGSR-CPU benchmark", "Title of the report.");
 DEFINE_string(budgets, "",
               "Instead of the methods: the quality-size study. Runs the MCMC density strategy at "
@@ -201,7 +205,7 @@ int main(int argc, char** argv) {
       "mgsr_bench --output DIR [--quick] [--scenes a,b] [--methods x,y]",
       {{"What to run",
         {"scenes", "methods", "quick", "size", "views", "solve_flags", "timeout", "budgets",
-         "workspace"}},
+         "workspace", "resume"}},
        {"Profile", {"profile", "profile_iterations"}},
        {"Output", {"output", "work", "title", "report_only", "nc_threshold"}}},
       &argc, &argv);
@@ -299,7 +303,7 @@ int main(int argc, char** argv) {
   int done = 0;
   mgsr::Timer all;
   for (const b::SceneSpec& sc : context.scenes) {
-    // Scenes are generated afresh: nothing from an earlier run is reused.
+    // Scenes are generated afresh (seeded: a run kept by --resume saw the same images).
     const bool external = !FLAGS_workspace.empty();  // then it is the only scene
     const std::string scene_dir = external ? fs::absolute(FLAGS_workspace).string()
                                            : mgsr::JoinPath(work, "scenes/" + sc.name);
@@ -332,9 +336,7 @@ int main(int argc, char** argv) {
       r.scene = sc.name;
       r.method = m.name;
       r.run_dir = mgsr::JoinPath(work, "runs/" + sc.name + "/" + m.name);
-      fs::remove_all(r.run_dir, ec);
       const std::string log = r.run_dir + ".log";
-      fs::remove(log, ec);
       std::vector<std::string> cmd = {solve,     "--workspace", scene_dir, "--output",
                                       r.run_dir, "--preset",    "fast",    "--eval_every",
                                       "0",       "--log_every", "100000",  "--checkpoint_every",
@@ -343,14 +345,28 @@ int main(int argc, char** argv) {
       cmd.insert(cmd.end(), extra.begin(), extra.end());
       std::printf("[%d/%d] %s / %s ...", ++done, total_runs, sc.name.c_str(), m.name.c_str());
       std::fflush(stdout);
-      mgsr::Timer timer;
-      const mgsr::ProgramResult pr = mgsr::RunProgram(cmd, {}, log, FLAGS_timeout);
-      r.wall_seconds = timer.ElapsedSeconds();
-      b::ReadRunResult(pr.exit_code, pr.signal, pr.timed_out, FLAGS_timeout, Tail(log, 4000),
-                       FLAGS_nc_threshold, &r);
+      // A generated scene is the same for the same arguments (seeded), so an earlier run on it
+      // still stands.
+      const bool kept =
+          FLAGS_resume && b::FinishedEarlier(r.run_dir, cmd, context.commit, &r.wall_seconds);
+      if (kept) {
+        b::ReadRunResult(0, 0, false, FLAGS_timeout, Tail(log, 4000), FLAGS_nc_threshold, &r);
+      } else {
+        b::ForgetRun(r.run_dir);
+        fs::remove_all(r.run_dir, ec);
+        fs::remove(log, ec);
+        mgsr::Timer timer;
+        const mgsr::ProgramResult pr = mgsr::RunProgram(cmd, {}, log, FLAGS_timeout);
+        r.wall_seconds = timer.ElapsedSeconds();
+        b::ReadRunResult(pr.exit_code, pr.signal, pr.timed_out, FLAGS_timeout, Tail(log, 4000),
+                         FLAGS_nc_threshold, &r);
+        if (r.ok) s = b::MarkRunFinished(r.run_dir, cmd, context.commit, r.wall_seconds);
+        if (!s.ok()) return Fail(s.message());
+      }
       if (r.ok) {
-        std::printf(" ok, %.0f s: NC x100 %.2f, PSNR %.2f (aligned %.2f)\n", r.wall_seconds,
-                    100 * r.nc, r.psnr, r.psnr_aligned);
+        std::printf(" %s, %.0f s: NC x100 %.2f, PSNR %.2f (aligned %.2f)\n",
+                    kept ? "kept from the earlier run" : "ok", r.wall_seconds, 100 * r.nc, r.psnr,
+                    r.psnr_aligned);
       } else {
         std::printf(" FAILED (%s), %.0f s\n", r.failure.c_str(), r.wall_seconds);
       }

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "benchmarks/harness/finished_runs.h"
 #include "benchmarks/harness/report.h"
 #include "benchmarks/harness/suite.h"
 #include "mgsr/core/subprocess.h"
@@ -246,6 +247,38 @@ TEST(HarnessTest, BudgetStudyFindsTheSmallestRunReachingTheReference) {
 }
 
 // A tiny --quick run end to end: every report file exists and parses.
+TEST(HarnessTest, ResumeKeepsOnlyRunsFinishedWithTheSameCommandAndCommit) {
+  const std::string run = testing::ScratchDir() + "/runs/main/mgsr";
+  ASSERT_TRUE(MakeDirectories(run).ok());
+  const std::vector<std::string> cmd = {"mgsr_solve", "--workspace", "w", "--preset", "fast"};
+  double wall = -1;
+  ASSERT_TRUE(MarkRunFinished(run, cmd, "abc1234", 12.5).ok());
+  // No metrics.json: the run did not leave its results, so it is not kept.
+  EXPECT_FALSE(FinishedEarlier(run, cmd, "abc1234", &wall));
+  ASSERT_TRUE(WriteStringToFileAtomic(run + "/metrics.json", "{}").ok());
+  EXPECT_TRUE(FinishedEarlier(run, cmd, "abc1234", &wall));
+  EXPECT_EQ(wall, 12.5);
+
+  std::vector<std::string> other = cmd;
+  other.back() = "paper";
+  EXPECT_FALSE(FinishedEarlier(run, other, "abc1234", &wall));
+  other = cmd;
+  other.push_back("--seed");
+  EXPECT_FALSE(FinishedEarlier(run, other, "abc1234", &wall));
+  EXPECT_FALSE(FinishedEarlier(run, cmd, "def5678", &wall));
+  // A tree with uncommitted changes cannot vouch for the code a run used.
+  const std::string dirty = "abc1234 (with uncommitted changes)";
+  ASSERT_TRUE(MarkRunFinished(run, cmd, dirty, 12.5).ok());
+  EXPECT_FALSE(FinishedEarlier(run, cmd, dirty, &wall));
+
+  ASSERT_TRUE(WriteStringToFileAtomic(run + ".done", "{\"command\": [1, 2]").ok());
+  EXPECT_FALSE(FinishedEarlier(run, cmd, "abc1234", &wall));
+  ASSERT_TRUE(MarkRunFinished(run, cmd, "abc1234", 3).ok());
+  ForgetRun(run);
+  EXPECT_FALSE(FileExists(run + ".done"));
+  EXPECT_FALSE(FinishedEarlier(run, cmd, "abc1234", &wall));
+}
+
 TEST(HarnessTest, QuickRunWritesAReportThatParses) {
   const std::string out = testing::ScratchDir();
   const auto r = testing::RunCommand(
