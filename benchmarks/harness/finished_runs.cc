@@ -1,7 +1,6 @@
 #include "benchmarks/harness/finished_runs.h"
 
 #include <filesystem>
-
 #include <nlohmann/json.hpp>
 
 #include "mgsr/io/file_util.h"

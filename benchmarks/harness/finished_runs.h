@@ -13,7 +13,7 @@ namespace mgsr::bench {
 
 // Records that the run in `run_dir` finished: its command, the commit and its wall time.
 Status MarkRunFinished(const std::string& run_dir, const std::vector<std::string>& command,
-                             const std::string& commit, double wall_seconds);
+                       const std::string& commit, double wall_seconds);
 
 // True when `run_dir` finished with exactly this command at this commit (and its metrics.json is
 // there); then `*wall_seconds` is the time it took. A commit that says "uncommitted changes" never
