@@ -302,6 +302,14 @@ void WriteBudgetStudy(const ReportContext& c, const std::vector<RunRecord>& runs
              r.psnr_aligned >= target->psnr_aligned - kPsnrTolerance;
     };
     const auto reaches = [&](const RunRecord& r) { return reaches_run(r, ref); };
+    // The first (smallest) budgeted run reaching `target`'s quality, other than `skip`.
+    const auto smallest_reaching = [&](const RunRecord* target,
+                                       const RunRecord* skip) -> const RunRecord* {
+      for (const RunRecord* r : rows) {
+        if (r != ref && r != skip && reaches_run(*r, target)) return r;
+      }
+      return nullptr;
+    };
     md << "\n### " << s.name << "\n\n"
        << "| method | Gaussians | surfels | of the reference | NC x100 | CD x1000 | F 1px | "
           "offset px | PSNR aligned | ms/it | total s | reaches the reference |\n"
@@ -322,11 +330,7 @@ void WriteBudgetStudy(const ReportContext& c, const std::vector<RunRecord>& runs
     }
     // --budget auto against the curve: the smallest given budget that reaches auto's quality.
     const RunRecord* automatic = FindRun(runs, s.name, "mcmc-auto");
-    const RunRecord* smallest_at_auto = nullptr;
-    for (const RunRecord* r : rows) {
-      if (r != ref && r != automatic && smallest_at_auto == nullptr && reaches_run(*r, automatic))
-        smallest_at_auto = r;
-    }
+    const RunRecord* smallest_at_auto = smallest_reaching(automatic, automatic);
     if (automatic != nullptr && smallest_at_auto != nullptr) {
       md << "\n`--budget auto` chose " << Fixed(Primitives(*automatic), 0)
          << " primitives; the smallest run reaching its quality is " << smallest_at_auto->method
@@ -334,10 +338,7 @@ void WriteBudgetStudy(const ReportContext& c, const std::vector<RunRecord>& runs
          << Signed(100 * (Primitives(*automatic) / Primitives(*smallest_at_auto) - 1), 0)
          << "%: auto's count against it).\n";
     }
-    const RunRecord* smallest = nullptr;
-    for (const RunRecord* r : rows) {
-      if (r != ref && smallest == nullptr && reaches(*r)) smallest = r;
-    }
+    const RunRecord* smallest = smallest_reaching(ref, nullptr);
     if (ref == nullptr) continue;
     md << "\n";
     if (smallest == nullptr) {
