@@ -70,7 +70,9 @@ struct SolverOptions {
   float percent_dense = 0.01f;
   size_t max_gaussians = 0, max_surfels = 0;  // 0 = no budget
   // The density strategy of both branches (DensityStrategyRegistry: "reference", "mcmc", ...) and
-  // its config (null: the strategy's defaults). "mcmc" needs a budget in each branch it trains.
+  // its config (null: the strategy's defaults). "mcmc" needs a budget in each branch it trains,
+  // so the library's default stays "reference"; mgsr_solve defaults to "mcmc" with a budget from
+  // the scene (ReconstructionPipeline, AutoPrimitiveBudget).
   std::string density = "reference";
   nlohmann::json density_config;
   // Pruning by contribution at the end of each stage: a primitive whose blend weights, summed

@@ -75,9 +75,10 @@ DEFINE_string(budget, "",
               "reference: scene).");
 DEFINE_int64(max_gaussians, -1, "Budget of 3DGS primitives (-1: from --budget; 0: none).");
 DEFINE_int64(max_surfels, -1, "Budget of 2DGS primitives (-1: from --budget; 0: none).");
-DEFINE_string(density, "reference",
-              "Density strategy of both branches: reference (clone/split/prune, the authors') | "
-              "mcmc (relocation under a fixed budget, Kheradmand et al. 2024).");
+DEFINE_string(density, "mcmc",
+              "Density strategy of both branches: mcmc (relocation under a fixed budget, "
+              "Kheradmand et al. 2024; with --budget auto by default) | reference "
+              "(clone/split/prune, the authors').");
 DEFINE_string(density_config, "",
               "JSON config of the density strategy, e.g. '{\"growth\": 0.05}' for mcmc "
               "(keys: dead_opacity, growth, noise_lr, opacity_reg, scale_reg).");
@@ -322,7 +323,10 @@ int main(int argc, char** argv) {
     if (!l.ok()) return Fail(l.message());
   }
   if (listing) {
-    const mgsr::Status valid = options.Validate();
+    // The budgets come from the scene, which a listing does not read: stand-ins for them.
+    mgsr::SolverOptions shown = options;
+    shown.max_gaussians = shown.max_surfels = 1;
+    const mgsr::Status valid = shown.Validate();
     if (!valid.ok()) return Fail(valid.message());
     PrintLosses(options);
     return 0;

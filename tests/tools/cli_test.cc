@@ -81,14 +81,15 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
   EXPECT_NE(metrics.find("\"psnr_aligned\""), std::string::npos);
   EXPECT_NE(metrics.find("\"nc\""),
             std::string::npos);  // the synthetic scene has a ground-truth mesh
-  // Without --max_*, each branch's budget comes from the scene: 4 per pixel of a 32 x 32 view
-  // is below the floor of 500,000.
-  EXPECT_NE(r.output.find("budget: 500000 Gaussians, 500000 surfels (scene: "), std::string::npos)
-      << r.output;
+  // By default the MCMC strategy with --budget auto: each branch's budget from the object's size
+  // in pixels, the same rule for both (135 surfels for every 180 Gaussians).
+  EXPECT_NE(r.output.find("(auto: "), std::string::npos) << r.output;
   const nlohmann::json parsed = nlohmann::json::parse(metrics);
-  EXPECT_EQ(parsed["budget"]["gaussians"], 500000);
-  EXPECT_EQ(parsed["budget"]["mode"], "scene");
-  EXPECT_EQ(parsed["budget"]["density"], "reference");
+  EXPECT_EQ(parsed["budget"]["mode"], "auto");
+  EXPECT_EQ(parsed["budget"]["density"], "mcmc");
+  const int64_t gaussians = parsed["budget"]["gaussians"], surfels = parsed["budget"]["surfels"];
+  EXPECT_GT(gaussians, 0);
+  EXPECT_NEAR(static_cast<double>(surfels) / gaussians, 135.0 / 180.0, 0.01);
   // mgsr_eval scores the run folder: NC, CD, PSNR, SSIM, time.
   const auto e =
       testing::RunCommand(kTools + "/mgsr_eval --run " + out + " --json " + out + "/eval.json");
