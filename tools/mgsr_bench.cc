@@ -345,8 +345,6 @@ int main(int argc, char** argv) {
       cmd.insert(cmd.end(), extra.begin(), extra.end());
       std::printf("[%d/%d] %s / %s ...", ++done, total_runs, sc.name.c_str(), m.name.c_str());
       std::fflush(stdout);
-      // A generated scene is the same for the same arguments (seeded), so an earlier run on it
-      // still stands.
       const bool kept =
           FLAGS_resume && b::FinishedEarlier(r.run_dir, cmd, context.commit, &r.wall_seconds);
       if (kept) {
