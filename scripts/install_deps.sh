@@ -10,6 +10,8 @@ PACKAGES=(
   libeigen3-dev libceres-dev libgoogle-glog-dev libgflags-dev
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
   libopen3d-dev libnanoflann-dev nlohmann-json3-dev
+  # .spz export (gzip)
+  zlib1g-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # real COLMAP, for interoperability tests and the photo pipeline

@@ -20,6 +20,7 @@
 #include "mgsr/io/model_ply.h"
 #include "mgsr/io/output_folder.h"
 #include "mgsr/io/ply.h"
+#include "mgsr/io/splat_formats.h"
 #include "mgsr/mesh/exact_depth_ceiling.h"
 #include "mgsr/synth/ray_caster.h"
 #include "solvers/backdrop.h"
@@ -297,6 +298,14 @@ Status ReconstructionOptions::Validate() const {
     return Status::Error("--mesh_resolution_scale must be between 1 and 8");
   if (!(surface.truncation_voxels > 0)) return Status::Error("--tsdf_truncation must be > 0");
   if (checkpoint_every < 0) return Status::Error("--checkpoint_every must be >= 0");
+  {
+    std::string joined;
+    for (const std::string& f : export_formats) joined += f + ",";
+    std::vector<std::string> parsed;
+    MGSR_RETURN_IF_ERROR(ParseExportFormats(joined, &parsed));
+    if (parsed.size() != export_formats.size())
+      return Status::Error("--export: a format is named twice");
+  }
   if (eval_every < 0) return Status::Error("--eval_every must be >= 0");
   if (max_gaussians < -1 || max_surfels < -1)
     return Status::Error(
@@ -512,9 +521,13 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
     s = WriteSurfelPly(out.Path("point_cloud_2d.ply"), solver.surfels());
     if (s.ok()) s = out.Record("point_cloud_2d.ply");
   }
-  if (s.ok() && options.train_3d) {
-    s = WriteGaussianPly(out.Path("point_cloud_3d.ply"), solver.gaussians());
-    if (s.ok()) s = out.Record("point_cloud_3d.ply");
+  for (const std::string& format : o.export_formats) {
+    if (!s.ok() || !options.train_3d) break;
+    const std::string name = "point_cloud_3d." + format;
+    if (format == "ply") s = WriteGaussianPly(out.Path(name), solver.gaussians());
+    if (format == "splat") s = WriteSplatFile(out.Path(name), solver.gaussians());
+    if (format == "spz") s = WriteSpzFile(out.Path(name), solver.gaussians());
+    if (s.ok()) s = out.Record(name);
   }
   if (!s.ok()) return fail(s.message());
 

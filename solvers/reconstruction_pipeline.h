@@ -54,6 +54,9 @@ struct ReconstructionOptions {
 
   // The mesh.
   SurfaceOptions surface;
+  // Formats of the 3DGS model: "ply" (point_cloud_3d.ply, with the reflection attributes),
+  // "splat", "spz" (splat_formats.h); ParseExportFormats checks the list.
+  std::vector<std::string> export_formats = {"ply"};
 
   // How `solver` was chosen, recorded in metrics.json.
   std::string preset = "fast", method = "mgsr", surfel_low_pass = "area",

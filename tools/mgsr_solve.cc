@@ -23,6 +23,7 @@
 #include "mgsr/io/output_folder.h"
 #include "mgsr/io/ply.h"
 #include "mgsr/io/scene.h"
+#include "mgsr/io/splat_formats.h"
 #include "mgsr/loss/loss_registry.h"
 #include "mgsr/synth/ray_caster.h"
 #include "solvers/backdrop.h"
@@ -132,6 +133,10 @@ DEFINE_bool(profile, false,
             "losses, Adam, density control, exposure) and print ms per iteration per stage and "
             "branch after training (also metrics.json \"profile\").");
 DEFINE_int32(eval_every, 500, "Print the test-view PSNR every N iterations (0: only at the end).");
+DEFINE_string(export, "ply",
+              "Formats of the 3DGS model, comma-separated: ply (point_cloud_3d.ply, every "
+              "attribute), splat (32 bytes a splat), spz (Niantic's compressed format); the "
+              "last two keep the transmitted colour only.");
 DEFINE_string(mesh_depth, "expected",
               "Depth fused into the mesh: expected (MGSR) | median (2DGS).");
 DEFINE_string(mesh_color, "transmitted",
@@ -219,6 +224,7 @@ int main(int argc, char** argv) {
        {"Primitives",
         {"density", "density_config", "budget", "prune_contribution", "max_gaussians",
          "max_surfels", "surfel_low_pass", "surfel_filter_sigma", "surfel_init"}},
+       {"Models", {"export"}},
        {"Mesh",
         {"mesh_depth", "mesh_color", "voxel_size", "mesh_resolution_scale", "tsdf_truncation"}}},
       &argc, &argv);
@@ -299,6 +305,8 @@ int main(int argc, char** argv) {
     return Fail("--mesh_color must be transmitted or surfel");
   ro.surface.resolution_scale = FLAGS_mesh_resolution_scale;
   ro.surface.median_depth = FLAGS_mesh_depth == "median";
+  if (mgsr::Status e = mgsr::ParseExportFormats(FLAGS_export, &ro.export_formats); !e.ok())
+    return Fail(e.message());
   ro.surface.surfel_color = FLAGS_mesh_color == "surfel";
   ro.surface.voxel_size = FLAGS_voxel_size;
   ro.surface.truncation_voxels = FLAGS_tsdf_truncation;

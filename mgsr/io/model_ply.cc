@@ -86,6 +86,15 @@ constexpr float kLogitOfTenth = -2.1972245773362196f;  // sigmoid^-1(0.1)
 
 }  // namespace
 
+void SetPlainReflection(GaussianModel* m) {
+  const int K = m->sh_coeffs();
+  for (size_t i = 0; i < m->size(); ++i) {
+    for (int c = 0; c < 3; ++c) m->ref_sh[i * K * 3 + c] = m->sh[i * K * 3 + c];
+    m->ref_opacity_logits[i] = kLogitOfTenth;
+    m->beta_logits[i] = kLogitOfTenth;
+  }
+}
+
 Status WriteGaussianPly(const std::string& path, const GaussianModel& m) {
   const size_t n = m.size();
   const int K = m.sh_coeffs();
@@ -129,12 +138,8 @@ Status ReadGaussianPly(const std::string& path, GaussianModel* m) {
     MGSR_RETURN_IF_ERROR(GetSh(*e, path, "ref_", K, &out.ref_sh));
     MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "ref_opacity", &out.ref_opacity_logits, 1, 0));
     MGSR_RETURN_IF_ERROR(GetStrided(*e, path, "beta", &out.beta_logits, 1, 0));
-  } else {  // a plain 3DGS file: initialise the reflection block as reference 1.9 does
-    for (size_t i = 0; i < out.size(); ++i) {
-      for (int c = 0; c < 3; ++c) out.ref_sh[i * K * 3 + c] = out.sh[i * K * 3 + c];
-      out.ref_opacity_logits[i] = kLogitOfTenth;
-      out.beta_logits[i] = kLogitOfTenth;
-    }
+  } else {
+    SetPlainReflection(&out);
   }
   *m = std::move(out);
   return Status::Ok();

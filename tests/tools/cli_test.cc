@@ -13,7 +13,9 @@
 #include "mgsr/io/colmap_model.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
+#include "mgsr/io/model_ply.h"
 #include "mgsr/io/output_folder.h"
+#include "mgsr/io/splat_formats.h"
 #include "test_util.h"
 
 namespace mgsr {
@@ -282,6 +284,16 @@ TEST_F(CliTest, SolveResumesFromItsCheckpointToTheSameResult) {
     ASSERT_TRUE(ReadFileToString(dir + "/b/" + f, &b).ok());
     EXPECT_TRUE(a == b) << f << " differs after resuming";
   }
+  // Resuming a finished run rebuilds its outputs: here with the model in every export format.
+  r = testing::RunCommand(common + " --output " + dir + "/b --resume --export ply,splat,spz");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  GaussianModel ply, splat, spz;
+  ASSERT_TRUE(ReadGaussianPly(dir + "/b/point_cloud_3d.ply", &ply).ok());
+  ASSERT_TRUE(ReadSplatFile(dir + "/b/point_cloud_3d.splat", &splat).ok());
+  ASSERT_TRUE(ReadSpzFile(dir + "/b/point_cloud_3d.spz", &spz).ok());
+  EXPECT_GT(ply.size(), 0u);
+  EXPECT_EQ(splat.size(), ply.size());
+  EXPECT_EQ(spz.size(), ply.size());
   r = testing::RunCommand(common + " --output " + dir + "/c --resume");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("no checkpoint to resume from"), std::string::npos) << r.output;
@@ -317,6 +329,10 @@ TEST_F(CliTest, SolveRejectsBadOptions) {
                           " --output /tmp/x --lambda_distortion nan");
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_EQ(r.output, "error: --lambda_distortion must be >= 0 (or -1 for the default)\n");
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --export ply,glb");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.output, "error: --export: unknown format 'glb' (ply, splat, spz)\n");
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
                           " --output /tmp/x --budget lots");
   EXPECT_EQ(r.exit_code, 1) << r.output;
