@@ -10,6 +10,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "mgsr/eval/image_metrics.h"
 #include "mgsr/io/colmap_model.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
@@ -102,6 +103,40 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
   const auto bad = testing::RunCommand(kTools + "/mgsr_eval --run " + base_);
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_NE(bad.output.find("metrics.json: cannot open"), std::string::npos) << bad.output;
+
+  // mgsr_render: the test views again, as mgsr_solve rendered them, and an orbit.
+  auto rr = testing::RunCommand(kTools + "/mgsr_render --run " + out + " --output " + out +
+                                "/again --views test");
+  ASSERT_EQ(rr.exit_code, 0) << rr.output;
+  for (const char* view : {"v000", "v008"}) {
+    Image ours, solved;
+    ASSERT_TRUE(ReadImage(out + "/again/" + view + "_composite.png", &ours).ok()) << rr.output;
+    ASSERT_TRUE(ReadImage(out + "/renders/" + view + "_composite.png", &solved).ok());
+    EXPECT_GT(Psnr(ours, solved), 45) << view;
+  }
+  rr = testing::RunCommand(kTools + "/mgsr_render --run " + out + " --output " + out +
+                           "/orbit --orbit 4 --width 48");
+  ASSERT_EQ(rr.exit_code, 0) << rr.output;
+  for (int i = 0; i < 4; ++i) {
+    for (const char* what : {"composite", "transmitted", "reflected", "depth", "normal"}) {
+      Image im;
+      const std::string f = out + "/orbit/000" + std::to_string(i) + "_" + what + ".png";
+      ASSERT_TRUE(ReadImage(f, &im).ok()) << f;
+      EXPECT_EQ(im.width(), 48);
+      if (std::string(what) == "depth") {
+        // The object fills part of the frame: some pixels coloured, the background black.
+        int coloured = 0;
+        for (size_t k = 0; k < im.plane_size(); ++k)
+          coloured += im.plane(0)[k] + im.plane(2)[k] > 0;
+        EXPECT_GT(coloured, 48 * 48 / 20) << f;
+        EXPECT_LT(coloured, 48 * 48) << f;
+      }
+    }
+  }
+  rr = testing::RunCommand(kTools + "/mgsr_render --run " + base_ + " --output " + out + "/x");
+  EXPECT_EQ(rr.exit_code, 1);
+  EXPECT_NE(rr.output.find("metrics.json: cannot open"), std::string::npos) << rr.output;
+  EXPECT_EQ(std::count(rr.output.begin(), rr.output.end(), '\n'), 1) << rr.output;
 }
 
 // #18: one run's results are never mixed with another's, and metrics.json vouches for each file.
