@@ -39,6 +39,9 @@ DEFINE_double(distance_scale, 1.0, "Orbit radius as a multiple of the cameras' m
 DEFINE_int32(width, 0,
              "Orbit image width (0: the first training view's; height keeps its aspect).");
 DEFINE_int32(fps, 30, "Frame rate of orbit.mp4.");
+DEFINE_int32(sheet, 0,
+             "Also write sheet.png: N evenly spaced cameras side by side, composite above depth "
+             "above normals (0: none).");
 
 namespace {
 
@@ -96,13 +99,29 @@ std::vector<Frame> OrbitFrames(const std::vector<mgsr::Camera>& train, int n) {
   return frames;
 }
 
+// Tiles (each 3 channels, one size) into a grid of `columns`, 2 px white gutters.
+mgsr::Image Sheet(const std::vector<mgsr::Image>& tiles, int columns) {
+  const int w = tiles[0].width(), h = tiles[0].height(), g = 2;
+  const int rows = (static_cast<int>(tiles.size()) + columns - 1) / columns;
+  mgsr::Image out(columns * w + (columns - 1) * g, rows * h + (rows - 1) * g, 3);
+  out.Fill(1.0f);
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    const int ox = static_cast<int>(i % columns) * (w + g),
+              oy = static_cast<int>(i / columns) * (h + g);
+    for (int c = 0; c < 3; ++c)
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) out.at(c, oy + y, ox + x) = tiles[i].at(c, y, x);
+  }
+  return out;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   mgsr_tools::ParseToolFlags(
       "mgsr_render --run OUTPUT_DIR --output FRAMES_DIR (--orbit N | --views test|train|all)",
       {{"Input and output", {"run", "output", "workspace"}},
-       {"Cameras", {"orbit", "views", "elevation", "distance_scale", "width", "fps"}}},
+       {"Cameras", {"orbit", "views", "elevation", "distance_scale", "width", "fps", "sheet"}}},
       &argc, &argv);
   if (FLAGS_run.empty() || FLAGS_output.empty()) return Fail("--run and --output are required");
   if (FLAGS_orbit < 0) return Fail("--orbit must be >= 0");
@@ -110,6 +129,7 @@ int main(int argc, char** argv) {
     return Fail("--views must be test, train or all");
   if (!(FLAGS_distance_scale > 0)) return Fail("--distance_scale must be > 0");
   if (FLAGS_fps < 1) return Fail("--fps must be >= 1");
+  if (FLAGS_sheet < 0) return Fail("--sheet must be >= 0");
 
   // The run: its settings and models.
   const std::string metrics_path = mgsr::JoinPath(FLAGS_run, "metrics.json");
@@ -160,8 +180,19 @@ int main(int argc, char** argv) {
   mgsr::GaussianRenderer gaussian_renderer;
   mgsr::SurfelRenderer surfel_renderer;
   mgsr::DepthRange range;  // an orbit keeps the first frame's range, so colours do not flicker
+  // Frames on the contact sheet: evenly spaced, as many as asked and there are.
+  const int sheet_n = std::min<int>(FLAGS_sheet, static_cast<int>(frames.size()));
+  std::vector<mgsr::Image> sheet_rows[3];
+  auto on_sheet = [&](size_t i) {
+    if (sheet_n == 0) return false;
+    for (int k = 0; k < sheet_n; ++k)
+      if (static_cast<size_t>(k) * frames.size() / sheet_n == i) return true;
+    return false;
+  };
   mgsr::Timer timer;
-  for (const Frame& f : frames) {
+  for (size_t fi = 0; fi < frames.size(); ++fi) {
+    const Frame& f = frames[fi];
+    mgsr::Image composite;
     auto write = [&](const std::string& what, const mgsr::Image& image) {
       return mgsr::WriteImage(mgsr::JoinPath(FLAGS_output, f.name + "_" + what + ".png"), image);
     };
@@ -176,6 +207,7 @@ int main(int argc, char** argv) {
       mgsr::GaussianRender g;
       gaussian_renderer.Forward(gaussians, o, &g);
       s = write("composite", g.color);
+      composite = g.color;
       if (s.ok()) s = write("transmitted", g.tran);
       if (s.ok() && reflection) s = write("reflected", g.ref);
       if (!has2) {
@@ -195,7 +227,10 @@ int main(int argc, char** argv) {
       o.filter_sigma = m.value("surfel_filter_sigma", o.filter_sigma);
       mgsr::SurfelRender r;
       surfel_renderer.Forward(surfels, o, &r);
-      if (!has3) s = write("composite", r.color);
+      if (!has3) {
+        s = write("composite", r.color);
+        composite = r.color;
+      }
       depth = std::move(r.depth);
       alpha = std::move(r.alpha);
       normal = std::move(r.normal_world);
@@ -203,10 +238,27 @@ int main(int argc, char** argv) {
     if (s.ok()) {
       if (FLAGS_orbit == 0 || !(range.far > range.near))
         range = mgsr::RenderedDepthRange(depth, alpha);
-      s = write("depth", mgsr::DepthColormap(depth, alpha, range));
+      const mgsr::Image depth_rgb = mgsr::DepthColormap(depth, alpha, range);
+      const mgsr::Image normal_rgb = mgsr::NormalColormap(normal, alpha);
+      s = write("depth", depth_rgb);
+      if (s.ok()) s = write("normal", normal_rgb);
+      if (on_sheet(fi) && composite.SameShape(depth_rgb)) {
+        sheet_rows[0].push_back(composite);
+        sheet_rows[1].push_back(depth_rgb);
+        sheet_rows[2].push_back(normal_rgb);
+      }
     }
-    if (s.ok()) s = write("normal", mgsr::NormalColormap(normal, alpha));
     if (!s.ok()) return Fail(s.message());
+  }
+  if (sheet_n > 0 && !sheet_rows[0].empty()) {
+    std::vector<mgsr::Image> tiles;
+    for (const auto& row : sheet_rows) tiles.insert(tiles.end(), row.begin(), row.end());
+    const std::string path = mgsr::JoinPath(FLAGS_output, "sheet.png");
+    if (mgsr::Status s =
+            mgsr::WriteImage(path, Sheet(tiles, static_cast<int>(sheet_rows[0].size())));
+        !s.ok())
+      return Fail(s.message());
+    std::printf("contact sheet: %s\n", path.c_str());
   }
   const double seconds = timer.ElapsedSeconds();
   std::printf("%zu cameras rendered into %s in %.1f s (%.0f ms each)\n", frames.size(),

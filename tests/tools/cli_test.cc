@@ -115,8 +115,12 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
     EXPECT_GT(Psnr(ours, solved), 45) << view;
   }
   rr = testing::RunCommand(kTools + "/mgsr_render --run " + out + " --output " + out +
-                           "/orbit --orbit 4 --width 48");
+                           "/orbit --orbit 4 --width 48 --sheet 2");
   ASSERT_EQ(rr.exit_code, 0) << rr.output;
+  Image sheet;
+  ASSERT_TRUE(ReadImage(out + "/orbit/sheet.png", &sheet).ok());
+  EXPECT_EQ(sheet.width(), 2 * 48 + 2);  // two cameras, composite / depth / normal rows
+  EXPECT_EQ(sheet.height(), 3 * 48 + 2 * 2);
   for (int i = 0; i < 4; ++i) {
     for (const char* what : {"composite", "transmitted", "reflected", "depth", "normal"}) {
       Image im;
