@@ -245,6 +245,15 @@ Image Colorize(const Image& one, float lo, float hi) {
   return out;
 }
 
+// Every training view has a mask or an alpha channel: the object's pixels are known.
+bool ForegroundKnown(const Scene& scene) {
+  const std::vector<int> train = scene.TrainIndices();
+  for (int i : train) {
+    if (scene.views[i].mask.empty() && scene.views[i].alpha.empty()) return false;
+  }
+  return !train.empty();
+}
+
 // Sets both branches' backgrounds from a parsed --background; returns what was chosen and why.
 std::string ChooseBackground(const std::string& flag, double level, const Scene& scene,
                              SolverOptions* o) {
@@ -398,6 +407,14 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   const std::string background_note =
       ChooseBackground(o.background, background_level, scene, &options);
   std::printf("background: %s\n", background_note.c_str());
+  if (o.normal_weight_from_scene) {
+    const bool foreground = ForegroundKnown(scene);
+    options.lambda_normal = foreground ? kNormalWeightWithForeground : kReferenceNormalWeight;
+    std::printf("normal weight: %g (%s)\n", options.lambda_normal,
+                foreground ? "the views have masks or alpha"
+                           : "the reference's: no masks or alpha to tell the object from its "
+                             "backdrop");
+  }
   // The budget: --budget for both branches unless --max_gaussians / --max_surfels give one.
   const std::string budget_mode =
       !o.budget.empty() ? o.budget : (options.density == "mcmc" ? "auto" : "scene");

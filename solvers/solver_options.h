@@ -21,6 +21,11 @@ struct BranchSchedule {
   float min_opacity = 0.05f;          // prune threshold
 };
 
+// The 2DGS normal-consistency weight: the reference's, and this project's default for objects
+// whose pixels are known (masks or alpha; README, surface accuracy, state D).
+constexpr double kReferenceNormalWeight = 0.05;
+constexpr double kNormalWeightWithForeground = 2.0;
+
 struct SolverOptions {
   // Warm-up: each branch steps until its loss window flattens (after a minimum iteration) or a cap.
   bool auto_stop = true;
@@ -46,7 +51,7 @@ struct SolverOptions {
   // stands out of the surface unless its centre sits deeper, and the surface ends 0.4-1.0 px
   // inside the truth. 2.0 aligns them: 0.1-0.25 px on five scenes, CD 2-4x lower, NC up (README,
   // surface accuracy). 4.0 over-smooths concavities.
-  double lambda_normal = 2.0;
+  double lambda_normal = kNormalWeightWithForeground;
   int normal_from_iteration = 7000;  // warm-up: normal terms off before this
   // 2DGS depth distortion (reference 3.4). MGSR leaves it at 0; 2DGS uses 1000 from 3000 on.
   double lambda_distortion = 0.0;

@@ -90,8 +90,9 @@ DEFINE_double(w_2d, 0.5, "Weight of the 2DGS loss in the mutual stage.");
 DEFINE_double(w_3d, 0.5, "Weight of the 3DGS loss in the mutual stage.");
 DEFINE_double(w_depth, 0.01, "Weight of the mutual depth loss.");
 DEFINE_double(lambda_l1, 0.8, "Render loss: lambda L1 + (1 - lambda) D-SSIM.");
-DEFINE_double(lambda_normal, 2.0,
-              "Weight of the normal consistency and normal TV terms (the reference: 0.05).");
+DEFINE_double(lambda_normal, -1,
+              "Weight of the normal consistency and normal TV terms; -1: 2.0 where the views have "
+              "masks or alpha, the reference's 0.05 where they have neither.");
 DEFINE_double(depth_tv_warmup_2d, 1.0,
               "Weight of the 2DGS branch's edge-aware depth TV in its warm-up.");
 DEFINE_double(depth_tv_mutual_2d, 0.05,
@@ -276,7 +277,12 @@ int main(int argc, char** argv) {
   options.w_3d = FLAGS_w_3d;
   options.w_depth = FLAGS_w_depth;
   options.lambda_l1 = FLAGS_lambda_l1;
-  options.lambda_normal = FLAGS_lambda_normal;
+  ro.normal_weight_from_scene = FLAGS_lambda_normal == -1;
+  if (FLAGS_lambda_normal >= 0) {
+    options.lambda_normal = FLAGS_lambda_normal;
+  } else if (FLAGS_lambda_normal != -1) {
+    return Fail("--lambda_normal must be >= 0 (or -1 for the default)");
+  }
   options.depth_tv_warmup_2d = FLAGS_depth_tv_warmup_2d;
   options.depth_tv_mutual_2d = FLAGS_depth_tv_mutual_2d;
   if (FLAGS_lambda_distortion >= 0) {

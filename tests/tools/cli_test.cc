@@ -369,6 +369,10 @@ TEST_F(CliTest, SolveRejectsBadOptions) {
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_EQ(r.output, "error: --lambda_distortion must be >= 0 (or -1 for the default)\n");
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --lambda_normal -2");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.output, "error: --lambda_normal must be >= 0 (or -1 for the default)\n");
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
                           " --output /tmp/x --export ply,glb");
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_EQ(r.output, "error: --export: unknown format 'glb' (ply, splat, spz)\n");
@@ -422,11 +426,35 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
   std::string metrics;
   ASSERT_TRUE(ReadFileToString(dir + "/out/metrics.json", &metrics).ok());
   EXPECT_NE(metrics.find("the photos' uniform backdrop"), std::string::npos) << metrics;
+  // Without masks the normal weight is the reference's (a strong one grows backdrop sheets); the
+  // loss table in metrics.json carries it.
+  EXPECT_NE(r.output.find("normal weight: 0.05 (the reference's: no masks or alpha"),
+            std::string::npos)
+      << r.output;
+  auto normal_row_weight = [](const std::string& json_text) {
+    const nlohmann::json parsed = nlohmann::json::parse(json_text);
+    for (const auto& row : parsed["losses"])
+      if (row.value("name", std::string()) == "normal_consistency")
+        return row.value("weight", -1.0);
+    return -1.0;
+  };
+  EXPECT_DOUBLE_EQ(normal_row_weight(metrics), 0.05) << metrics;
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
                           "/out_masked" + few);
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("background: reference (2DGS white, 3DGS black): "), std::string::npos)
       << r.output;
+  EXPECT_NE(r.output.find("normal weight: 2 (the views have masks or alpha)"), std::string::npos)
+      << r.output;
+  ASSERT_TRUE(ReadFileToString(dir + "/out_masked/metrics.json", &metrics).ok());
+  EXPECT_DOUBLE_EQ(normal_row_weight(metrics), 2.0);
+  // Given on the command line, the weight is kept as given.
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
+                          "/out_given --lambda_normal 0.7" + few);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(r.output.find("normal weight:"), std::string::npos) << r.output;
+  ASSERT_TRUE(ReadFileToString(dir + "/out_given/metrics.json", &metrics).ok());
+  EXPECT_DOUBLE_EQ(normal_row_weight(metrics), 0.7);
 }
 
 // The progress line's test PSNR scores the same composite as the final evaluation: at the last
