@@ -688,7 +688,8 @@ namespace {
 // --help: each tool's own flags by topic, with defaults; none of glog's or gflags' own, and none
 // left out of a topic.
 TEST(CliHelpTest, HelpShowsTheToolsOwnFlagsByTopic) {
-  for (const char* tool : {"mgsr_solve", "mgsr_eval", "mgsr_synth", "mgsr_colmap", "mgsr_bench"}) {
+  for (const char* tool :
+       {"mgsr_solve", "mgsr_eval", "mgsr_synth", "mgsr_colmap", "mgsr_bench", "mgsr_render"}) {
     const auto r = testing::RunCommand(kTools + "/" + tool + " --help");
     EXPECT_EQ(r.exit_code, 0) << tool << r.output;
     EXPECT_EQ(r.output.rfind(std::string("usage: ") + tool, 0), 0u) << r.output;
@@ -698,7 +699,7 @@ TEST(CliHelpTest, HelpShowsTheToolsOwnFlagsByTopic) {
   }
   const auto r = testing::RunCommand(kTools + "/mgsr_solve --help");
   EXPECT_NE(r.output.find("\nLosses:\n"), std::string::npos) << r.output;
-  EXPECT_NE(r.output.find("  --lambda_normal (double, default 2)\n"), std::string::npos)
+  EXPECT_NE(r.output.find("  --lambda_normal (double, default -1)\n"), std::string::npos)
       << r.output;
   EXPECT_NE(r.output.find("  --preset (string, default \"fast\")\n"), std::string::npos)
       << r.output;
