@@ -54,11 +54,23 @@ void ComputeGeometry(const GaussianModel& m, size_t i, const Mat3& Rc, const Eig
 
 }  // namespace
 
+bool AlphaExtent(float cov_xx, float cov_yy, float opacity, float radius, float* ex, float* ey) {
+  if (!(opacity > kMinBlendAlpha)) return false;
+  // alpha = o exp(-d^T cov^-1 d / 2) >= 1/255 inside the ellipse d^T cov^-1 d <= k, whose
+  // bounding box has half-widths sqrt(k cov_xx) and sqrt(k cov_yy). The 1% and 0.01 px margin
+  // cover float rounding in the pixel loops' exponent, so no pixel they would blend falls outside.
+  const float k = 2.0f * std::log(opacity / kMinBlendAlpha);
+  *ex = std::min(radius, std::sqrt(k * cov_xx) * 1.01f + 0.01f);
+  *ey = std::min(radius, std::sqrt(k * cov_yy) * 1.01f + 0.01f);
+  return true;
+}
+
 void ProjectedGaussians::Resize(size_t n) {
   mean2d.resize(2 * n);
   conic.resize(3 * n);
   depth.resize(n);
   radius.resize(n);
+  extent.resize(2 * n);
   rects.resize(n);
   opacity.resize(n);
   ref_opacity.resize(n);
@@ -108,6 +120,7 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
   for (int i = 0; i < n; ++i) {
     out->radius[i] = 0;
     out->rects[i] = TileRect();
+    out->extent[2 * i] = out->extent[2 * i + 1] = 0;
     Geometry g;
     ComputeGeometry(m, i, Rc, tc, cam, &g);
     out->depth[i] = g.t.z();
@@ -120,23 +133,33 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
     const float radius = std::ceil(3.0f * std::sqrt(lambda));
     const float u = static_cast<float>(cam.fx) * g.t.x() / g.t.z() + static_cast<float>(cam.cx);
     const float v = static_cast<float>(cam.fy) * g.t.y() / g.t.z() + static_cast<float>(cam.cy);
-    const TileRect rect = TileRectFromBox(u, v, radius, radius, tiles_x, tiles_y);
-    if (rect.empty() || !std::isfinite(u) || !std::isfinite(v)) continue;
+    // Visible (radius > 0, what density control reads) when the 3-sigma square meets the image.
+    if (TileRectFromBox(u, v, radius, radius, tiles_x, tiles_y).empty() || !std::isfinite(u) ||
+        !std::isfinite(v)) {
+      continue;
+    }
     out->radius[i] = radius;
-    out->rects[i] = rect;
+    out->opacity[i] = Sigmoid(m.opacity_logits[i]);
+    if (reflection) out->ref_opacity[i] = Sigmoid(m.ref_opacity_logits[i]);
+    // Binned where it can blend: a primitive too faint for 1/255 anywhere gets no tiles.
+    const float o = reflection ? std::max(out->opacity[i], out->ref_opacity[i]) : out->opacity[i];
+    float ex = 0, ey = 0;
+    if (AlphaExtent(a, c, o, radius, &ex, &ey)) {
+      out->rects[i] = TileRectFromBox(u, v, ex, ey, tiles_x, tiles_y);
+    }
+    out->extent[2 * i] = ex;
+    out->extent[2 * i + 1] = ey;
     out->mean2d[2 * i] = u;
     out->mean2d[2 * i + 1] = v;
     out->conic[3 * i] = c / det;
     out->conic[3 * i + 1] = -b / det;
     out->conic[3 * i + 2] = a / det;
-    out->opacity[i] = Sigmoid(m.opacity_logits[i]);
     const Eigen::Vector3f mean(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
     const Eigen::Vector3f dir = (mean - center).normalized();
     for (int k = 0; k < 3; ++k) out->view_dir[3 * i + k] = dir[k];
     EvalShColor(degree, &m.sh[static_cast<size_t>(i) * K * 3], dir.data(), &out->color_t[3 * i],
                 &out->clamp_t[3 * i]);
     if (reflection) {
-      out->ref_opacity[i] = Sigmoid(m.ref_opacity_logits[i]);
       out->beta[i] = Sigmoid(m.beta_logits[i]);
       EvalShColor(degree, &m.ref_sh[static_cast<size_t>(i) * K * 3], dir.data(),
                   &out->color_r[3 * i], &out->clamp_r[3 * i]);

@@ -1,8 +1,8 @@
 // Projection stage of the 3DGS branch (reference 4.1): per Gaussian, the view-space mean, the EWA
 // screen covariance with the 0.3 px^2 dilation and the 1.3 x fov clamp of the Jacobian, its conic,
-// a 3-sigma radius and tile rectangle, activated opacities and the SH colours (transmitted and,
-// for MGSR, reflected). Pixel coordinates follow COLMAP: pixel (x, y) spans [x, x+1) x [y, y+1),
-// so its centre is (x + 0.5, y + 0.5).
+// a 3-sigma radius, the screen box that can receive alpha >= 1/255 and its tile rectangle,
+// activated opacities and the SH colours (transmitted and, for MGSR, reflected). Pixel coordinates
+// follow COLMAP: pixel (x, y) spans [x, x+1) x [y, y+1), so its centre is (x + 0.5, y + 0.5).
 #pragma once
 
 #include <cstdint>
@@ -18,11 +18,22 @@ constexpr float kNearPlane = 0.2f;
 constexpr float kScreenDilation = 0.3f;  // px^2 added to the screen covariance (low-pass)
 constexpr float kFovClamp = 1.3f;
 
+constexpr float kMinBlendAlpha = 1.0f / 255.0f;  // alpha below this is not blended
+
+// Half-widths (ex, ey) of the screen box outside which a Gaussian of screen covariance diagonal
+// (cov_xx, cov_yy) and peak opacity `opacity` stays below kMinBlendAlpha, capped at `radius`;
+// false (and no box) when even its peak does.
+bool AlphaExtent(float cov_xx, float cov_yy, float opacity, float radius, float* ex, float* ey);
+
 struct ProjectedGaussians {
   std::vector<float> mean2d;  // N x 2, pixels
   std::vector<float> conic;   // N x 3 (a, b, c): power = -a dx^2 / 2 - b dx dy - c dy^2 / 2
   std::vector<float> depth;   // N, view-space z
   std::vector<float> radius;  // N, pixels; 0 = culled
+  // N x 2, pixels: half-widths of the box around the mean outside which the Gaussian's alpha
+  // (and, with reflection, its reflected alpha) stays below 1/255; at most the radius. The tile
+  // rectangle and the rasterizers' row and column ranges come from it.
+  std::vector<float> extent;
   std::vector<TileRect> rects;
   std::vector<float> opacity, ref_opacity, beta;  // N, activated
   std::vector<float> color_t, color_r;            // N x 3

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "mgsr/core/image.h"
+#include "mgsr/render/simd16.h"
 #include "mgsr/render/tile_binning.h"
 
 namespace mgsr {
@@ -44,6 +45,66 @@ inline void EnsureImage(Image* im, int w, int h, int c) {
 inline void BoxRange(float m, float r, int first, int last, int* lo, int* hi) {
   *lo = std::max(first, static_cast<int>(std::floor(m - r - 0.5f)) - 1);
   *hi = std::min(last, static_cast<int>(std::ceil(m - 0.5f + r)) + 1);
+}
+
+// Which columns of a tile row the pixel loops process for one primitive that reaches only pixels
+// whose centre x + 0.5 lies within `half_width` of `mx` (the lanes' own test, |x + 0.5 - mx| <=
+// half_width, in the same float arithmetic): a footprint of at most 8 columns of the tile takes
+// one 8-lane vector starting at `first`, anything wider the whole 16-lane row. Per pixel nothing
+// changes; a trained object's splats are mostly 3-8 px wide, so this halves the lanes that
+// compute nothing.
+struct ColumnWindow {
+  int first = 0;
+  bool half = false;
+};
+inline bool ColumnReached(float mx, float half_width, int x) {
+  return std::abs((static_cast<float>(x) + 0.5f) - mx) <= half_width;
+}
+inline ColumnWindow WindowFor(float mx, float half_width, int x0) {
+  const int x_last = x0 + kTileSize - 1;
+  // An estimate of the first and last reached columns, then corrected by the exact test.
+  const float lo_f = std::clamp(std::ceil(mx - half_width - 0.5f), x0 - 1.0f, x_last + 1.0f);
+  const float hi_f = std::clamp(std::floor(mx + half_width - 0.5f), x0 - 1.0f, x_last + 1.0f);
+  int lo = static_cast<int>(lo_f), hi = static_cast<int>(hi_f);
+  if (lo > x0 && ColumnReached(mx, half_width, lo - 1)) --lo;
+  if (lo <= x_last && !ColumnReached(mx, half_width, lo)) ++lo;
+  if (hi < x_last && ColumnReached(mx, half_width, hi + 1)) ++hi;
+  if (hi >= x0 && !ColumnReached(mx, half_width, hi)) --hi;
+  lo = std::max(lo, x0) - x0;
+  hi = std::min(hi, x_last) - x0;
+  if (hi - lo >= 8) return {};
+  return {std::clamp(lo, 0, kTileSize - 8), true};
+}
+
+// The pixel lanes of a tile: centres and "inside the image" masks at both widths.
+struct TileLanes {
+  simd::F16 px16;
+  simd::MaskOf<simd::F16> ok16;
+  int x0 = 0, valid = 0;
+  TileLanes(int tile_x0, int valid_columns) : x0(tile_x0), valid(valid_columns) {
+    px16 = simd::Lanes<simd::F16>() + (x0 + 0.5f);
+    ok16 = simd::Lanes<simd::F16>() < static_cast<float>(valid);
+  }
+  template <class V>
+  V Px(int first) const;
+  template <class V>
+  simd::MaskOf<V> Ok(int first) const;
+};
+template <>
+inline simd::F16 TileLanes::Px<simd::F16>(int) const {
+  return px16;
+}
+template <>
+inline simd::MaskOf<simd::F16> TileLanes::Ok<simd::F16>(int) const {
+  return ok16;
+}
+template <>
+inline simd::F8 TileLanes::Px<simd::F8>(int first) const {
+  return simd::Lanes<simd::F8>() + (x0 + first + 0.5f);
+}
+template <>
+inline simd::MaskOf<simd::F8> TileLanes::Ok<simd::F8>(int first) const {
+  return simd::Lanes<simd::F8>() < static_cast<float>(valid - first);
 }
 
 // Per-pixel arrays of a tile (index k = row * 16 + column) carved out of one per-thread buffer,

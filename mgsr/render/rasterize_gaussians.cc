@@ -15,7 +15,9 @@ namespace {
 enum Field {
   kMx,
   kMy,
-  kRad,
+  kEx,
+  kEy,
+  kMinPow,
   kCa,
   kCb,
   kCc,
@@ -51,24 +53,32 @@ enum GradField {
   kGradStride
 };
 
-// Everything the pixel loops read about one Gaussian, packed into one 64-byte row (AoS), so a
-// tile's loop touches one cache line per Gaussian instead of 16 scattered arrays.
-void PackGaussians(const ProjectedGaussians& p, std::vector<float>* packed) {
+// Below this exponent neither chain's alpha reaches 1/255, so the pixel is skipped.
+inline float MinPower(float opacity, float ref_opacity, bool reflection) {
+  const float o = reflection ? std::max(opacity, ref_opacity) : opacity;
+  return o > 0 ? std::log(kMinAlpha / o) : 0.0f;
+}
+
+// Everything the pixel loops read about one Gaussian, packed into one row (AoS), so a tile's loop
+// touches one or two cache lines per Gaussian instead of 18 scattered arrays.
+void PackGaussians(const ProjectedGaussians& p, bool reflection, std::vector<float>* packed) {
   const int64_t n = static_cast<int64_t>(p.size());
   packed->resize(static_cast<size_t>(n) * kNumFields);
   float* out = packed->data();
 #pragma omp parallel for schedule(static)
   for (int64_t g = 0; g < n; ++g) {
     float* f = out + g * kNumFields;
-    if (p.radius[g] <= 0) continue;  // never binned
+    if (p.rects[g].empty()) continue;  // never binned
     f[kMx] = p.mean2d[2 * g];
     f[kMy] = p.mean2d[2 * g + 1];
-    f[kRad] = p.radius[g];
+    f[kEx] = p.extent[2 * g];
+    f[kEy] = p.extent[2 * g + 1];
     f[kCa] = p.conic[3 * g];
     f[kCb] = p.conic[3 * g + 1];
     f[kCc] = p.conic[3 * g + 2];
     f[kOp] = p.opacity[g];
     f[kRefOp] = p.ref_opacity[g];
+    f[kMinPow] = MinPower(p.opacity[g], p.ref_opacity[g], reflection);
     f[kBeta] = p.beta[g];
     f[kZ] = p.depth[g];
     for (int c = 0; c < 3; ++c) {
@@ -90,21 +100,19 @@ void GatherTile(const float* packed, const uint32_t* ids, int n, std::vector<flo
 }
 
 using raster_internal::BoxRange;
+using raster_internal::ColumnWindow;
 using raster_internal::EnsureImage;
 using raster_internal::EnsureScratch;
 using raster_internal::kTilePixels;
 using raster_internal::PixelArrays;
 using raster_internal::SumEntriesPerPrimitive;
+using raster_internal::TileLanes;
+using raster_internal::WindowFor;
 using simd::F16;
-using simd::I16;
+using simd::F8;
+using simd::MaskOf;
 
 static_assert(kTileSize == 16, "one tile row is one 16-lane vector");
-
-// Below this exponent neither chain's alpha reaches 1/255, so the pixel is skipped.
-inline float MinPower(float opacity, float ref_opacity, bool reflection) {
-  const float o = reflection ? std::max(opacity, ref_opacity) : opacity;
-  return o > 0 ? std::log(kMinAlpha / o) : 0.0f;
-}
 
 // Whether row offset dy crosses the ellipse a dx^2 + 2 b dx dy + c dy^2 <= -2 min_power at all
 // (a conservative shortcut; the per-pixel tests decide).
@@ -115,11 +123,13 @@ inline bool RowHitsEllipse(float dy, float a, float b, float c, float min_power)
 
 // One Gaussian, as the pixel loops read it (from its packed row).
 struct Splat {
-  float mx, my, rad, ca, cb, cc, op, rop, beta, z, ct0, ct1, ct2, cr0, cr1, cr2;
+  float mx, my, ex, ey, min_power, ca, cb, cc, op, rop, beta, z, ct0, ct1, ct2, cr0, cr1, cr2;
   explicit Splat(const float* f)
       : mx(f[kMx]),
         my(f[kMy]),
-        rad(f[kRad]),
+        ex(f[kEx]),
+        ey(f[kEy]),
+        min_power(f[kMinPow]),
         ca(f[kCa]),
         cb(f[kCb]),
         cc(f[kCc]),
@@ -135,20 +145,234 @@ struct Splat {
         cr2(f[kCr2]) {}
 };
 
-// The exponent and the "may contribute" mask of a Gaussian over one tile row; one definition for
-// both passes so their decisions agree bit for bit. `lanes_ok` masks pixels outside the image.
-inline F16 RowPower(const Splat& s, F16 dx, float dy, float min_power, I16 lanes_ok, I16* in) {
-  const F16 power = -0.5f * (s.ca * dx * dx + s.cc * dy * dy) - s.cb * dx * dy;
-  *in = lanes_ok & (simd::Abs(dx) <= s.rad) & (power <= 0.0f) & (power >= min_power);
+// The exponent and the "may contribute" mask of a Gaussian over (part of) one tile row; one
+// definition for both passes so their decisions agree bit for bit. `lanes_ok` masks pixels
+// outside the image. (|dx| <= ex is the 3-sigma square's test where the square is the tighter
+// bound; elsewhere the exponent's test implies it.)
+template <class V>
+inline V RowPower(const Splat& s, V dx, float dy, MaskOf<V> lanes_ok, MaskOf<V>* in) {
+  const V power = -0.5f * (s.ca * dx * dx + s.cc * dy * dy) - s.cb * dx * dy;
+  *in = lanes_ok & (simd::Abs(dx) <= s.ex) & (power <= 0.0f) & (power >= s.min_power);
   return power;
 }
 
-// Per-pixel arrays of a tile carved out of one per-thread buffer (index k = row * 16 + column).
+// Forward per-pixel state of a tile: T, Tr, colours, W and D sums, "still blending" flags and
+// 1 + index of the last blended Gaussian (as float, exact below 2^24).
+enum ForwardArray {
+  aT,
+  aTr,
+  aCt0,
+  aCt1,
+  aCt2,
+  aCr0,
+  aCr1,
+  aCr2,
+  aWs,
+  aDs,
+  aLiveT,
+  aLiveR,
+  aLastT,
+  aLastR,
+  kForwardArrays
+};
+
+// Blends Gaussian j (row `s`) into tile rows [ya, yb], columns [first, first + lanes of V).
+// Returns the sum of its blend weights there (both chains).
+template <class V>
+float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const TileLanes& tl,
+                bool refl, const PixelArrays& st) {
+  using M = MaskOf<V>;
+  const float jp1 = static_cast<float>(j + 1);
+  const V dx = tl.Px<V>(first) - s.mx;
+  const M lanes_ok = tl.Ok<V>(first);
+  const V max_alpha = simd::Splat<V>(kMaxAlpha);
+  V weight_sum{};
+  for (int y = ya; y <= yb; ++y) {
+    const float dy = y + 0.5f - s.my;
+    if (std::abs(dy) > s.ey || !RowHitsEllipse(dy, s.ca, s.cb, s.cc, s.min_power)) continue;
+    const int k = (y - y0) * kTileSize + first;
+    M in;
+    const V power = RowPower(s, dx, dy, lanes_ok, &in);
+    if (!simd::Any(in)) continue;
+    const V G = simd::Exp(simd::Max(power, simd::Splat<V>(-80.0f)));
+    // Transmitted chain.
+    const V T = simd::Load<V>(st[aT] + k), live = simd::Load<V>(st[aLiveT] + k);
+    const V at = simd::Min(s.op * G, max_alpha);
+    const M vt = in & (live > 0.5f) & (at >= kMinAlpha);
+    const V test_t = T * (1.0f - at);
+    const M term_t = vt & (test_t < kMinTransmittance);
+    const M blend_t = vt & ~term_t;
+    const V wt = simd::Masked(blend_t, at * T);
+    simd::Store(st[aCt0] + k, simd::Load<V>(st[aCt0] + k) + wt * s.ct0);
+    simd::Store(st[aCt1] + k, simd::Load<V>(st[aCt1] + k) + wt * s.ct1);
+    simd::Store(st[aCt2] + k, simd::Load<V>(st[aCt2] + k) + wt * s.ct2);
+    simd::Store(st[aWs] + k, simd::Load<V>(st[aWs] + k) + wt * s.beta);
+    simd::Store(st[aDs] + k, simd::Load<V>(st[aDs] + k) + wt * s.z);
+    simd::Store(st[aT] + k, simd::Select(blend_t, test_t, T));
+    simd::Store(st[aLastT] + k,
+                simd::Select(blend_t, simd::Splat<V>(jp1), simd::Load<V>(st[aLastT] + k)));
+    simd::Store(st[aLiveT] + k, simd::Select(term_t, V{}, live));
+    weight_sum += wt;
+    if (!refl) continue;
+    // Reflected chain.
+    const V Tr = simd::Load<V>(st[aTr] + k), live_r = simd::Load<V>(st[aLiveR] + k);
+    const V ar = simd::Min(s.rop * G, max_alpha);
+    const M vr = in & (live_r > 0.5f) & (ar >= kMinAlpha);
+    const V test_r = Tr * (1.0f - ar);
+    const M term_r = vr & (test_r < kMinTransmittance);
+    const M blend_r = vr & ~term_r;
+    const V wr = simd::Masked(blend_r, ar * Tr);
+    simd::Store(st[aCr0] + k, simd::Load<V>(st[aCr0] + k) + wr * s.cr0);
+    simd::Store(st[aCr1] + k, simd::Load<V>(st[aCr1] + k) + wr * s.cr1);
+    simd::Store(st[aCr2] + k, simd::Load<V>(st[aCr2] + k) + wr * s.cr2);
+    simd::Store(st[aTr] + k, simd::Select(blend_r, test_r, Tr));
+    simd::Store(st[aLastR] + k,
+                simd::Select(blend_r, simd::Splat<V>(jp1), simd::Load<V>(st[aLastR] + k)));
+    simd::Store(st[aLiveR] + k, simd::Select(term_r, V{}, live_r));
+    weight_sum += wr;
+  }
+  return simd::Sum(weight_sum);
+}
+
+// Backward per-pixel state of a tile, walking back to front: transmittances, "behind"
+// accumulators, the upstream gradients folded onto the chains (C = C_tran + W C_ref,
+// D = Dsum / A) and the last-blended indices. Pixels outside the image keep last = 0 and take no
+// part.
+enum BackwardArray {
+  bT,
+  bTr,
+  bSt0,
+  bSt1,
+  bSt2,
+  bSr0,
+  bSr1,
+  bSr2,
+  bSb,
+  bSz,
+  bGt0,
+  bGt1,
+  bGt2,
+  bGr0,
+  bGr1,
+  bGr2,
+  bGW,
+  bGN,
+  bGA,
+  bTfin,
+  bLastT,
+  bLastR,
+  kBackwardArrays
+};
+
+// Gradients of Gaussian j (row `s`) over tile rows [ya, yb], columns [first, first + lanes of
+// V), written to its gradient row `dst` (kGradStride floats); un-blends it from the pixel state.
+template <class V>
+void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, const TileLanes& tl,
+                  bool refl, const PixelArrays& st, float* dst) {
+  using M = MaskOf<V>;
+  const float jf = static_cast<float>(j);
+  const V dx = tl.Px<V>(first) - s.mx;
+  const M lanes_ok = tl.Ok<V>(first);
+  V g_mx{}, g_my{}, g_ca{}, g_cb{}, g_cc{}, g_op{}, g_rop{}, g_beta{}, g_z{};
+  V g_ct0{}, g_ct1{}, g_ct2{}, g_cr0{}, g_cr1{}, g_cr2{};
+  for (int y = ya; y <= yb; ++y) {
+    const float dy = y + 0.5f - s.my;
+    if (std::abs(dy) > s.ey || !RowHitsEllipse(dy, s.ca, s.cb, s.cc, s.min_power)) continue;
+    const int k = (y - y0) * kTileSize + first;
+    M in;
+    const V power = RowPower(s, dx, dy, lanes_ok, &in);
+    // Only pixels that blended this Gaussian (j < last) take part.
+    const V last_t = simd::Load<V>(st[bLastT] + k), last_r = simd::Load<V>(st[bLastR] + k);
+    in &= (jf < last_t) | (jf < last_r);
+    if (!simd::Any(in)) continue;
+    const V G = simd::Exp(simd::Max(power, simd::Splat<V>(-80.0f)));
+    // Transmitted chain: recover T_j = T_{j+1} / (1 - a_j), then the gradients.
+    const V raw_t = s.op * G;
+    const V at = simd::Min(raw_t, simd::Splat<V>(kMaxAlpha));
+    const M vt = in & (jf < last_t) & (at >= kMinAlpha);
+    const V inv_t = 1.0f / (1.0f - at);
+    const V T_next = simd::Load<V>(st[bT] + k);
+    const V T = simd::Select(vt, T_next * inv_t, T_next);
+    simd::Store(st[bT] + k, T);
+    const V wt = simd::Masked(vt, at * T);
+    const V gt0 = simd::Load<V>(st[bGt0] + k), gt1 = simd::Load<V>(st[bGt1] + k),
+            gt2 = simd::Load<V>(st[bGt2] + k);
+    const V gW = simd::Load<V>(st[bGW] + k), gN = simd::Load<V>(st[bGN] + k);
+    g_ct0 += wt * gt0;
+    g_ct1 += wt * gt1;
+    g_ct2 += wt * gt2;
+    g_beta += wt * gW;
+    g_z += wt * gN;
+    const V St0 = simd::Load<V>(st[bSt0] + k), St1 = simd::Load<V>(st[bSt1] + k),
+            St2 = simd::Load<V>(st[bSt2] + k);
+    const V Sb = simd::Load<V>(st[bSb] + k), Sz = simd::Load<V>(st[bSz] + k);
+    V da_t = (s.ct0 - St0) * gt0 + (s.ct1 - St1) * gt1 + (s.ct2 - St2) * gt2 + (s.beta - Sb) * gW +
+             (s.z - Sz) * gN;
+    da_t = da_t * T + simd::Load<V>(st[bTfin] + k) * inv_t * simd::Load<V>(st[bGA] + k);
+    const V keep_t = 1.0f - at;
+    simd::Store(st[bSt0] + k, simd::Select(vt, at * s.ct0 + keep_t * St0, St0));
+    simd::Store(st[bSt1] + k, simd::Select(vt, at * s.ct1 + keep_t * St1, St1));
+    simd::Store(st[bSt2] + k, simd::Select(vt, at * s.ct2 + keep_t * St2, St2));
+    simd::Store(st[bSb] + k, simd::Select(vt, at * s.beta + keep_t * Sb, Sb));
+    simd::Store(st[bSz] + k, simd::Select(vt, at * s.z + keep_t * Sz, Sz));
+    const M slope_t = vt & (raw_t < kMaxAlpha);  // the clamp at 0.99 has zero slope
+    g_op += simd::Masked(slope_t, G * da_t);
+    V dG = simd::Masked(slope_t, s.op * da_t);
+    if (refl) {
+      // Reflected chain.
+      const V raw_r = s.rop * G;
+      const V ar = simd::Min(raw_r, simd::Splat<V>(kMaxAlpha));
+      const M vr = in & (jf < last_r) & (ar >= kMinAlpha);
+      const V inv_r = 1.0f / (1.0f - ar);
+      const V Tr_next = simd::Load<V>(st[bTr] + k);
+      const V Tr = simd::Select(vr, Tr_next * inv_r, Tr_next);
+      simd::Store(st[bTr] + k, Tr);
+      const V wr = simd::Masked(vr, ar * Tr);
+      const V gr0 = simd::Load<V>(st[bGr0] + k), gr1 = simd::Load<V>(st[bGr1] + k),
+              gr2 = simd::Load<V>(st[bGr2] + k);
+      g_cr0 += wr * gr0;
+      g_cr1 += wr * gr1;
+      g_cr2 += wr * gr2;
+      const V Sr0 = simd::Load<V>(st[bSr0] + k), Sr1 = simd::Load<V>(st[bSr1] + k),
+              Sr2 = simd::Load<V>(st[bSr2] + k);
+      const V da_r = ((s.cr0 - Sr0) * gr0 + (s.cr1 - Sr1) * gr1 + (s.cr2 - Sr2) * gr2) * Tr;
+      const V keep_r = 1.0f - ar;
+      simd::Store(st[bSr0] + k, simd::Select(vr, ar * s.cr0 + keep_r * Sr0, Sr0));
+      simd::Store(st[bSr1] + k, simd::Select(vr, ar * s.cr1 + keep_r * Sr1, Sr1));
+      simd::Store(st[bSr2] + k, simd::Select(vr, ar * s.cr2 + keep_r * Sr2, Sr2));
+      const M slope_r = vr & (raw_r < kMaxAlpha);
+      g_rop += simd::Masked(slope_r, G * da_r);
+      dG += simd::Masked(slope_r, s.rop * da_r);
+    }
+    // Through G = exp(power) to the conic and the screen mean.
+    const V dpower = G * dG;
+    g_mx += dpower * (s.ca * dx + s.cb * dy);
+    g_my += dpower * (s.cb * dx + s.cc * dy);
+    g_ca += -0.5f * dpower * dx * dx;
+    g_cb += -dpower * dx * dy;
+    g_cc += -0.5f * dpower * dy * dy;
+  }
+  dst[gMx] = simd::Sum(g_mx);
+  dst[gMy] = simd::Sum(g_my);
+  dst[gCa] = simd::Sum(g_ca);
+  dst[gCb] = simd::Sum(g_cb);
+  dst[gCc] = simd::Sum(g_cc);
+  dst[gOp] = simd::Sum(g_op);
+  dst[gRefOp] = simd::Sum(g_rop);
+  dst[gBeta] = simd::Sum(g_beta);
+  dst[gZ] = simd::Sum(g_z);
+  dst[gCt0] = simd::Sum(g_ct0);
+  dst[gCt1] = simd::Sum(g_ct1);
+  dst[gCt2] = simd::Sum(g_ct2);
+  dst[gCr0] = simd::Sum(g_cr0);
+  dst[gCr1] = simd::Sum(g_cr1);
+  dst[gCr2] = simd::Sum(g_cr2);
+}
 
 }  // namespace
 
 // Both passes walk a tile Gaussian by Gaussian (front to back, or back to front) and, for each,
-// the tile rows its 3-sigma square covers, 16 pixels at a time in vector registers, keeping every
+// the tile rows its alpha box covers, 16 or 8 pixels at a time in vector registers, keeping every
 // pixel's blending state in tile-local arrays. Per pixel, the order and the decisions are those
 // of the per-pixel loop the header describes; masks replace its branches.
 void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
@@ -167,8 +391,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
   EnsureScratch(scratch, threads);
   const bool refl = o.reflection;
   const float bg[3] = {o.background[0], o.background[1], o.background[2]};
-  const F16 lanes = simd::Lanes();
-  PackGaussians(p, &scratch->packed);
+  PackGaussians(p, refl, &scratch->packed);
   const float* packed = scratch->packed.data();
   // Per tile entry: the entry's summed blend weights (only when recording contributions).
   std::vector<float> entry_weight(o.record_contribution ? bins.ids.size() : 0, 0.0f);
@@ -185,29 +408,9 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
     const float* f = buffer.data();
     const int x0 = tx * kTileSize, y0 = ty * kTileSize;
     const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
-    const I16 lanes_ok = lanes < static_cast<float>(x_end - x0);
-    const F16 px = lanes + (x0 + 0.5f);
+    const TileLanes tl(x0, x_end - x0);
 
-    // T, Tr, colours, W and D sums, "still blending" flags and 1 + index of the last blended
-    // Gaussian (as float, exact below 2^24), per pixel.
-    enum {
-      aT,
-      aTr,
-      aCt0,
-      aCt1,
-      aCt2,
-      aCr0,
-      aCr1,
-      aCr2,
-      aWs,
-      aDs,
-      aLiveT,
-      aLiveR,
-      aLastT,
-      aLastR,
-      kArrays
-    };
-    const PixelArrays st(&scratch->pixel_state[thread], kArrays);
+    const PixelArrays st(&scratch->pixel_state[thread], kForwardArrays);
     for (int k = 0; k < kTilePixels; ++k) {
       st[aT][k] = st[aTr][k] = 1.0f;
       for (int a : {aCt0, aCt1, aCt2, aCr0, aCr1, aCr2, aWs, aDs, aLastT, aLastR}) st[a][k] = 0.0f;
@@ -222,56 +425,13 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
         if (any == 0) break;
       }
       const Splat s(f + static_cast<size_t>(j) * kNumFields);
-      const float min_power = MinPower(s.op, s.rop, refl);
-      if (!(min_power < 0.0f)) continue;  // too transparent to reach 1/255 anywhere
+      if (!(s.min_power < 0.0f)) continue;  // too transparent to reach 1/255 anywhere
       int ya, yb;
-      BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
-      const float jp1 = static_cast<float>(j + 1);
-      const F16 dx = px - s.mx;
-      for (int y = ya; y <= yb; ++y) {
-        const float dy = y + 0.5f - s.my;
-        if (std::abs(dy) > s.rad || !RowHitsEllipse(dy, s.ca, s.cb, s.cc, min_power)) continue;
-        const int k = (y - y0) * kTileSize;
-        I16 in;
-        const F16 power = RowPower(s, dx, dy, min_power, lanes_ok, &in);
-        if (!simd::Any(in)) continue;
-        const F16 G = simd::Exp(simd::Max(power, simd::Splat(-80.0f)));
-        // Transmitted chain.
-        F16 T = simd::Load(st[aT] + k), live = simd::Load(st[aLiveT] + k);
-        const F16 at = simd::Min(s.op * G, simd::Splat(kMaxAlpha));
-        const I16 vt = in & (live > 0.5f) & (at >= kMinAlpha);
-        const F16 test_t = T * (1.0f - at);
-        const I16 term_t = vt & (test_t < kMinTransmittance);
-        const I16 blend_t = vt & ~term_t;
-        const F16 wt = simd::Masked(blend_t, at * T);
-        simd::Store(st[aCt0] + k, simd::Load(st[aCt0] + k) + wt * s.ct0);
-        simd::Store(st[aCt1] + k, simd::Load(st[aCt1] + k) + wt * s.ct1);
-        simd::Store(st[aCt2] + k, simd::Load(st[aCt2] + k) + wt * s.ct2);
-        simd::Store(st[aWs] + k, simd::Load(st[aWs] + k) + wt * s.beta);
-        simd::Store(st[aDs] + k, simd::Load(st[aDs] + k) + wt * s.z);
-        simd::Store(st[aT] + k, simd::Select(blend_t, test_t, T));
-        simd::Store(st[aLastT] + k,
-                    simd::Select(blend_t, simd::Splat(jp1), simd::Load(st[aLastT] + k)));
-        simd::Store(st[aLiveT] + k, simd::Select(term_t, F16{}, live));
-        if (weights != nullptr) weights[j] += simd::Sum(wt);
-        if (!refl) continue;
-        // Reflected chain.
-        const F16 Tr = simd::Load(st[aTr] + k), live_r = simd::Load(st[aLiveR] + k);
-        const F16 ar = simd::Min(s.rop * G, simd::Splat(kMaxAlpha));
-        const I16 vr = in & (live_r > 0.5f) & (ar >= kMinAlpha);
-        const F16 test_r = Tr * (1.0f - ar);
-        const I16 term_r = vr & (test_r < kMinTransmittance);
-        const I16 blend_r = vr & ~term_r;
-        const F16 wr = simd::Masked(blend_r, ar * Tr);
-        simd::Store(st[aCr0] + k, simd::Load(st[aCr0] + k) + wr * s.cr0);
-        simd::Store(st[aCr1] + k, simd::Load(st[aCr1] + k) + wr * s.cr1);
-        simd::Store(st[aCr2] + k, simd::Load(st[aCr2] + k) + wr * s.cr2);
-        simd::Store(st[aTr] + k, simd::Select(blend_r, test_r, Tr));
-        simd::Store(st[aLastR] + k,
-                    simd::Select(blend_r, simd::Splat(jp1), simd::Load(st[aLastR] + k)));
-        simd::Store(st[aLiveR] + k, simd::Select(term_r, F16{}, live_r));
-        if (weights != nullptr) weights[j] += simd::Sum(wr);
-      }
+      BoxRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
+      const ColumnWindow w = WindowFor(s.mx, s.ex, x0);
+      const float sum = w.half ? BlendRows<F8>(s, j, ya, yb, y0, w.first, tl, refl, st)
+                               : BlendRows<F16>(s, j, ya, yb, y0, 0, tl, refl, st);
+      if (weights != nullptr) weights[j] += sum;
     }
     for (int y = y0; y < y_end; ++y) {
       for (int x = x0; x < x_end; ++x) {
@@ -315,8 +475,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
   EnsureScratch(scratch, threads);
   const bool refl = o.reflection;
   const float bg[3] = {o.background[0], o.background[1], o.background[2]};
-  const F16 lanes = simd::Lanes();
-  PackGaussians(p, &scratch->packed);
+  PackGaussians(p, refl, &scratch->packed);
   const float* packed = scratch->packed.data();
 
   scratch->entry_grads.resize(bins.ids.size() * kGradStride);
@@ -337,39 +496,10 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
       float* tg = scratch->entry_grads.data() + static_cast<size_t>(begin) * kGradStride;
       const int x0 = tx * kTileSize, y0 = ty * kTileSize;
       const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
-      const I16 lanes_ok = lanes < static_cast<float>(x_end - x0);
-      const F16 px = lanes + (x0 + 0.5f);
+      const TileLanes tl(x0, x_end - x0);
 
-      // Per-pixel state, walking back to front: transmittances, "behind" accumulators, the
-      // upstream gradients folded onto the chains (C = C_tran + W C_ref, D = Dsum / A) and the
-      // last-blended indices. Pixels outside the image keep last = 0 and take no part.
-      enum {
-        aT,
-        aTr,
-        aSt0,
-        aSt1,
-        aSt2,
-        aSr0,
-        aSr1,
-        aSr2,
-        aSb,
-        aSz,
-        aGt0,
-        aGt1,
-        aGt2,
-        aGr0,
-        aGr1,
-        aGr2,
-        aGW,
-        aGN,
-        aGA,
-        aTfin,
-        aLastT,
-        aLastR,
-        kArrays
-      };
-      const PixelArrays st(&scratch->pixel_state[thread], kArrays);
-      for (int a = 0; a < kArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
+      const PixelArrays st(&scratch->pixel_state[thread], kBackwardArrays);
+      for (int a = 0; a < kBackwardArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
       int max_last = 0;
       for (int y = y0; y < y_end; ++y) {
         for (int x = x0; x < x_end; ++x) {
@@ -380,11 +510,11 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
           for (int c = 0; c < 3; ++c) {
             const float gc = g.color.empty() ? 0.0f : g.color.plane(c)[pix];
             gtc[c] = gc + (g.tran.empty() ? 0.0f : g.tran.plane(c)[pix]);
-            st[aGr0 + c][k] = Wv * gc + (g.ref.empty() ? 0.0f : g.ref.plane(c)[pix]);
-            st[aGt0 + c][k] = gtc[c];
+            st[bGr0 + c][k] = Wv * gc + (g.ref.empty() ? 0.0f : g.ref.plane(c)[pix]);
+            st[bGt0 + c][k] = gtc[c];
             w_grad += gc * r.ref.plane(c)[pix];
           }
-          st[aGW][k] = w_grad + (g.weight.empty() ? 0.0f : g.weight.plane(0)[pix]);
+          st[bGW][k] = w_grad + (g.weight.empty() ? 0.0f : g.weight.plane(0)[pix]);
           float a_grad = g.alpha.empty() ? 0.0f : g.alpha.plane(0)[pix];
           float n_grad = 0;
           const float A = 1.0f - r.final_t[pix];
@@ -394,123 +524,32 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
             a_grad -= gD * r.depth_sum[pix] / (A * A);
           }
           // The background and A terms share d T_N / d a_i = -T_N / (1 - a_i).
-          st[aGA][k] = a_grad - (bg[0] * gtc[0] + bg[1] * gtc[1] + bg[2] * gtc[2]);
-          st[aGN][k] = n_grad;
-          st[aT][k] = st[aTfin][k] = r.final_t[pix];
-          st[aTr][k] = r.final_tr[pix];
+          st[bGA][k] = a_grad - (bg[0] * gtc[0] + bg[1] * gtc[1] + bg[2] * gtc[2]);
+          st[bGN][k] = n_grad;
+          st[bT][k] = st[bTfin][k] = r.final_t[pix];
+          st[bTr][k] = r.final_tr[pix];
           const int lt = static_cast<int>(r.last_t[pix]),
                     lr = refl ? static_cast<int>(r.last_r[pix]) : 0;
-          st[aLastT][k] = static_cast<float>(lt);
-          st[aLastR][k] = static_cast<float>(lr);
+          st[bLastT][k] = static_cast<float>(lt);
+          st[bLastR][k] = static_cast<float>(lr);
           max_last = std::max(max_last, std::max(lt, lr));
         }
       }
       for (int j = max_last - 1; j >= 0; --j) {
         const Splat s(f + static_cast<size_t>(j) * kNumFields);
-        const float min_power = MinPower(s.op, s.rop, refl);
-        if (!(min_power <
-              0.0f)) {  // invisible everywhere: no gradient (the row must still be written)
-          std::fill(tg + static_cast<size_t>(j) * kGradStride,
-                    tg + static_cast<size_t>(j + 1) * kGradStride, 0.0f);
+        float* dst = tg + static_cast<size_t>(j) * kGradStride;
+        if (!(s.min_power < 0.0f)) {  // invisible everywhere: no gradient (the row is written)
+          std::fill(dst, dst + kGradStride, 0.0f);
           continue;
         }
         int ya, yb;
-        BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
-        const float jf = static_cast<float>(j);
-        const F16 dx = px - s.mx;
-        F16 g_mx{}, g_my{}, g_ca{}, g_cb{}, g_cc{}, g_op{}, g_rop{}, g_beta{}, g_z{};
-        F16 g_ct0{}, g_ct1{}, g_ct2{}, g_cr0{}, g_cr1{}, g_cr2{};
-        for (int y = ya; y <= yb; ++y) {
-          const float dy = y + 0.5f - s.my;
-          if (std::abs(dy) > s.rad || !RowHitsEllipse(dy, s.ca, s.cb, s.cc, min_power)) continue;
-          const int k = (y - y0) * kTileSize;
-          I16 in;
-          const F16 power = RowPower(s, dx, dy, min_power, lanes_ok, &in);
-          // Only pixels that blended this Gaussian (j < last) take part.
-          in &= (jf < simd::Load(st[aLastT] + k)) | (jf < simd::Load(st[aLastR] + k));
-          if (!simd::Any(in)) continue;
-          const F16 G = simd::Exp(simd::Max(power, simd::Splat(-80.0f)));
-          // Transmitted chain: recover T_j = T_{j+1} / (1 - a_j), then the gradients.
-          const F16 raw_t = s.op * G;
-          const F16 at = simd::Min(raw_t, simd::Splat(kMaxAlpha));
-          const I16 vt = in & (jf < simd::Load(st[aLastT] + k)) & (at >= kMinAlpha);
-          const F16 inv_t = 1.0f / (1.0f - at);
-          const F16 T = simd::Select(vt, simd::Load(st[aT] + k) * inv_t, simd::Load(st[aT] + k));
-          simd::Store(st[aT] + k, T);
-          const F16 wt = simd::Masked(vt, at * T);
-          const F16 gt0 = simd::Load(st[aGt0] + k), gt1 = simd::Load(st[aGt1] + k),
-                    gt2 = simd::Load(st[aGt2] + k);
-          const F16 gW = simd::Load(st[aGW] + k), gN = simd::Load(st[aGN] + k);
-          g_ct0 += wt * gt0;
-          g_ct1 += wt * gt1;
-          g_ct2 += wt * gt2;
-          g_beta += wt * gW;
-          g_z += wt * gN;
-          const F16 St0 = simd::Load(st[aSt0] + k), St1 = simd::Load(st[aSt1] + k),
-                    St2 = simd::Load(st[aSt2] + k);
-          const F16 Sb = simd::Load(st[aSb] + k), Sz = simd::Load(st[aSz] + k);
-          F16 da_t = (s.ct0 - St0) * gt0 + (s.ct1 - St1) * gt1 + (s.ct2 - St2) * gt2 +
-                     (s.beta - Sb) * gW + (s.z - Sz) * gN;
-          da_t = da_t * T + simd::Load(st[aTfin] + k) * inv_t * simd::Load(st[aGA] + k);
-          const F16 keep_t = 1.0f - at;
-          simd::Store(st[aSt0] + k, simd::Select(vt, at * s.ct0 + keep_t * St0, St0));
-          simd::Store(st[aSt1] + k, simd::Select(vt, at * s.ct1 + keep_t * St1, St1));
-          simd::Store(st[aSt2] + k, simd::Select(vt, at * s.ct2 + keep_t * St2, St2));
-          simd::Store(st[aSb] + k, simd::Select(vt, at * s.beta + keep_t * Sb, Sb));
-          simd::Store(st[aSz] + k, simd::Select(vt, at * s.z + keep_t * Sz, Sz));
-          const I16 slope_t = vt & (raw_t < kMaxAlpha);  // the clamp at 0.99 has zero slope
-          g_op += simd::Masked(slope_t, G * da_t);
-          F16 dG = simd::Masked(slope_t, s.op * da_t);
-          if (refl) {
-            // Reflected chain.
-            const F16 raw_r = s.rop * G;
-            const F16 ar = simd::Min(raw_r, simd::Splat(kMaxAlpha));
-            const I16 vr = in & (jf < simd::Load(st[aLastR] + k)) & (ar >= kMinAlpha);
-            const F16 inv_r = 1.0f / (1.0f - ar);
-            const F16 Tr =
-                simd::Select(vr, simd::Load(st[aTr] + k) * inv_r, simd::Load(st[aTr] + k));
-            simd::Store(st[aTr] + k, Tr);
-            const F16 wr = simd::Masked(vr, ar * Tr);
-            const F16 gr0 = simd::Load(st[aGr0] + k), gr1 = simd::Load(st[aGr1] + k),
-                      gr2 = simd::Load(st[aGr2] + k);
-            g_cr0 += wr * gr0;
-            g_cr1 += wr * gr1;
-            g_cr2 += wr * gr2;
-            const F16 Sr0 = simd::Load(st[aSr0] + k), Sr1 = simd::Load(st[aSr1] + k),
-                      Sr2 = simd::Load(st[aSr2] + k);
-            const F16 da_r = ((s.cr0 - Sr0) * gr0 + (s.cr1 - Sr1) * gr1 + (s.cr2 - Sr2) * gr2) * Tr;
-            const F16 keep_r = 1.0f - ar;
-            simd::Store(st[aSr0] + k, simd::Select(vr, ar * s.cr0 + keep_r * Sr0, Sr0));
-            simd::Store(st[aSr1] + k, simd::Select(vr, ar * s.cr1 + keep_r * Sr1, Sr1));
-            simd::Store(st[aSr2] + k, simd::Select(vr, ar * s.cr2 + keep_r * Sr2, Sr2));
-            const I16 slope_r = vr & (raw_r < kMaxAlpha);
-            g_rop += simd::Masked(slope_r, G * da_r);
-            dG += simd::Masked(slope_r, s.rop * da_r);
-          }
-          // Through G = exp(power) to the conic and the screen mean.
-          const F16 dpower = G * dG;
-          g_mx += dpower * (s.ca * dx + s.cb * dy);
-          g_my += dpower * (s.cb * dx + s.cc * dy);
-          g_ca += -0.5f * dpower * dx * dx;
-          g_cb += -dpower * dx * dy;
-          g_cc += -0.5f * dpower * dy * dy;
+        BoxRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
+        const ColumnWindow w = WindowFor(s.mx, s.ex, x0);
+        if (w.half) {
+          GradientRows<F8>(s, j, ya, yb, y0, w.first, tl, refl, st, dst);
+        } else {
+          GradientRows<F16>(s, j, ya, yb, y0, 0, tl, refl, st, dst);
         }
-        float* dst = tg + static_cast<size_t>(j) * kGradStride;
-        dst[gMx] = simd::Sum(g_mx);
-        dst[gMy] = simd::Sum(g_my);
-        dst[gCa] = simd::Sum(g_ca);
-        dst[gCb] = simd::Sum(g_cb);
-        dst[gCc] = simd::Sum(g_cc);
-        dst[gOp] = simd::Sum(g_op);
-        dst[gRefOp] = simd::Sum(g_rop);
-        dst[gBeta] = simd::Sum(g_beta);
-        dst[gZ] = simd::Sum(g_z);
-        dst[gCt0] = simd::Sum(g_ct0);
-        dst[gCt1] = simd::Sum(g_ct1);
-        dst[gCt2] = simd::Sum(g_ct2);
-        dst[gCr0] = simd::Sum(g_cr0);
-        dst[gCr1] = simd::Sum(g_cr1);
-        dst[gCr2] = simd::Sum(g_cr2);
       }
       scratch->tile_used[tile] = static_cast<uint32_t>(max_last);
     }

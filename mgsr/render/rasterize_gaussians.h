@@ -1,16 +1,19 @@
 // Rasterization stage of the 3DGS branch with MGSR's reflection decomposition (reference 2.2):
 // per 16x16 tile, front-to-back alpha blending of the depth-sorted Gaussians, two transmittance
 // chains per pixel:
-//   C_tran = sum_i c_t,i a_i T_i + T_N bg        (a_i = min(0.99, o_i G_i), T_i = prod_{j<i} (1 -
-//   a_j)) C_ref  = sum_i c_r,i ar_i Tr_i               (ar_i = min(0.99, or_i G_i), own chain, no
-//   background) W      = sum_i beta_i a_i T_i                (beta blended with the transmitted
-//   weights) D      = sum_i z_i a_i T_i / A, A = 1 - T_N  (0 where A < kMinDepthAlpha) C      =
-//   C_tran + W * C_ref
+//   C_tran = sum_i c_t,i a_i T_i + T_N bg        (a_i = min(0.99, o_i G_i),
+//                                                 T_i = prod_{j<i} (1 - a_j))
+//   C_ref  = sum_i c_r,i ar_i Tr_i               (ar_i = min(0.99, or_i G_i), own chain,
+//                                                 no background)
+//   W      = sum_i beta_i a_i T_i                (beta blended with the transmitted weights)
+//   D      = sum_i z_i a_i T_i / A, A = 1 - T_N  (0 where A < kMinDepthAlpha)
+//   C      = C_tran + W * C_ref
 // A Gaussian affects a pixel only inside its 3-sigma square (|dx|, |dy| <= radius), where the
 // exponent is <= 0, and in a chain only if that chain's alpha >= 1/255 (each chain decides for
 // itself: a departure from the reference kernels, which skip both when either alpha is small,
 // reference 8 item 20). A chain stops when its transmittance would fall below 1e-4 (that Gaussian
-// is not blended in it); the pixel stops when every chain has.
+// is not blended in it); the pixel stops when every chain has. Tiles and pixel loops visit only
+// the box where some alpha can reach 1/255 (ProjectedGaussians::extent), which changes nothing.
 #pragma once
 
 #include <cstdint>
@@ -24,7 +27,7 @@
 
 namespace mgsr {
 
-constexpr float kMinAlpha = 1.0f / 255.0f;
+constexpr float kMinAlpha = kMinBlendAlpha;
 constexpr float kMaxAlpha = 0.99f;
 constexpr float kMinTransmittance = 1e-4f;
 constexpr float kMinDepthAlpha = 1e-4f;

@@ -11,13 +11,16 @@ namespace mgsr {
 namespace {
 
 using raster_internal::BoxRange;
+using raster_internal::ColumnWindow;
 using raster_internal::EnsureImage;
 using raster_internal::EnsureScratch;
 using raster_internal::kTilePixels;
 using raster_internal::PixelArrays;
 using raster_internal::SumEntriesPerPrimitive;
+using raster_internal::TileLanes;
+using raster_internal::WindowFor;
 using simd::F16;
-using simd::I16;
+using simd::F8;
 
 // Gathered per-tile fields (structure of arrays over the tile's surfels).
 enum Field {
@@ -128,19 +131,23 @@ struct Surfel {
 
 // The ray-splat intersection of one tile row (reference 3.3), shared by both passes so their
 // decisions agree bit for bit.
+template <class V>
 struct RowHit {
-  F16 k0, k1, k2;    // k = x T_w - T_u per lane
+  using M = simd::MaskOf<V>;
+  V k0, k1, k2;      // k = x T_w - T_u per lane
   float l0, l1, l2;  // l = y T_w - T_v (one value for the row)
-  F16 p2, u, v;      // p = k x l, (u, v) = (p_x, p_y) / p_z
-  F16 dxp;           // pixel - m (x), per lane
+  V p2, u, v;        // p = k x l, (u, v) = (p_x, p_y) / p_z
+  V dxp;             // pixel - m (x), per lane
   float dyp;         // pixel - m (y), one value for the row
-  F16 dxm, dym;      // m - pixel
-  F16 rho3d, rho2d, G, z;
-  I16 in, splat_branch;  // may contribute; rho3d <= rho2d
+  V dxm, dym;        // m - pixel
+  V rho3d, rho2d, G, z;
+  M in, splat_branch;  // may contribute; rho3d <= rho2d
 };
 
-inline void IntersectRow(const Surfel& s, F16 px, float py, float min_power, I16 lanes_ok,
-                         RowHit* h) {
+template <class V>
+inline void IntersectRow(const Surfel& s, V px, float py, float min_power, simd::MaskOf<V> lanes_ok,
+                         RowHit<V>* h) {
+  using M = simd::MaskOf<V>;
   // Pixel offsets from the centre m; the stored rows are T_u - m_x T_w and T_v - m_y T_w (see
   // project_surfels.h), so k and l stay small and float keeps its precision.
   h->dxp = px - s.mx;
@@ -151,19 +158,19 @@ inline void IntersectRow(const Surfel& s, F16 px, float py, float min_power, I16
   h->l0 = h->dyp * s.tw[0] - s.tv[0];
   h->l1 = h->dyp * s.tw[1] - s.tv[1];
   h->l2 = h->dyp * s.tw[2] - s.tv[2];
-  const F16 p0 = h->k1 * h->l2 - h->k2 * h->l1;
-  const F16 p1 = h->k2 * h->l0 - h->k0 * h->l2;
+  const V p0 = h->k1 * h->l2 - h->k2 * h->l1;
+  const V p1 = h->k2 * h->l0 - h->k0 * h->l2;
   h->p2 = h->k0 * h->l1 - h->k1 * h->l0;
-  const I16 ok = h->p2 != 0.0f;
-  const F16 safe_p2 = simd::Select(ok, h->p2, simd::Splat(1.0f));
+  const M ok = h->p2 != 0.0f;
+  const V safe_p2 = simd::Select(ok, h->p2, simd::Splat<V>(1.0f));
   h->u = p0 / safe_p2;
   h->v = p1 / safe_p2;
   h->dxm = s.mx - px;
-  h->dym = simd::Splat(s.my - py);
+  h->dym = simd::Splat<V>(s.my - py);
   h->rho3d = h->u * h->u + h->v * h->v;
   h->rho2d = s.inv_square * (h->dxm * h->dxm + h->dym * h->dym) + s.low_pass;
   h->splat_branch = h->rho3d <= h->rho2d;
-  const F16 rho = simd::Min(h->rho3d, h->rho2d);
+  const V rho = simd::Min(h->rho3d, h->rho2d);
   // Depth: where the ray meets the disk's plane in the splat branch; the centre's depth where the
   // screen low-pass draws the surfel (as 2DGS's own rasterizer; MGSR's copy takes the plane there
   // too, reference 3.3). Off the disk that intersection is unbounded: for a nearly edge-on surfel
@@ -171,16 +178,253 @@ inline void IntersectRow(const Surfel& s, F16 px, float py, float min_power, I16
   // spikes (up to 4.6e6) through the depth TV and distortion terms; with disks started tangent to
   // the surface (every silhouette disk edge-on) they cost the 2DGS-only method 10 dB.
   h->z = simd::Select(h->splat_branch, s.tw[0] * h->u + s.tw[1] * h->v + s.tw[2],
-                      simd::Splat(s.tw[2]));
-  const F16 power = -0.5f * rho;
+                      simd::Splat<V>(s.tw[2]));
+  const V power = -0.5f * rho;
   // (The row itself is within the radius: callers skip rows with |m_y - y| > radius.)
   h->in =
       lanes_ok & ok & (simd::Abs(h->dxm) <= s.rad) & (h->z >= kSurfelNear) & (power >= min_power);
-  h->G = simd::Exp(simd::Max(power, simd::Splat(-80.0f)));
+  h->G = simd::Exp(simd::Max(power, simd::Splat<V>(-80.0f)));
 }
 
-inline F16 NdcDepth(F16 z) {
+template <class V>
+inline V NdcDepth(V z) {
   return (kSurfelFar / (kSurfelFar - kSurfelNear)) * (1.0f - kSurfelNear / z);
+}
+
+// Forward per-pixel state of a tile.
+enum ForwardArray {
+  aT,
+  aC0,
+  aC1,
+  aC2,
+  aDs,
+  aWs,
+  aN0,
+  aN1,
+  aN2,
+  aLive,
+  aLast,
+  aZmed,
+  aMed,
+  aM1,
+  aM2,
+  aDist,
+  aMref,
+  kForwardArrays
+};
+
+// Blends surfel j into tile rows [ya, yb], columns [first, first + lanes of V); returns the sum of
+// its blend weights there.
+template <class V>
+float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0, int first,
+                const TileLanes& tl, const PixelArrays& st) {
+  using M = simd::MaskOf<V>;
+  const V px = tl.Px<V>(first);
+  const M lanes_ok = tl.Ok<V>(first);
+  V weight_sum{};
+  const float jp1 = static_cast<float>(j + 1);
+  for (int y = ya; y <= yb; ++y) {
+    const float py = y + 0.5f;
+    if (std::abs(s.my - py) > s.rad) continue;
+    RowHit<V> h;
+    IntersectRow(s, px, py, min_power, lanes_ok, &h);
+    const int k = (y - y0) * kTileSize + first;
+    const V live = simd::Load<V>(st[aLive] + k);
+    h.in &= live > 0.5f;
+    if (!simd::Any(h.in)) continue;
+    const V T = simd::Load<V>(st[aT] + k);
+    const V a = simd::Min(s.op * h.G, simd::Splat<V>(kMaxAlpha));
+    const M valid = h.in & (a >= kMinAlpha);
+    const V test = T * (1.0f - a);
+    const M term = valid & (test < kMinTransmittance);
+    const M blend = valid & ~term;
+    const V w = simd::Masked(blend, a * T);
+    simd::Store(st[aC0] + k, simd::Load<V>(st[aC0] + k) + w * s.c[0]);
+    simd::Store(st[aC1] + k, simd::Load<V>(st[aC1] + k) + w * s.c[1]);
+    simd::Store(st[aC2] + k, simd::Load<V>(st[aC2] + k) + w * s.c[2]);
+    simd::Store(st[aDs] + k, simd::Load<V>(st[aDs] + k) + w * h.z);
+    simd::Store(st[aWs] + k, simd::Load<V>(st[aWs] + k) + w);
+    simd::Store(st[aN0] + k, simd::Load<V>(st[aN0] + k) + w * s.n[0]);
+    simd::Store(st[aN1] + k, simd::Load<V>(st[aN1] + k) + w * s.n[1]);
+    simd::Store(st[aN2] + k, simd::Load<V>(st[aN2] + k) + w * s.n[2]);
+    // Median: the last surfel blended while the incoming transmittance is above one half.
+    const M med = blend & (T > 0.5f);
+    simd::Store(st[aZmed] + k, simd::Select(med, h.z, simd::Load<V>(st[aZmed] + k)));
+    simd::Store(st[aMed] + k, simd::Select(med, simd::Splat<V>(jp1), simd::Load<V>(st[aMed] + k)));
+    // Distortion: w_i (m_i^2 A_i + M2_i - 2 m_i M1_i), A_i = 1 - T_i, M1/M2 over the surfels in
+    // front. It only depends on differences of m, so m is taken relative to the pixel's first
+    // blended surfel: in float, the absolute NDC depths (all close to 1) would cancel
+    // catastrophically.
+    const V m_abs = NdcDepth(simd::Select(blend, h.z, simd::Splat<V>(1.0f)));
+    const V mref = simd::Select(blend & (simd::Load<V>(st[aLast] + k) == 0.0f), m_abs,
+                                simd::Load<V>(st[aMref] + k));
+    simd::Store(st[aMref] + k, mref);
+    const V m = m_abs - mref;
+    const V M1 = simd::Load<V>(st[aM1] + k), M2 = simd::Load<V>(st[aM2] + k);
+    simd::Store(st[aDist] + k,
+                simd::Load<V>(st[aDist] + k) + w * (m * m * (1.0f - T) + M2 - 2.0f * m * M1));
+    simd::Store(st[aM1] + k, M1 + w * m);
+    simd::Store(st[aM2] + k, M2 + w * m * m);
+    simd::Store(st[aT] + k, simd::Select(blend, test, T));
+    simd::Store(st[aLast] + k,
+                simd::Select(blend, simd::Splat<V>(jp1), simd::Load<V>(st[aLast] + k)));
+    simd::Store(st[aLive] + k, simd::Select(term, V{}, live));
+    weight_sum += w;
+  }
+  return simd::Sum(weight_sum);
+}
+
+// d m / d z of the NDC depth m the distortion term reads.
+constexpr float kDmDzScale = kSurfelFar * kSurfelNear / (kSurfelFar - kSurfelNear);
+
+// Backward per-pixel state of a tile.
+enum BackwardArray {
+  bT,
+  bSc0,
+  bSc1,
+  bSc2,
+  bSz,
+  bSn0,
+  bSn1,
+  bSn2,
+  bSw,
+  bGc0,
+  bGc1,
+  bGc2,
+  bGDs,
+  bGn0,
+  bGn1,
+  bGn2,
+  bGA,
+  bGZmed,
+  bGDist,
+  bTfin,
+  bAN,
+  bM1N,
+  bM2N,
+  bMref,
+  bLast,
+  bMed,
+  kBackwardArrays
+};
+
+// Gradients of surfel j over tile rows [ya, yb], columns [first, first + lanes of V), written to
+// its gradient row `dst` (`dlow`: d c / d M of its low-pass offset); un-blends it from the state.
+template <class V>
+void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0, int first,
+                  const TileLanes& tl, const PixelArrays& st, const float dlow[9], float* dst) {
+  using M = simd::MaskOf<V>;
+  const V px = tl.Px<V>(first);
+  const M lanes_ok = tl.Ok<V>(first);
+  const float jf = static_cast<float>(j);
+  V glow{};  // d loss / d c (the low-pass offset)
+  V gTu0{}, gTu1{}, gTu2{}, gTv0{}, gTv1{}, gTv2{}, gTw0{}, gTw1{}, gTw2{}, gmx{}, gmy{}, gop{};
+  V gn0{}, gn1{}, gn2{}, gc0{}, gc1{}, gc2{};
+  for (int y = ya; y <= yb; ++y) {
+    const float py = y + 0.5f;
+    if (std::abs(s.my - py) > s.rad) continue;
+    const int k = (y - y0) * kTileSize + first;
+    RowHit<V> h;
+    IntersectRow(s, px, py, min_power, lanes_ok, &h);
+    h.in &= jf < simd::Load<V>(st[bLast] + k);
+    if (!simd::Any(h.in)) continue;
+    const V raw = s.op * h.G;
+    const V a = simd::Min(raw, simd::Splat<V>(kMaxAlpha));
+    const M valid = h.in & (a >= kMinAlpha);
+    if (!simd::Any(valid)) continue;
+    const V inv = 1.0f / (1.0f - a);
+    const V T = simd::Select(valid, simd::Load<V>(st[bT] + k) * inv, simd::Load<V>(st[bT] + k));
+    simd::Store(st[bT] + k, T);
+    const V w = simd::Masked(valid, a * T);
+    const V Gc0 = simd::Load<V>(st[bGc0] + k), Gc1 = simd::Load<V>(st[bGc1] + k),
+            Gc2 = simd::Load<V>(st[bGc2] + k);
+    const V Gn0 = simd::Load<V>(st[bGn0] + k), Gn1 = simd::Load<V>(st[bGn1] + k),
+            Gn2 = simd::Load<V>(st[bGn2] + k);
+    const V GDs = simd::Load<V>(st[bGDs] + k), GDist = simd::Load<V>(st[bGDist] + k);
+    gc0 += w * Gc0;
+    gc1 += w * Gc1;
+    gc2 += w * Gc2;
+    gn0 += w * Gn0;
+    gn1 += w * Gn1;
+    gn2 += w * Gn2;
+    // Distortion: d dist / d w_i and d dist / d m_i at this pixel's totals.
+    const V zz = simd::Select(valid, h.z, simd::Splat<V>(1.0f));
+    const V m = NdcDepth(zz) - simd::Load<V>(st[bMref] + k);  // relative, as in the forward pass
+    const V AN = simd::Load<V>(st[bAN] + k), M1N = simd::Load<V>(st[bM1N] + k),
+            M2N = simd::Load<V>(st[bM2N] + k);
+    const V gw_dist = GDist * (m * m * AN - 2.0f * m * M1N + M2N);
+    const V dm = 2.0f * w * GDist * (m * AN - M1N);
+    // d loss / d z of the intersection.
+    const M is_median = valid & (jf + 1.0f == simd::Load<V>(st[bMed] + k));
+    const V dz = w * GDs + simd::Masked(is_median, simd::Load<V>(st[bGZmed] + k)) +
+                 dm * (kDmDzScale / (zz * zz));
+    // d loss / d a through every output (the "behind" accumulators S).
+    const V Sc0 = simd::Load<V>(st[bSc0] + k), Sc1 = simd::Load<V>(st[bSc1] + k),
+            Sc2 = simd::Load<V>(st[bSc2] + k);
+    const V Sn0 = simd::Load<V>(st[bSn0] + k), Sn1 = simd::Load<V>(st[bSn1] + k),
+            Sn2 = simd::Load<V>(st[bSn2] + k);
+    const V Sz = simd::Load<V>(st[bSz] + k), Sw = simd::Load<V>(st[bSw] + k);
+    V da = (s.c[0] - Sc0) * Gc0 + (s.c[1] - Sc1) * Gc1 + (s.c[2] - Sc2) * Gc2 + (h.z - Sz) * GDs +
+           (s.n[0] - Sn0) * Gn0 + (s.n[1] - Sn1) * Gn1 + (s.n[2] - Sn2) * Gn2 + (gw_dist - Sw);
+    da = da * T + simd::Load<V>(st[bTfin] + k) * inv * simd::Load<V>(st[bGA] + k);
+    const V keep = 1.0f - a;
+    simd::Store(st[bSc0] + k, simd::Select(valid, a * s.c[0] + keep * Sc0, Sc0));
+    simd::Store(st[bSc1] + k, simd::Select(valid, a * s.c[1] + keep * Sc1, Sc1));
+    simd::Store(st[bSc2] + k, simd::Select(valid, a * s.c[2] + keep * Sc2, Sc2));
+    simd::Store(st[bSn0] + k, simd::Select(valid, a * s.n[0] + keep * Sn0, Sn0));
+    simd::Store(st[bSn1] + k, simd::Select(valid, a * s.n[1] + keep * Sn1, Sn1));
+    simd::Store(st[bSn2] + k, simd::Select(valid, a * s.n[2] + keep * Sn2, Sn2));
+    simd::Store(st[bSz] + k, simd::Select(valid, a * h.z + keep * Sz, Sz));
+    simd::Store(st[bSw] + k, simd::Select(valid, a * gw_dist + keep * Sw, Sw));
+    const M slope = valid & (raw < kMaxAlpha);  // the clamp at 0.99 has zero slope
+    gop += simd::Masked(slope, h.G * da);
+    const V dG = simd::Masked(slope, s.op * da);
+    const V drho = -0.5f * h.G * dG;
+    // rho = min(rho3d, rho2d): the splat branch moves (u, v), the low-pass branch the centre.
+    V du = simd::Masked(h.splat_branch, 2.0f * h.u * drho);
+    V dv = simd::Masked(h.splat_branch, 2.0f * h.v * drho);
+    const V drho2d = simd::Masked(~h.splat_branch, drho) * (2.0f * s.inv_square);
+    gmx += drho2d * h.dxm;
+    gmy += drho2d * h.dym;
+    glow += simd::Masked(~h.splat_branch, drho);
+    // z = T_w . (u, v, 1) in the splat branch, T_w,z in the low-pass branch.
+    const V dzv = simd::Masked(valid, dz);
+    const V dzs = simd::Masked(h.splat_branch, dzv);
+    du += dzs * s.tw[0];
+    dv += dzs * s.tw[1];
+    gTw0 += dzs * h.u;
+    gTw1 += dzs * h.v;
+    gTw2 += dzv;
+    // (u, v) = (p_x, p_y) / p_z, p = k x l, k = x T_w - T_u, l = y T_w - T_v.
+    const V safe_p2 = simd::Select(valid, h.p2, simd::Splat<V>(1.0f));
+    const V dp0 = du / safe_p2, dp1 = dv / safe_p2, dp2 = -(h.u * du + h.v * dv) / safe_p2;
+    const V dk0 = h.l1 * dp2 - h.l2 * dp1;  // dk = l x dp
+    const V dk1 = h.l2 * dp0 - h.l0 * dp2;
+    const V dk2 = h.l0 * dp1 - h.l1 * dp0;
+    const V dl0 = dp1 * h.k2 - dp2 * h.k1;  // dl = dp x k
+    const V dl1 = dp2 * h.k0 - dp0 * h.k2;
+    const V dl2 = dp0 * h.k1 - dp1 * h.k0;
+    gTu0 -= dk0;
+    gTu1 -= dk1;
+    gTu2 -= dk2;
+    gTv0 -= dl0;
+    gTv1 -= dl1;
+    gTv2 -= dl2;
+    gTw0 += h.dxp * dk0 + h.dyp * dl0;
+    gTw1 += h.dxp * dk1 + h.dyp * dl1;
+    gTw2 += h.dxp * dk2 + h.dyp * dl2;
+    // k and l depend on the centre through the pixel offsets.
+    gmx -= s.tw[0] * dk0 + s.tw[1] * dk1 + s.tw[2] * dk2;
+    gmy -= s.tw[0] * dl0 + s.tw[1] * dl1 + s.tw[2] * dl2;
+  }
+  const V* accs[kGradStride] = {&gTu0, &gTu1, &gTu2, &gTv0, &gTv1, &gTv2, &gTw0, &gTw1, &gTw2,
+                                &gmx,  &gmy,  &gop,  &gn0,  &gn1,  &gn2,  &gc0,  &gc1,  &gc2};
+  for (int q = 0; q < kGradStride; ++q) dst[q] = simd::Sum(*accs[q]);
+  if (s.low_pass > 0) {  // area-preserving low-pass only
+    const float gl = simd::Sum(glow);
+    // The rows T_u, T_v, T_w lead the gradient stride (gTu0 = 0).
+    for (int q = 0; q < 9; ++q) dst[q] += gl * dlow[q];
+  }
 }
 
 }  // namespace
@@ -206,7 +450,6 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   EnsureScratch(scratch, threads);
   const float bg[3] = {o.background[0], o.background[1], o.background[2]};
   const Eigen::Matrix3f Rt = o.camera.R.transpose().cast<float>();
-  const F16 lanes = simd::Lanes();
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
   // Per tile entry: the entry's summed blend weights (only when recording contributions).
@@ -224,31 +467,10 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
     const float* f = buffer.data();
     const int x0 = tx * kTileSize, y0 = ty * kTileSize;
     const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
-    const I16 lanes_ok = lanes < static_cast<float>(x_end - x0);
-    const F16 px = lanes + (x0 + 0.5f);
+    const TileLanes tl(x0, x_end - x0);
 
-    enum {
-      aT,
-      aC0,
-      aC1,
-      aC2,
-      aDs,
-      aWs,
-      aN0,
-      aN1,
-      aN2,
-      aLive,
-      aLast,
-      aZmed,
-      aMed,
-      aM1,
-      aM2,
-      aDist,
-      aMref,
-      kArrays
-    };
-    const PixelArrays st(&scratch->pixel_state[thread], kArrays);
-    for (int a = 0; a < kArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
+    const PixelArrays st(&scratch->pixel_state[thread], kForwardArrays);
+    for (int a = 0; a < kForwardArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
     std::fill(st[aT], st[aT] + kTilePixels, 1.0f);
     std::fill(st[aLive], st[aLive] + kTilePixels, 1.0f);
     for (int j = 0; j < n; ++j) {
@@ -263,55 +485,10 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
       const float min_power = std::log(kMinAlpha / s.op);
       int ya, yb;
       BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
-      const float jp1 = static_cast<float>(j + 1);
-      for (int y = ya; y <= yb; ++y) {
-        const float py = y + 0.5f;
-        if (std::abs(s.my - py) > s.rad) continue;
-        RowHit h;
-        IntersectRow(s, px, py, min_power, lanes_ok, &h);
-        const int k = (y - y0) * kTileSize;
-        const F16 live = simd::Load(st[aLive] + k);
-        h.in &= live > 0.5f;
-        if (!simd::Any(h.in)) continue;
-        const F16 T = simd::Load(st[aT] + k);
-        const F16 a = simd::Min(s.op * h.G, simd::Splat(kMaxAlpha));
-        const I16 valid = h.in & (a >= kMinAlpha);
-        const F16 test = T * (1.0f - a);
-        const I16 term = valid & (test < kMinTransmittance);
-        const I16 blend = valid & ~term;
-        const F16 w = simd::Masked(blend, a * T);
-        simd::Store(st[aC0] + k, simd::Load(st[aC0] + k) + w * s.c[0]);
-        simd::Store(st[aC1] + k, simd::Load(st[aC1] + k) + w * s.c[1]);
-        simd::Store(st[aC2] + k, simd::Load(st[aC2] + k) + w * s.c[2]);
-        simd::Store(st[aDs] + k, simd::Load(st[aDs] + k) + w * h.z);
-        simd::Store(st[aWs] + k, simd::Load(st[aWs] + k) + w);
-        simd::Store(st[aN0] + k, simd::Load(st[aN0] + k) + w * s.n[0]);
-        simd::Store(st[aN1] + k, simd::Load(st[aN1] + k) + w * s.n[1]);
-        simd::Store(st[aN2] + k, simd::Load(st[aN2] + k) + w * s.n[2]);
-        // Median: the last surfel blended while the incoming transmittance is above one half.
-        const I16 med = blend & (T > 0.5f);
-        simd::Store(st[aZmed] + k, simd::Select(med, h.z, simd::Load(st[aZmed] + k)));
-        simd::Store(st[aMed] + k, simd::Select(med, simd::Splat(jp1), simd::Load(st[aMed] + k)));
-        // Distortion: w_i (m_i^2 A_i + M2_i - 2 m_i M1_i), A_i = 1 - T_i, M1/M2 over the surfels in
-        // front. It only depends on differences of m, so m is taken relative to the pixel's first
-        // blended surfel: in float, the absolute NDC depths (all close to 1) would cancel
-        // catastrophically.
-        const F16 m_abs = NdcDepth(simd::Select(blend, h.z, simd::Splat(1.0f)));
-        const F16 mref = simd::Select(blend & (simd::Load(st[aLast] + k) == 0.0f), m_abs,
-                                      simd::Load(st[aMref] + k));
-        simd::Store(st[aMref] + k, mref);
-        const F16 m = m_abs - mref;
-        const F16 M1 = simd::Load(st[aM1] + k), M2 = simd::Load(st[aM2] + k);
-        simd::Store(st[aDist] + k,
-                    simd::Load(st[aDist] + k) + w * (m * m * (1.0f - T) + M2 - 2.0f * m * M1));
-        simd::Store(st[aM1] + k, M1 + w * m);
-        simd::Store(st[aM2] + k, M2 + w * m * m);
-        simd::Store(st[aT] + k, simd::Select(blend, test, T));
-        simd::Store(st[aLast] + k,
-                    simd::Select(blend, simd::Splat(jp1), simd::Load(st[aLast] + k)));
-        simd::Store(st[aLive] + k, simd::Select(term, F16{}, live));
-        if (weights != nullptr) weights[j] += simd::Sum(w);
-      }
+      const ColumnWindow win = WindowFor(s.mx, s.rad, x0);
+      const float sum = win.half ? BlendRows<F8>(s, j, min_power, ya, yb, y0, win.first, tl, st)
+                                 : BlendRows<F16>(s, j, min_power, ya, yb, y0, 0, tl, st);
+      if (weights != nullptr) weights[j] += sum;
     }
     for (int y = y0; y < y_end; ++y) {
       for (int x = x0; x < x_end; ++x) {
@@ -361,8 +538,6 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
   EnsureScratch(scratch, threads);
   const float bg[3] = {o.background[0], o.background[1], o.background[2]};
   const Eigen::Matrix3f Rc = o.camera.R.cast<float>();
-  const F16 lanes = simd::Lanes();
-  constexpr float kDmDzScale = kSurfelFar * kSurfelNear / (kSurfelFar - kSurfelNear);
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
 
@@ -383,40 +558,10 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
       const float* f = buffer.data();
       const int x0 = tx * kTileSize, y0 = ty * kTileSize;
       const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
-      const I16 lanes_ok = lanes < static_cast<float>(x_end - x0);
-      const F16 px = lanes + (x0 + 0.5f);
+      const TileLanes tl(x0, x_end - x0);
 
-      enum {
-        aT,
-        aSc0,
-        aSc1,
-        aSc2,
-        aSz,
-        aSn0,
-        aSn1,
-        aSn2,
-        aSw,
-        aGc0,
-        aGc1,
-        aGc2,
-        aGDs,
-        aGn0,
-        aGn1,
-        aGn2,
-        aGA,
-        aGZmed,
-        aGDist,
-        aTfin,
-        aAN,
-        aM1N,
-        aM2N,
-        aMref,
-        aLast,
-        aMed,
-        kArrays
-      };
-      const PixelArrays st(&scratch->pixel_state[thread], kArrays);
-      for (int a = 0; a < kArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
+      const PixelArrays st(&scratch->pixel_state[thread], kBackwardArrays);
+      for (int a = 0; a < kBackwardArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
       int max_last = 0;
       for (int y = y0; y < y_end; ++y) {
         for (int x = x0; x < x_end; ++x) {
@@ -442,21 +587,21 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
             a_grad -= gD * r.depth_sum[pix] / (ws * ws);
           }
           for (int c = 0; c < 3; ++c) {
-            st[aGc0 + c][k] = gc[c];
-            st[aGn0 + c][k] = gn[c];
+            st[bGc0 + c][k] = gc[c];
+            st[bGn0 + c][k] = gn[c];
           }
-          st[aGDs][k] = ds_grad;
+          st[bGDs][k] = ds_grad;
           // The background and A terms share d T_N / d a_i = -T_N / (1 - a_i).
-          st[aGA][k] = a_grad - (bg[0] * gc[0] + bg[1] * gc[1] + bg[2] * gc[2]);
-          st[aGZmed][k] = g.median_depth.empty() ? 0.0f : g.median_depth.plane(0)[pix];
-          st[aGDist][k] = g.distortion.empty() ? 0.0f : g.distortion.plane(0)[pix];
-          st[aT][k] = st[aTfin][k] = r.final_t[pix];
-          st[aAN][k] = A;
-          st[aM1N][k] = r.m1[pix];
-          st[aM2N][k] = r.m2[pix];
-          st[aMref][k] = r.m_ref[pix];
-          st[aLast][k] = static_cast<float>(r.last[pix]);
-          st[aMed][k] = static_cast<float>(r.median_index[pix]);
+          st[bGA][k] = a_grad - (bg[0] * gc[0] + bg[1] * gc[1] + bg[2] * gc[2]);
+          st[bGZmed][k] = g.median_depth.empty() ? 0.0f : g.median_depth.plane(0)[pix];
+          st[bGDist][k] = g.distortion.empty() ? 0.0f : g.distortion.plane(0)[pix];
+          st[bT][k] = st[bTfin][k] = r.final_t[pix];
+          st[bAN][k] = A;
+          st[bM1N][k] = r.m1[pix];
+          st[bM2N][k] = r.m2[pix];
+          st[bMref][k] = r.m_ref[pix];
+          st[bLast][k] = static_cast<float>(r.last[pix]);
+          st[bMed][k] = static_cast<float>(r.median_index[pix]);
           max_last = std::max(max_last, static_cast<int>(r.last[pix]));
         }
       }
@@ -473,119 +618,12 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
         const float min_power = std::log(kMinAlpha / s.op);
         int ya, yb;
         BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
-        const float jf = static_cast<float>(j);
-        F16 glow{};  // d loss / d c (the low-pass offset)
-        F16 gTu0{}, gTu1{}, gTu2{}, gTv0{}, gTv1{}, gTv2{}, gTw0{}, gTw1{}, gTw2{}, gmx{}, gmy{},
-            gop{};
-        F16 gn0{}, gn1{}, gn2{}, gc0{}, gc1{}, gc2{};
-        for (int y = ya; y <= yb; ++y) {
-          const float py = y + 0.5f;
-          if (std::abs(s.my - py) > s.rad) continue;
-          const int k = (y - y0) * kTileSize;
-          RowHit h;
-          IntersectRow(s, px, py, min_power, lanes_ok, &h);
-          h.in &= jf < simd::Load(st[aLast] + k);
-          if (!simd::Any(h.in)) continue;
-          const F16 raw = s.op * h.G;
-          const F16 a = simd::Min(raw, simd::Splat(kMaxAlpha));
-          const I16 valid = h.in & (a >= kMinAlpha);
-          if (!simd::Any(valid)) continue;
-          const F16 inv = 1.0f / (1.0f - a);
-          const F16 T = simd::Select(valid, simd::Load(st[aT] + k) * inv, simd::Load(st[aT] + k));
-          simd::Store(st[aT] + k, T);
-          const F16 w = simd::Masked(valid, a * T);
-          const F16 Gc0 = simd::Load(st[aGc0] + k), Gc1 = simd::Load(st[aGc1] + k),
-                    Gc2 = simd::Load(st[aGc2] + k);
-          const F16 Gn0 = simd::Load(st[aGn0] + k), Gn1 = simd::Load(st[aGn1] + k),
-                    Gn2 = simd::Load(st[aGn2] + k);
-          const F16 GDs = simd::Load(st[aGDs] + k), GDist = simd::Load(st[aGDist] + k);
-          gc0 += w * Gc0;
-          gc1 += w * Gc1;
-          gc2 += w * Gc2;
-          gn0 += w * Gn0;
-          gn1 += w * Gn1;
-          gn2 += w * Gn2;
-          // Distortion: d dist / d w_i and d dist / d m_i at this pixel's totals.
-          const F16 zz = simd::Select(valid, h.z, simd::Splat(1.0f));
-          const F16 m =
-              NdcDepth(zz) - simd::Load(st[aMref] + k);  // relative, as in the forward pass
-          const F16 AN = simd::Load(st[aAN] + k), M1N = simd::Load(st[aM1N] + k),
-                    M2N = simd::Load(st[aM2N] + k);
-          const F16 gw_dist = GDist * (m * m * AN - 2.0f * m * M1N + M2N);
-          const F16 dm = 2.0f * w * GDist * (m * AN - M1N);
-          // d loss / d z of the intersection.
-          const I16 is_median = valid & (jf + 1.0f == simd::Load(st[aMed] + k));
-          const F16 dz = w * GDs + simd::Masked(is_median, simd::Load(st[aGZmed] + k)) +
-                         dm * (kDmDzScale / (zz * zz));
-          // d loss / d a through every output (the "behind" accumulators S).
-          const F16 Sc0 = simd::Load(st[aSc0] + k), Sc1 = simd::Load(st[aSc1] + k),
-                    Sc2 = simd::Load(st[aSc2] + k);
-          const F16 Sn0 = simd::Load(st[aSn0] + k), Sn1 = simd::Load(st[aSn1] + k),
-                    Sn2 = simd::Load(st[aSn2] + k);
-          const F16 Sz = simd::Load(st[aSz] + k), Sw = simd::Load(st[aSw] + k);
-          F16 da = (s.c[0] - Sc0) * Gc0 + (s.c[1] - Sc1) * Gc1 + (s.c[2] - Sc2) * Gc2 +
-                   (h.z - Sz) * GDs + (s.n[0] - Sn0) * Gn0 + (s.n[1] - Sn1) * Gn1 +
-                   (s.n[2] - Sn2) * Gn2 + (gw_dist - Sw);
-          da = da * T + simd::Load(st[aTfin] + k) * inv * simd::Load(st[aGA] + k);
-          const F16 keep = 1.0f - a;
-          simd::Store(st[aSc0] + k, simd::Select(valid, a * s.c[0] + keep * Sc0, Sc0));
-          simd::Store(st[aSc1] + k, simd::Select(valid, a * s.c[1] + keep * Sc1, Sc1));
-          simd::Store(st[aSc2] + k, simd::Select(valid, a * s.c[2] + keep * Sc2, Sc2));
-          simd::Store(st[aSn0] + k, simd::Select(valid, a * s.n[0] + keep * Sn0, Sn0));
-          simd::Store(st[aSn1] + k, simd::Select(valid, a * s.n[1] + keep * Sn1, Sn1));
-          simd::Store(st[aSn2] + k, simd::Select(valid, a * s.n[2] + keep * Sn2, Sn2));
-          simd::Store(st[aSz] + k, simd::Select(valid, a * h.z + keep * Sz, Sz));
-          simd::Store(st[aSw] + k, simd::Select(valid, a * gw_dist + keep * Sw, Sw));
-          const I16 slope = valid & (raw < kMaxAlpha);  // the clamp at 0.99 has zero slope
-          gop += simd::Masked(slope, h.G * da);
-          const F16 dG = simd::Masked(slope, s.op * da);
-          const F16 drho = -0.5f * h.G * dG;
-          // rho = min(rho3d, rho2d): the splat branch moves (u, v), the low-pass branch the centre.
-          F16 du = simd::Masked(h.splat_branch, 2.0f * h.u * drho);
-          F16 dv = simd::Masked(h.splat_branch, 2.0f * h.v * drho);
-          const F16 drho2d = simd::Masked(~h.splat_branch, drho) * (2.0f * s.inv_square);
-          gmx += drho2d * h.dxm;
-          gmy += drho2d * h.dym;
-          glow += simd::Masked(~h.splat_branch, drho);
-          // z = T_w . (u, v, 1) in the splat branch, T_w,z in the low-pass branch.
-          const F16 dzv = simd::Masked(valid, dz);
-          const F16 dzs = simd::Masked(h.splat_branch, dzv);
-          du += dzs * s.tw[0];
-          dv += dzs * s.tw[1];
-          gTw0 += dzs * h.u;
-          gTw1 += dzs * h.v;
-          gTw2 += dzv;
-          // (u, v) = (p_x, p_y) / p_z, p = k x l, k = x T_w - T_u, l = y T_w - T_v.
-          const F16 safe_p2 = simd::Select(valid, h.p2, simd::Splat(1.0f));
-          const F16 dp0 = du / safe_p2, dp1 = dv / safe_p2, dp2 = -(h.u * du + h.v * dv) / safe_p2;
-          const F16 dk0 = h.l1 * dp2 - h.l2 * dp1;  // dk = l x dp
-          const F16 dk1 = h.l2 * dp0 - h.l0 * dp2;
-          const F16 dk2 = h.l0 * dp1 - h.l1 * dp0;
-          const F16 dl0 = dp1 * h.k2 - dp2 * h.k1;  // dl = dp x k
-          const F16 dl1 = dp2 * h.k0 - dp0 * h.k2;
-          const F16 dl2 = dp0 * h.k1 - dp1 * h.k0;
-          gTu0 -= dk0;
-          gTu1 -= dk1;
-          gTu2 -= dk2;
-          gTv0 -= dl0;
-          gTv1 -= dl1;
-          gTv2 -= dl2;
-          gTw0 += h.dxp * dk0 + h.dyp * dl0;
-          gTw1 += h.dxp * dk1 + h.dyp * dl1;
-          gTw2 += h.dxp * dk2 + h.dyp * dl2;
-          // k and l depend on the centre through the pixel offsets.
-          gmx -= s.tw[0] * dk0 + s.tw[1] * dk1 + s.tw[2] * dk2;
-          gmy -= s.tw[0] * dl0 + s.tw[1] * dl1 + s.tw[2] * dl2;
-        }
         float* dst = tg + static_cast<size_t>(j) * kGradStride;
-        const F16* accs[kGradStride] = {&gTu0, &gTu1, &gTu2, &gTv0, &gTv1, &gTv2,
-                                        &gTw0, &gTw1, &gTw2, &gmx,  &gmy,  &gop,
-                                        &gn0,  &gn1,  &gn2,  &gc0,  &gc1,  &gc2};
-        for (int q = 0; q < kGradStride; ++q) dst[q] = simd::Sum(*accs[q]);
-        if (area_preserving && s.low_pass > 0) {
-          const float gl = simd::Sum(glow);
-          // The rows T_u, T_v, T_w lead the gradient stride (gTu0 = 0).
-          for (int q = 0; q < 9; ++q) dst[q] += gl * dlow[q];
+        const ColumnWindow win = WindowFor(s.mx, s.rad, x0);
+        if (win.half) {
+          GradientRows<F8>(s, j, min_power, ya, yb, y0, win.first, tl, st, dlow, dst);
+        } else {
+          GradientRows<F16>(s, j, min_power, ya, yb, y0, 0, tl, st, dlow, dst);
         }
       }
       scratch->tile_used[tile] = static_cast<uint32_t>(max_last);
