@@ -17,6 +17,7 @@
 #include "mgsr/eval/metrics_json.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
+#include "mgsr/io/mesh_glb.h"
 #include "mgsr/io/model_ply.h"
 #include "mgsr/io/output_folder.h"
 #include "mgsr/io/ply.h"
@@ -540,6 +541,7 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   }
   for (const std::string& format : o.export_formats) {
     if (!s.ok() || !options.train_3d) break;
+    if (format == "glb") continue;  // the mesh's format, written with mesh.ply
     const std::string name = "point_cloud_3d." + format;
     if (format == "ply") s = WriteGaussianPly(out.Path(name), solver.gaussians());
     if (format == "splat") s = WriteSplatFile(out.Path(name), solver.gaussians());
@@ -656,6 +658,11 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   }
   if (s.ok()) s = WriteTriangleMesh(mesh_path, mesh);
   if (s.ok()) s = out.Record("mesh.ply");
+  const auto& formats = o.export_formats;
+  if (s.ok() && std::find(formats.begin(), formats.end(), "glb") != formats.end()) {
+    s = WriteMeshGlb(out.Path("mesh.glb"), mesh);
+    if (s.ok()) s = out.Record("mesh.glb");
+  }
   if (!s.ok()) {
     const bool kept = FileExists(ckpt);
     return fail(s.message() + (kept ? "; the trained state is kept in " + ckpt +

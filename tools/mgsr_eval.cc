@@ -20,12 +20,13 @@
 #include "mgsr/eval/metrics_json.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
+#include "mgsr/io/mesh_glb.h"
 #include "mgsr/io/output_folder.h"
 #include "mgsr/io/ply.h"
 #include "tools/tool_flags.h"
 
-DEFINE_string(mesh, "", "Predicted mesh (PLY).");
-DEFINE_string(gt, "", "Ground-truth mesh or point cloud (PLY).");
+DEFINE_string(mesh, "", "Predicted mesh (PLY, or binary glTF .glb).");
+DEFINE_string(gt, "", "Ground-truth mesh or point cloud (PLY, or binary glTF .glb).");
 DEFINE_int32(samples, 10000, "Points sampled on each surface.");
 DEFINE_double(fscore_threshold, 0.01, "Distance threshold of the F-score, in scene units.");
 DEFINE_uint64(seed, 0, "Sampling seed.");
@@ -87,11 +88,17 @@ mgsr::MeshMetricsOptions MeshOptionsFromFlags() {
   return o;
 }
 
+// A mesh file by its extension: .glb (binary glTF), otherwise PLY.
+mgsr::Status ReadMesh(const std::string& path, mgsr::TriangleMesh* mesh) {
+  const bool glb = path.size() >= 4 && path.compare(path.size() - 4, 4, ".glb") == 0;
+  return glb ? mgsr::ReadMeshGlb(path, mesh) : mgsr::ReadTriangleMesh(path, mesh);
+}
+
 int EvaluateMeshes(nlohmann::json* report) {
   mgsr::TriangleMesh pred, gt, visible;
-  mgsr::Status s = mgsr::ReadTriangleMesh(FLAGS_mesh, &pred);
+  mgsr::Status s = ReadMesh(FLAGS_mesh, &pred);
   if (!s.ok()) return Fail(s.message());
-  s = mgsr::ReadTriangleMesh(FLAGS_gt, &gt);
+  s = ReadMesh(FLAGS_gt, &gt);
   if (!s.ok()) return Fail(s.message());
   mgsr::MeshMetricsOptions o = MeshOptionsFromFlags();
   if (!FLAGS_gt_visible.empty()) {
@@ -190,7 +197,7 @@ int EvaluateRun(nlohmann::json* report) {
   if (!run["files"].contains("mesh.ply")) return Fail(metrics_path + ": the run wrote no mesh.ply");
   mgsr::GroundTruthGeometry gt;
   if (!FLAGS_gt.empty()) {
-    s = mgsr::ReadTriangleMesh(FLAGS_gt, &gt.mesh);
+    s = ReadMesh(FLAGS_gt, &gt.mesh);
     if (!s.ok()) return Fail(s.message());
     gt.mesh_path = FLAGS_gt;
   } else if (run.contains("scene") && run["scene"].is_string()) {

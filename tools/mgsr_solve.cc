@@ -135,9 +135,10 @@ DEFINE_bool(profile, false,
             "branch after training (also metrics.json \"profile\").");
 DEFINE_int32(eval_every, 500, "Print the test-view PSNR every N iterations (0: only at the end).");
 DEFINE_string(export, "ply",
-              "Formats of the 3DGS model, comma-separated: ply (point_cloud_3d.ply, every "
-              "attribute), splat (32 bytes a splat), spz (Niantic's compressed format); the "
-              "last two keep the transmitted colour only.");
+              "Output formats, comma-separated: ply (point_cloud_3d.ply, every attribute), "
+              "splat (32 bytes a splat), spz (Niantic's compressed format): the 3DGS model, the "
+              "last two with the transmitted colour only; glb: the mesh also as binary glTF "
+              "(mesh.glb; mesh.ply is always written).");
 DEFINE_string(mesh_depth, "expected",
               "Depth fused into the mesh: expected (MGSR) | median (2DGS).");
 DEFINE_string(mesh_color, "transmitted",

@@ -23,8 +23,10 @@ Status RemovePath(const std::string& path) {
 }  // namespace
 
 const std::vector<std::string>& OutputFolder::ResultNames() {
-  static const std::vector<std::string> names = {"metrics.json", "mesh.ply", "point_cloud_2d.ply",
-                                                 "point_cloud_3d.ply", "renders"};
+  static const std::vector<std::string> names = {"metrics.json",       "mesh.ply",
+                                                 "mesh.glb",           "point_cloud_2d.ply",
+                                                 "point_cloud_3d.ply", "point_cloud_3d.splat",
+                                                 "point_cloud_3d.spz", "renders"};
   return names;
 }
 

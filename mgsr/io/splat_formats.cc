@@ -320,12 +320,12 @@ Status ParseExportFormats(const std::string& list, std::vector<std::string>* for
     item.erase(0, item.find_first_not_of(" \t"));
     item.erase(item.find_last_not_of(" \t") + 1);
     if (item.empty()) continue;
-    if (item != "ply" && item != "splat" && item != "spz")
-      return Status::Error("--export: unknown format '" + item + "' (ply, splat, spz)");
+    if (item != "ply" && item != "splat" && item != "spz" && item != "glb")
+      return Status::Error("--export: unknown format '" + item + "' (ply, splat, spz, glb)");
     if (std::find(formats->begin(), formats->end(), item) == formats->end())
       formats->push_back(item);
   }
-  if (formats->empty()) return Status::Error("--export: name at least one of ply, splat, spz");
+  if (formats->empty()) return Status::Error("--export: name at least one of ply, splat, spz, glb");
   return Status::Ok();
 }
 

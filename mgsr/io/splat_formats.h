@@ -32,7 +32,9 @@ Status WriteSpzFile(const std::string& path, const GaussianModel& model);
 Status ReadSplatFile(const std::string& path, GaussianModel* model);
 Status ReadSpzFile(const std::string& path, GaussianModel* model);
 
-// "ply,splat,spz" -> the formats, in order, without repeats; an error names an unknown one.
+// "ply,splat,spz,glb" -> the formats, in order, without repeats; an error names an unknown one.
+// ply, splat and spz are the 3DGS model's formats; glb adds the mesh as binary glTF (mesh_glb.h)
+// beside mesh.ply, which is always written.
 Status ParseExportFormats(const std::string& list, std::vector<std::string>* formats);
 
 }  // namespace mgsr

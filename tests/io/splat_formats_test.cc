@@ -202,7 +202,9 @@ TEST(SplatFormatsTest, ExportListIsChecked) {
   std::vector<std::string> f;
   ASSERT_TRUE(ParseExportFormats("ply, splat,spz,ply", &f).ok());
   EXPECT_EQ(f, (std::vector<std::string>{"ply", "splat", "spz"}));
-  EXPECT_FALSE(ParseExportFormats("ply,glb", &f).ok());
+  ASSERT_TRUE(ParseExportFormats("glb,ply", &f).ok());
+  EXPECT_EQ(f, (std::vector<std::string>{"glb", "ply"}));
+  EXPECT_FALSE(ParseExportFormats("ply,obj", &f).ok());
   EXPECT_FALSE(ParseExportFormats(" , ", &f).ok());
 }
 

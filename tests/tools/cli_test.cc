@@ -14,8 +14,10 @@
 #include "mgsr/io/colmap_model.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
+#include "mgsr/io/mesh_glb.h"
 #include "mgsr/io/model_ply.h"
 #include "mgsr/io/output_folder.h"
+#include "mgsr/io/ply.h"
 #include "mgsr/io/splat_formats.h"
 #include "test_util.h"
 
@@ -324,7 +326,7 @@ TEST_F(CliTest, SolveResumesFromItsCheckpointToTheSameResult) {
     EXPECT_TRUE(a == b) << f << " differs after resuming";
   }
   // Resuming a finished run rebuilds its outputs: here with the model in every export format.
-  r = testing::RunCommand(common + " --output " + dir + "/b --resume --export ply,splat,spz");
+  r = testing::RunCommand(common + " --output " + dir + "/b --resume --export ply,splat,spz,glb");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   GaussianModel ply, splat, spz;
   ASSERT_TRUE(ReadGaussianPly(dir + "/b/point_cloud_3d.ply", &ply).ok());
@@ -333,6 +335,19 @@ TEST_F(CliTest, SolveResumesFromItsCheckpointToTheSameResult) {
   EXPECT_GT(ply.size(), 0u);
   EXPECT_EQ(splat.size(), ply.size());
   EXPECT_EQ(spz.size(), ply.size());
+  TriangleMesh mesh_ply, mesh_glb;
+  ASSERT_TRUE(ReadTriangleMesh(dir + "/b/mesh.ply", &mesh_ply).ok());
+  ASSERT_TRUE(ReadMeshGlb(dir + "/b/mesh.glb", &mesh_glb).ok());
+  EXPECT_EQ(mesh_glb.vertices.size(), mesh_ply.vertices.size());
+  EXPECT_EQ(mesh_glb.triangles, mesh_ply.triangles);
+  std::string metrics;
+  ASSERT_TRUE(ReadFileToString(dir + "/b/metrics.json", &metrics).ok());
+  EXPECT_NE(metrics.find("\"mesh.glb\""), std::string::npos) << "not in the manifest";
+  // A run without glb removes the previous run's mesh.glb and splat files (they are results).
+  r = testing::RunCommand(common + " --output " + dir + "/b --resume");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  for (const char* f : {"mesh.glb", "point_cloud_3d.splat", "point_cloud_3d.spz"})
+    EXPECT_FALSE(FileExists(dir + "/b/" + f)) << f << " of the previous run is still there";
   r = testing::RunCommand(common + " --output " + dir + "/c --resume");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.output.find("no checkpoint to resume from"), std::string::npos) << r.output;
@@ -373,9 +388,9 @@ TEST_F(CliTest, SolveRejectsBadOptions) {
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_EQ(r.output, "error: --lambda_normal must be >= 0 (or -1 for the default)\n");
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
-                          " --output /tmp/x --export ply,glb");
+                          " --output /tmp/x --export ply,obj");
   EXPECT_EQ(r.exit_code, 1) << r.output;
-  EXPECT_EQ(r.output, "error: --export: unknown format 'glb' (ply, splat, spz)\n");
+  EXPECT_EQ(r.output, "error: --export: unknown format 'obj' (ply, splat, spz, glb)\n");
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
                           " --output /tmp/x --budget lots");
   EXPECT_EQ(r.exit_code, 1) << r.output;
@@ -569,6 +584,18 @@ TEST_F(CliTest, EvalScoresMeshesAndImagesAndWritesJson) {
   std::string json;
   ASSERT_TRUE(ReadFileToString(out + "/mesh.json", &json).ok());
   EXPECT_NE(json.find("\"ok\": true"), std::string::npos) << json;
+  // The same mesh as binary glTF scores the same against its PLY.
+  TriangleMesh gt;
+  ASSERT_TRUE(ReadTriangleMesh(base_ + "/gt/mesh.ply", &gt).ok());
+  ASSERT_TRUE(WriteMeshGlb(out + "/gt.glb", gt).ok());
+  r = testing::RunCommand(kTools + "/mgsr_eval --mesh " + out + "/gt.glb --gt " + base_ +
+                          "/gt/mesh.ply --json " + out + "/glb.json");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  nlohmann::json a = nlohmann::json::parse(json), b;
+  ASSERT_TRUE(ReadFileToString(out + "/glb.json", &json).ok());
+  b = nlohmann::json::parse(json);
+  EXPECT_NEAR(b["mesh"]["cd"].get<double>(), a["mesh"]["cd"].get<double>(), 1e-6) << json;
+  EXPECT_NEAR(b["mesh"]["nc"].get<double>(), a["mesh"]["nc"].get<double>(), 1e-6) << json;
   r = testing::RunCommand(kTools + "/mgsr_eval --renders " + base_ + "/images --gt_images " +
                           base_ + "/images --json " + out + "/images.json");
   ASSERT_EQ(r.exit_code, 0) << r.output;
