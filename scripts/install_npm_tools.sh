@@ -1,31 +1,33 @@
 #!/usr/bin/env bash
 # Installs the third-party readers the compatibility tests run against our outputs: npm packages
 # pinned in tests/third_party/package.json and package-lock.json (splat-transform, the glTF
-# validator, the Spark web viewer and three.js) into BUILD/npm_tools, and Debian's chromium for the
-# viewer. Never fails the caller: without npm, Chromium or the registries it says so in one line,
-# and those tests then skip with the same reason.
+# validator, the Spark web viewer and three.js) into BUILD/npm_tools, and Debian's chromium (for
+# the viewer) and ffmpeg. Never fails the caller: without npm, a package or the registries it says
+# so in one line, and those tests then skip (or check less) with the same reason.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 dest="${MGSR_BUILD_DIR:-build}/npm_tools"
 
-# The web viewer of SparkViewerInteropTest runs in Debian's Chromium (headless, software WebGL).
-if command -v chromium >/dev/null 2>&1; then
-  echo "[npm_tools] chromium present"
-else
-  SUDO=""
-  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
-  if { $SUDO apt-get update -qq &&
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends chromium; } \
-    >/tmp/mgsr_install_chromium.log 2>&1; then
-    echo "[npm_tools] installed $(chromium --version 2>/dev/null | head -1)"
-  else
-    echo "[npm_tools] apt-get install chromium failed (see /tmp/mgsr_install_chromium.log): the web-viewer test will be skipped"
+# Debian packages the compatibility tests drive, best effort: Chromium for the web viewer of
+# SparkViewerInteropTest (headless, software WebGL), ffmpeg for mgsr_render's orbit.mp4.
+apt_best_effort() {  # PACKAGE COMMAND WHAT-SKIPS
+  if command -v "$2" >/dev/null 2>&1; then
+    echo "[npm_tools] $1 present"
+    return
   fi
-fi
-if ! command -v npm >/dev/null 2>&1; then
-  echo "[npm_tools] npm is not installed: the third-party compatibility tests (splat-transform, gltf-validator, Spark) will be skipped"
-  exit 0
-fi
+  local sudo=""
+  if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+  if { $sudo apt-get update -qq &&
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "$1"; } \
+    >"/tmp/mgsr_install_$1.log" 2>&1; then
+    echo "[npm_tools] installed $1"
+  else
+    echo "[npm_tools] apt-get install $1 failed (see /tmp/mgsr_install_$1.log): $3"
+  fi
+}
+apt_best_effort chromium chromium "the web-viewer test will be skipped"
+apt_best_effort ffmpeg ffprobe "mgsr_render's video is not tested"
+
 mkdir -p "$dest"
 if cmp -s tests/third_party/package-lock.json "$dest/package-lock.json" &&
   [ -x "$dest/node_modules/.bin/splat-transform" ] &&

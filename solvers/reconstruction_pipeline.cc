@@ -8,6 +8,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
+#include "mgsr/core/progress.h"
 #include "mgsr/core/timer.h"
 #include "mgsr/eval/depth_error.h"
 #include "mgsr/eval/exposure_alignment.h"
@@ -23,6 +24,7 @@
 #include "mgsr/io/ply.h"
 #include "mgsr/io/splat_formats.h"
 #include "mgsr/mesh/exact_depth_ceiling.h"
+#include "mgsr/render/visualize.h"
 #include "mgsr/synth/ray_caster.h"
 #include "solvers/backdrop.h"
 #include "solvers/checkpoint_callback.h"
@@ -238,13 +240,6 @@ class ProgressLog : public IterationCallback {
   bool train_2d_, train_3d_;
   double loss_2d_ = 0, loss_3d_ = 0;
 };
-
-Image Colorize(const Image& one, float lo, float hi) {
-  Image out(one.width(), one.height(), 1);
-  for (size_t i = 0; i < one.size(); ++i)
-    out.data()[i] = hi > lo ? (one.data()[i] - lo) / (hi - lo) : 0.0f;
-  return out;
-}
 
 // Every training view has a mask or an alpha channel: the object's pixels are known.
 bool ForegroundKnown(const Scene& scene) {
@@ -580,15 +575,6 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
       if (w.ok()) w = out.Record(name);
       return w;
     };
-    float dmin = 1e30f, dmax = 0;
-    for (size_t k = 0; k < sr.depth.size(); ++k) {
-      if (sr.alpha.data()[k] < 0.5f) continue;
-      dmin = std::min(dmin, sr.depth.data()[k]);
-      dmax = std::max(dmax, sr.depth.data()[k]);
-    }
-    Image normal(sr.normal_world.width(), sr.normal_world.height(), 3);
-    for (size_t k = 0; k < normal.size(); ++k)
-      normal.data()[k] = 0.5f + 0.5f * sr.normal_world.data()[k];
     for (const auto& [suffix, image] :
          std::vector<std::pair<std::string, const Image*>>{{"composite", &g.color},
                                                            {"transmitted", &g.tran},
@@ -598,8 +584,11 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
       s = write_render(suffix, *image);
       if (!s.ok()) return fail(s.message());
     }
-    s = write_render("depth2d", Colorize(sr.depth, dmin, dmax));
-    if (s.ok()) s = write_render("normal2d", normal);
+    // The same pictures as mgsr_render's: turbo-mapped depth over the object's own range, normals
+    // as colours, black where nothing was rendered.
+    s = write_render("depth2d",
+                     DepthColormap(sr.depth, sr.alpha, RenderedDepthRange(sr.depth, sr.alpha)));
+    if (s.ok()) s = write_render("normal2d", NormalColormap(sr.normal_world, sr.alpha));
     if (!s.ok()) return fail(s.message());
     if (stop_requested_) return stop_writing();
     // Depth error against ground-truth depth maps when the scene has them (synthetic scenes);
@@ -649,7 +638,12 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   Timer mesh_timer;
   const SurfaceOptions& surface = o.surface;
   TriangleMesh mesh;
-  s = ExtractSurface(&solver, options, scene, surface, &mesh);
+  ProgressMeter mesh_progress("meshing", "views fused", 3.0, [](const std::string& line) {
+    std::printf("%s\n", line.c_str());
+    std::fflush(stdout);
+  });
+  s = ExtractSurface(&solver, options, scene, surface, &mesh,
+                     [&](int done, int total) { mesh_progress.Update(done, total); });
   const std::string mesh_path = out.Path("mesh.ply");
   if (s.ok() && mesh.triangles.empty()) {
     s = Status::Error(mesh_path +

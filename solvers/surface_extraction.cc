@@ -64,7 +64,8 @@ TsdfOptions SurfaceTsdfOptions(const Scene& scene, const SurfaceOptions& options
 }
 
 Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_options,
-                      const Scene& scene, const SurfaceOptions& options, TriangleMesh* mesh) {
+                      const Scene& scene, const SurfaceOptions& options, TriangleMesh* mesh,
+                      const std::function<void(int, int)>& progress) {
   if (options.resolution_scale < 1) return Status::Error("mesh resolution scale must be >= 1");
   const std::vector<int> train = scene.TrainIndices();
   const std::vector<Camera> cameras = FusionCameras(scene, options.resolution_scale);
@@ -88,6 +89,7 @@ Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_o
         f.weight.data()[k] *= mask.data()[k] >= 0.5f ? 1.0f : 0.0f;
     }
     MGSR_RETURN_IF_ERROR(integrator.Integrate(f));
+    if (progress) progress(static_cast<int>(i + 1), static_cast<int>(train.size()));
   }
   return integrator.Extract(mesh);
 }

@@ -5,6 +5,8 @@
 // cameras and settings, and signed depth diagnostics against a ground-truth mesh.
 #pragma once
 
+#include <functional>
+
 #include "mgsr/core/status.h"
 #include "mgsr/core/triangle_mesh.h"
 #include "mgsr/eval/depth_error.h"
@@ -38,9 +40,11 @@ TsdfOptions SurfaceTsdfOptions(const Scene& scene, const SurfaceOptions& options
 std::vector<Camera> FusionCameras(const Scene& scene, int resolution_scale);
 
 // Renders and fuses the trained geometry of every training view; depth is kept where the render's
-// alpha times the view's mask (if any) is at least 0.5.
+// alpha times the view's mask (if any) is at least 0.5. `progress`, when given, is called after
+// each view with (views fused, views in all).
 Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_options,
-                      const Scene& scene, const SurfaceOptions& options, TriangleMesh* mesh);
+                      const Scene& scene, const SurfaceOptions& options, TriangleMesh* mesh,
+                      const std::function<void(int, int)>& progress = {});
 
 // The same fusion of the ground truth's exact depth: what this fusion can achieve at best.
 Status ExactDepthCeiling(const TriangleMesh& ground_truth, const Scene& scene,

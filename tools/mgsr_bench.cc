@@ -15,6 +15,7 @@
 #include "benchmarks/harness/finished_runs.h"
 #include "benchmarks/harness/report.h"
 #include "benchmarks/harness/suite.h"
+#include "mgsr/core/progress.h"
 #include "mgsr/core/subprocess.h"
 #include "mgsr/core/timer.h"
 #include "mgsr/io/file_util.h"
@@ -368,6 +369,10 @@ int main(int argc, char** argv) {
       } else {
         std::printf(" FAILED (%s), %.0f s\n", r.failure.c_str(), r.wall_seconds);
       }
+      if (done < total_runs)
+        std::printf("%s\n",
+                    mgsr::ProgressLine("mgsr_bench", "runs", done, total_runs, all.ElapsedSeconds())
+                        .c_str());
       std::fflush(stdout);
       runs.push_back(std::move(r));
     }

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
@@ -270,13 +271,21 @@ int main(int argc, char** argv) {
       return 0;
     }
     const std::string video = mgsr::JoinPath(FLAGS_output, "orbit.mp4");
+    const std::string partial = mgsr::JoinPath(FLAGS_output, "orbit.partial.mp4");
+    // Written under another name and renamed, so a failed or interrupted encode leaves no
+    // orbit.mp4 that looks finished.
     const mgsr::ProgramResult r = mgsr::RunProgram(
         {ffmpeg, "-y", "-loglevel", "error", "-framerate", std::to_string(FLAGS_fps), "-i",
          mgsr::JoinPath(FLAGS_output, "%04d_composite.png"), "-pix_fmt", "yuv420p", "-vf",
-         "pad=ceil(iw/2)*2:ceil(ih/2)*2", video},
+         "pad=ceil(iw/2)*2:ceil(ih/2)*2", partial},
         {}, mgsr::JoinPath(FLAGS_output, "ffmpeg.log"));
-    if (!r.started || r.exit_code != 0)
+    std::error_code ec;
+    if (!r.started || r.exit_code != 0) {
+      std::filesystem::remove(partial, ec);
       return Fail("ffmpeg failed to write " + video + " (see ffmpeg.log there)");
+    }
+    std::filesystem::rename(partial, video, ec);
+    if (ec) return Fail(video + ": cannot move the encoded video into place: " + ec.message());
     std::printf("video: %s\n", video.c_str());
   }
   return 0;

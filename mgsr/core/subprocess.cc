@@ -42,7 +42,7 @@ std::string FindProgram(const std::string& program) {
 
 ProgramResult RunProgram(const std::vector<std::string>& argv,
                          const std::vector<std::string>& extra_env, const std::string& log_path,
-                         double timeout_seconds) {
+                         double timeout_seconds, const std::function<void()>& on_wait) {
   ProgramResult result;
   if (argv.empty()) return result;
   // Everything the child needs is prepared before fork(): after it only async-signal-safe calls.
@@ -82,8 +82,10 @@ ProgramResult RunProgram(const std::vector<std::string>& argv,
   close(log_fd);
   int status = 0;
   const auto start = std::chrono::steady_clock::now();
+  const bool poll = timeout_seconds > 0 || on_wait;
+  double last_wait_call = 0;
   while (true) {
-    const pid_t done = waitpid(pid, &status, timeout_seconds > 0 ? WNOHANG : 0);
+    const pid_t done = waitpid(pid, &status, poll ? WNOHANG : 0);
     if (done == pid) break;
     if (done < 0) {
       if (errno == EINTR) continue;
@@ -92,7 +94,11 @@ ProgramResult RunProgram(const std::vector<std::string>& argv,
     // Still running (WNOHANG): check the clock, then poll again shortly.
     const double elapsed =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    if (elapsed > timeout_seconds) {
+    if (on_wait && elapsed - last_wait_call >= 0.5) {
+      last_wait_call = elapsed;
+      on_wait();
+    }
+    if (timeout_seconds > 0 && elapsed > timeout_seconds) {
       kill(pid, SIGKILL);
       result.timed_out = true;
       while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {

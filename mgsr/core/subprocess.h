@@ -2,6 +2,7 @@
 // are, so paths with spaces or quotes need no escaping.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -20,9 +21,11 @@ struct ProgramResult {
 
 // Runs argv[0] (a path, as FindProgram gives) with the given arguments and extra environment
 // entries ("NAME=value"), appending its stdout and stderr to `log_path`, and waits for it.
-// With timeout_seconds > 0 the program is killed (SIGKILL) when it runs longer.
+// With timeout_seconds > 0 the program is killed (SIGKILL) when it runs longer. `on_wait`, when
+// given, is called about every half second while the program runs (e.g. to read its log for a
+// progress line).
 ProgramResult RunProgram(const std::vector<std::string>& argv,
                          const std::vector<std::string>& extra_env, const std::string& log_path,
-                         double timeout_seconds = 0);
+                         double timeout_seconds = 0, const std::function<void()>& on_wait = {});
 
 }  // namespace mgsr

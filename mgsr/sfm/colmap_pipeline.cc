@@ -2,11 +2,14 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <set>
 #include <sstream>
 
+#include "mgsr/core/progress.h"
 #include "mgsr/core/subprocess.h"
 #include "mgsr/core/timer.h"
 #include "mgsr/io/colmap_model.h"
@@ -32,12 +35,23 @@ std::string Join(const std::vector<std::string>& names, size_t max_names) {
   return out;
 }
 
+// "[a/b" at `pos` (after the prefix): a and b, or false.
+bool ParseFraction(const std::string& text, size_t pos, long* a, long* b) {
+  char* end = nullptr;
+  const char* p = text.c_str() + pos;
+  *a = std::strtol(p, &end, 10);
+  if (end == p || *end != '/') return false;
+  p = end + 1;
+  *b = std::strtol(p, &end, 10);
+  return end != p && *a >= 0 && *b > 0;
+}
+
 // Runs one colmap command as a named, timed step.
 class StepRunner {
  public:
   StepRunner(std::string colmap, const ColmapPipelineOptions& options,
-             ColmapPipelineSummary* summary)
-      : colmap_(std::move(colmap)), options_(options), summary_(summary) {}
+             ColmapPipelineSummary* summary, int num_images)
+      : colmap_(std::move(colmap)), options_(options), summary_(summary), num_images_(num_images) {}
 
   Status Run(const std::string& step, std::vector<std::string> args) {
     if (options_.log) options_.log(step + " ...");
@@ -49,8 +63,27 @@ class StepRunner {
     }
     args.insert(args.begin(), colmap_);
     Timer timer;
+    // While it runs: a progress line every 5 s from what colmap has written to the log so far.
+    std::error_code ec;
+    const auto start_size = fs::file_size(summary_->log_path, ec);
+    ProgressMeter meter(step, "", 5.0, options_.log);
+    const auto show_progress = [&] {
+      std::ifstream in(summary_->log_path, std::ios::binary);
+      if (!in || ec) return;
+      in.seekg(static_cast<std::streamoff>(start_size));
+      const std::string text((std::istreambuf_iterator<char>(in)),
+                             std::istreambuf_iterator<char>());
+      double done = 0, total = 0;
+      std::string unit;
+      if (LatestColmapProgress(text, num_images_, &done, &total, &unit)) {
+        meter.set_unit(unit);
+        meter.UpdateAt(done, total, timer.ElapsedSeconds());
+      }
+    };
     // Headless: colmap links Qt, which needs a display unless told otherwise.
-    const ProgramResult r = RunProgram(args, {"QT_QPA_PLATFORM=offscreen"}, summary_->log_path);
+    const ProgramResult r =
+        RunProgram(args, {"QT_QPA_PLATFORM=offscreen"}, summary_->log_path, 0,
+                   options_.log ? std::function<void()>(show_progress) : std::function<void()>());
     summary_->steps.push_back({step, timer.ElapsedSeconds()});
     if (!r.started) return Status::Error(colmap_ + ": could not be executed (" + step + ")");
     if (r.exit_code != 0) {
@@ -71,6 +104,7 @@ class StepRunner {
   std::string colmap_;
   const ColmapPipelineOptions& options_;
   ColmapPipelineSummary* summary_;
+  int num_images_;
 };
 
 std::string Threads(const ColmapPipelineOptions& o) { return std::to_string(o.num_threads); }
@@ -152,6 +186,54 @@ Status ColmapPipelineOptions::Validate() const {
   return Status::Ok();
 }
 
+bool LatestColmapProgress(const std::string& log_text, int num_images, double* done, double* total,
+                          std::string* unit) {
+  // From the last line back: the first line that reports progress is the latest.
+  size_t end = log_text.size();
+  while (end > 0) {
+    const size_t begin = log_text.rfind('\n', end - 1);
+    const size_t from = begin == std::string::npos ? 0 : begin + 1;
+    const std::string line = log_text.substr(from, end - from);
+    end = begin == std::string::npos ? 0 : begin;
+    long a = 0, b = 0, c = 0, d = 0;
+    size_t at;
+    for (const char* prefix : {"Processed file [", "Matching image [", "Undistorting image ["}) {
+      if ((at = line.find(prefix)) != std::string::npos &&
+          ParseFraction(line, at + std::strlen(prefix), &a, &b)) {
+        *done = static_cast<double>(a);
+        *total = static_cast<double>(b);
+        *unit = "images";
+        return true;
+      }
+    }
+    const char* block = "Matching block [";
+    if ((at = line.find(block)) != std::string::npos &&
+        ParseFraction(line, at + std::strlen(block), &a, &b)) {
+      const size_t second = line.find(", ", at);
+      if (second != std::string::npos && ParseFraction(line, second + 2, &c, &d)) {
+        *done = static_cast<double>((a - 1) * d + c);
+        *total = static_cast<double>(b * d);
+        *unit = "blocks";
+        return true;
+      }
+    }
+    const char* registering = "Registering image #";
+    if ((at = line.find(registering)) != std::string::npos && num_images > 0) {
+      const size_t open = line.find('(', at);
+      char* stop = nullptr;
+      const long k =
+          open == std::string::npos ? -1 : std::strtol(line.c_str() + open + 1, &stop, 10);
+      if (k >= 0 && stop != nullptr && *stop == ')') {
+        *done = static_cast<double>(k);
+        *total = static_cast<double>(num_images);
+        *unit = "images placed";
+        return true;
+      }
+    }
+  }
+  return false;
+}
+
 Status ListImageFiles(const std::string& dir, std::vector<std::string>* names) {
   names->clear();
   if (!DirectoryExists(dir)) return Status::Error(dir + ": folder of photos does not exist");
@@ -202,7 +284,7 @@ Status RunColmapPipeline(const ColmapPipelineOptions& options, ColmapPipelineSum
   summary->log_path = JoinPath(ws, "colmap.log");
   fs::remove(summary->log_path, ec);
 
-  StepRunner run(colmap, options, summary);
+  StepRunner run(colmap, options, summary, static_cast<int>(names.size()));
   MGSR_RETURN_IF_ERROR(
       run.Run("feature extraction",
               {"feature_extractor", "--database_path", database, "--image_path", options.images,

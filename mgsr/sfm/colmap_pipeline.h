@@ -49,6 +49,13 @@ struct ColmapPipelineSummary {
   std::string log_path;   // workspace/colmap.log
 };
 
+// The latest progress COLMAP reports in `log_text` (its console output): "Processed file [i/N]"
+// (feature extraction), "Matching block [a/A, b/B]" (exhaustive matching), "Matching image [i/N]"
+// (sequential matching), "Registering image #id (k)" (mapping: k of `num_images` placed) and
+// "Undistorting image [i/N]". False when the text holds none of them.
+bool LatestColmapProgress(const std::string& log_text, int num_images, double* done, double* total,
+                          std::string* unit);
+
 // Photo file names in `dir` (sorted); an error when the folder is missing.
 Status ListImageFiles(const std::string& dir, std::vector<std::string>* names);
 

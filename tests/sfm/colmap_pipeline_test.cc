@@ -34,6 +34,9 @@ std::string WriteFakeColmap(const std::string& dir) {
 cmd="$1"; shift
 echo "fake colmap $cmd"
 if [ "$cmd" = "$FAKE_COLMAP_FAIL" ]; then echo "something broke" >&2; exit 3; fi
+if [ "$cmd" = feature_extractor ] && [ -n "$FAKE_COLMAP_SLOW" ]; then
+  for i in 1 2 3 4; do echo "Processed file [$i/4]"; sleep "$FAKE_COLMAP_SLOW"; done
+fi
 out=""
 while [ $# -gt 0 ]; do
   case "$1" in --output_path) out="$2"; shift;; esac
@@ -90,6 +93,7 @@ class FakeColmapPipeline : public ::testing::Test {
   }
   void TearDown() override {
     unsetenv("FAKE_COLMAP_FAIL");
+    unsetenv("FAKE_COLMAP_SLOW");
     unsetenv("FAKE_COLMAP_MODEL");
   }
   void Register(const std::vector<std::string>& names) {
@@ -196,6 +200,63 @@ TEST_F(FakeColmapPipeline, BadInputGetsAClearError) {
   o.camera_model = "FISHEYE";
   st = RunColmapPipeline(o, &s);
   EXPECT_NE(st.message().find("--camera_model: 'FISHEYE'"), std::string::npos) << st.message();
+}
+
+// A step that runs for seconds says how far it is and how long it has left, from colmap's log.
+TEST_F(FakeColmapPipeline, ASlowStepShowsProgressWithTimeLeft) {
+  Register({"a.png", "b.png", "c.jpg", "d.png"});
+  setenv("FAKE_COLMAP_SLOW", "1.8", 1);  // 4 photos, 7 s: one line after 5 s
+  std::vector<std::string> lines;
+  options_.log = [&](const std::string& l) { lines.push_back(l); };
+  ColmapPipelineSummary s;
+  ASSERT_TRUE(RunColmapPipeline(options_, &s).ok());
+  std::string progress;
+  for (const std::string& l : lines)
+    if (l.rfind("feature extraction: ", 0) == 0) progress += l + "\n";
+  EXPECT_NE(progress.find("/4 images ("), std::string::npos) << progress;
+  EXPECT_NE(progress.find(" left"), std::string::npos) << progress;
+}
+
+TEST(ColmapProgress, ReadsTheLatestCountOfEachStep) {
+  double done = 0, total = 0;
+  std::string unit;
+  EXPECT_FALSE(LatestColmapProgress("", 10, &done, &total, &unit));
+  EXPECT_FALSE(LatestColmapProgress("Feature extraction\n=====\n", 10, &done, &total, &unit));
+  ASSERT_TRUE(
+      LatestColmapProgress("Processed file [1/32]\n  Name: a.png\nProcessed file [2/32]\n"
+                           "  Name: b.png\n  Features: 812\n",
+                           32, &done, &total, &unit));
+  EXPECT_EQ(done, 2);
+  EXPECT_EQ(total, 32);
+  EXPECT_EQ(unit, "images");
+  // Exhaustive matching: block (a, b) of A x B, row by row.
+  ASSERT_TRUE(
+      LatestColmapProgress("Matching block [2/3, 1/3] in 4.1s\n", 100, &done, &total, &unit));
+  EXPECT_EQ(done, 4);
+  EXPECT_EQ(total, 9);
+  ASSERT_TRUE(LatestColmapProgress("Matching image [7/120] in 0.3s\n", 120, &done, &total, &unit));
+  EXPECT_EQ(done, 7);
+  // Mapping: the count in brackets is how many images are placed, of the photos given.
+  ASSERT_TRUE(
+      LatestColmapProgress("Registering image #9 (3)\n=====\nRegistering image #22 (4)\n"
+                           "  => Image sees 410 / 1204 points\n",
+                           32, &done, &total, &unit));
+  EXPECT_EQ(done, 4);
+  EXPECT_EQ(total, 32);
+  ASSERT_TRUE(LatestColmapProgress("Undistorting image [5/32]", 32, &done, &total, &unit));
+  EXPECT_EQ(done, 5);
+  // A half-written or malformed line is not progress.
+  EXPECT_FALSE(LatestColmapProgress("Processed file [", 32, &done, &total, &unit));
+  EXPECT_FALSE(LatestColmapProgress("Registering image #9 (", 32, &done, &total, &unit));
+}
+
+TEST(Subprocess, CallsBackWhileTheProgramRuns) {
+  const std::string log = JoinPath(testing::ScratchDir(), "log.txt");
+  int calls = 0;
+  const ProgramResult r = RunProgram({FindProgram("sleep"), "1.3"}, {}, log, 0, [&] { ++calls; });
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_GE(calls, 2);
+  EXPECT_LE(calls, 3);
 }
 
 TEST(Subprocess, FindsProgramsAndReportsExitStatus) {

@@ -10,6 +10,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "mgsr/core/subprocess.h"
 #include "mgsr/eval/image_metrics.h"
 #include "mgsr/io/colmap_model.h"
 #include "mgsr/io/file_util.h"
@@ -80,6 +81,23 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
                         "renders/v000_depth2d_error.png"}) {  // the scene has gt/depth
     EXPECT_TRUE(FileExists(out + "/" + f)) << f;
   }
+  // The depth picture is readable: colour-mapped over the object's own depth range, so the
+  // object's pixels are bright and several colours, not a near-black grey ramp.
+  Image depth_png;
+  ASSERT_TRUE(ReadImage(out + "/renders/v000_depth2d.png", &depth_png).ok());
+  ASSERT_EQ(depth_png.channels(), 3);
+  double brightest = 0, red = 0, blue = 0;
+  for (int y = 0; y < depth_png.height(); ++y) {
+    for (int x = 0; x < depth_png.width(); ++x) {
+      const float r = depth_png.at(0, y, x), g = depth_png.at(1, y, x), b = depth_png.at(2, y, x);
+      brightest = std::max<double>(brightest, std::max({r, g, b}));
+      red = std::max<double>(red, r - b);
+      blue = std::max<double>(blue, b - r);
+    }
+  }
+  EXPECT_GT(brightest, 0.8);
+  EXPECT_GT(red, 0.3);   // near parts
+  EXPECT_GT(blue, 0.3);  // far parts
   std::string metrics;
   ASSERT_TRUE(ReadFileToString(out + "/metrics.json", &metrics).ok());
   EXPECT_NE(metrics.find("\"psnr\""), std::string::npos);
@@ -138,6 +156,20 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
         EXPECT_LT(coloured, 48 * 48) << f;
       }
     }
+  }
+  // The orbit as a video when ffmpeg is installed (scripts/install_npm_tools.sh installs it for
+  // the tests); without it the tool says so.
+  if (FindProgram("ffmpeg").empty() || FindProgram("ffprobe").empty()) {
+    EXPECT_NE(rr.output.find("ffmpeg is not on the PATH"), std::string::npos) << rr.output;
+  } else {
+    EXPECT_NE(rr.output.find("video: " + out + "/orbit/orbit.mp4"), std::string::npos) << rr.output;
+    const auto probe =
+        testing::RunCommand(FindProgram("ffprobe") +
+                            " -v error -count_frames -select_streams v:0 -show_entries "
+                            "stream=nb_read_frames,width,height -of csv=p=0 " +
+                            out + "/orbit/orbit.mp4");
+    EXPECT_EQ(probe.output, "48,48,4\n");  // width, height, frames
+    EXPECT_FALSE(FileExists(out + "/orbit/orbit.partial.mp4"));
   }
   rr = testing::RunCommand(kTools + "/mgsr_render --run " + base_ + " --output " + out + "/x");
   EXPECT_EQ(rr.exit_code, 1);
