@@ -2,16 +2,17 @@
 # Installs the third-party readers the compatibility tests run against our outputs: npm packages
 # pinned in tests/third_party/package.json and package-lock.json (splat-transform, the glTF
 # validator, the Spark web viewer and three.js) into BUILD/npm_tools, and Debian's chromium (for
-# the viewer) and ffmpeg. Never fails the caller: without npm, a package or the registries it says
+# the viewer), ffmpeg and python3-open3d. Never fails the caller: without npm, a package or the registries it says
 # so in one line, and those tests then skip (or check less) with the same reason.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 dest="${MGSR_BUILD_DIR:-build}/npm_tools"
 
 # Debian packages the compatibility tests drive, best effort: Chromium for the web viewer of
-# SparkViewerInteropTest (headless, software WebGL), ffmpeg for mgsr_render's orbit.mp4.
-apt_best_effort() {  # PACKAGE COMMAND WHAT-SKIPS
-  if command -v "$2" >/dev/null 2>&1; then
+# SparkViewerInteropTest (headless, software WebGL), ffmpeg for mgsr_render's orbit.mp4, Open3D's
+# Python package as a reader of our meshes.
+apt_best_effort() {  # PACKAGE CHECK-COMMAND WHAT-SKIPS
+  if eval "$2" >/dev/null 2>&1; then
     echo "[npm_tools] $1 present"
     return
   fi
@@ -25,8 +26,10 @@ apt_best_effort() {  # PACKAGE COMMAND WHAT-SKIPS
     echo "[npm_tools] apt-get install $1 failed (see /tmp/mgsr_install_$1.log): $3"
   fi
 }
-apt_best_effort chromium chromium "the web-viewer test will be skipped"
-apt_best_effort ffmpeg ffprobe "mgsr_render's video is not tested"
+apt_best_effort chromium "command -v chromium" "the web-viewer test will be skipped"
+apt_best_effort ffmpeg "command -v ffprobe" "mgsr_render's video is not tested"
+apt_best_effort python3-open3d "/usr/bin/python3 -c 'import open3d'" \
+  "the Open3D (Python) reader test will be skipped"
 
 mkdir -p "$dest"
 if cmp -s tests/third_party/package-lock.json "$dest/package-lock.json" &&

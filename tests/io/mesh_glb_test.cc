@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "mgsr/core/rng.h"
 #include "mgsr/core/subprocess.h"
@@ -202,6 +203,55 @@ TEST(MeshGlbTest, MutatedFilesAreReadOrRefusedCleanly) {
     EXPECT_EQ(s.message().find('\n'), std::string::npos) << c << ": " << s.message();
   }
   EXPECT_GT(refused, 100);  // the mutations reach the error paths
+}
+
+// Open3D's Python package (Debian python3-open3d, what users script with) reads both files: the
+// same counts, normals, and colours (linear in the .glb, as glTF defines them).
+TEST(Open3DPythonInteropTest, ReadsOurMeshPlyAndGlb) {
+  const std::string python = FindProgram("/usr/bin/python3");
+  const std::string log0 = testing::ScratchDir() + "/probe.log";
+  if (python.empty() || RunProgram({python, "-c", "import open3d"}, {}, log0, 60).exit_code != 0)
+    GTEST_SKIP() << "Debian's python3-open3d is not installed (scripts/install_npm_tools.sh "
+                    "installs it)";
+  const std::string dir = testing::ScratchDir();
+  const TriangleMesh mesh = ColouredTorus();
+  ASSERT_TRUE(WriteMeshGlb(dir + "/m.glb", mesh).ok());
+  ASSERT_TRUE(WriteTriangleMesh(dir + "/m.ply", mesh).ok());
+  const ProgramResult r =
+      RunProgram({python, std::string(MGSR_SOURCE_DIR) + "/tests/third_party/read_mesh_open3d.py",
+                  dir + "/m.ply", dir + "/m.glb"},
+                 {}, dir + "/open3d.log", 120);
+  std::string log;
+  EXPECT_TRUE(ReadFileToString(dir + "/open3d.log", &log).ok());
+  ASSERT_TRUE(r.started && r.exit_code == 0) << log;
+  double mean[3] = {0, 0, 0}, mean_linear[3] = {0, 0, 0}, min_x = 1e9, max_x = -1e9;
+  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+    for (int c = 0; c < 3; ++c) {
+      mean[c] += mesh.vertex_colors[i][c] / mesh.vertices.size();
+      mean_linear[c] += SrgbToLinear(mesh.vertex_colors[i][c]) / mesh.vertices.size();
+    }
+    min_x = std::min(min_x, mesh.vertices[i].x());
+    max_x = std::max(max_x, mesh.vertices[i].x());
+  }
+  std::istringstream lines(log);
+  int files = 0;
+  for (std::string name; lines >> name;) {
+    size_t vertices, triangles;
+    int colors, normals;
+    double got[3], lo, hi;
+    lines >> vertices >> triangles >> colors >> normals >> got[0] >> got[1] >> got[2] >> lo >> hi;
+    SCOPED_TRACE(name);
+    ++files;
+    EXPECT_EQ(vertices, mesh.vertices.size());
+    EXPECT_EQ(triangles, mesh.triangles.size());
+    EXPECT_EQ(colors, 1);
+    EXPECT_EQ(normals, 1);
+    const double* want = name == "m.glb" ? mean_linear : mean;
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(got[c], want[c], 0.003);
+    EXPECT_NEAR(lo, min_x, 1e-5);
+    EXPECT_NEAR(hi, max_x, 1e-5);
+  }
+  EXPECT_EQ(files, 2) << log;
 }
 
 // ---- Against the Khronos glTF Validator (npm gltf-validator, pinned in tests/third_party;
