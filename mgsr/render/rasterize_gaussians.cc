@@ -176,6 +176,36 @@ enum ForwardArray {
   kForwardArrays
 };
 
+// The arrays of one blending chain: transmitted or reflected.
+struct ChainArrays {
+  ForwardArray T, live, c0, c1, c2, last;
+};
+constexpr ChainArrays kTransmittedChain{aT, aLiveT, aCt0, aCt1, aCt2, aLastT};
+constexpr ChainArrays kReflectedChain{aTr, aLiveR, aCr0, aCr1, aCr2, aLastR};
+
+// Blends one chain of a Gaussian (its opacity and colour) into the pixels `in` of a row at `k`:
+// front-to-back alpha blending with early termination. Returns the blend weights.
+template <class V>
+inline V BlendChain(const ChainArrays& a, const PixelArrays& st, int k, MaskOf<V> in, V G,
+                    float opacity, float c0, float c1, float c2, float jp1) {
+  using M = MaskOf<V>;
+  const V T = simd::Load<V>(st[a.T] + k), live = simd::Load<V>(st[a.live] + k);
+  const V alpha = simd::Min(opacity * G, simd::Splat<V>(kMaxAlpha));
+  const M valid = in & (live > 0.5f) & (alpha >= kMinAlpha);
+  const V test = T * (1.0f - alpha);
+  const M terminate = valid & (test < kMinTransmittance);
+  const M blend = valid & ~terminate;
+  const V w = simd::Masked(blend, alpha * T);
+  simd::Store(st[a.c0] + k, simd::Load<V>(st[a.c0] + k) + w * c0);
+  simd::Store(st[a.c1] + k, simd::Load<V>(st[a.c1] + k) + w * c1);
+  simd::Store(st[a.c2] + k, simd::Load<V>(st[a.c2] + k) + w * c2);
+  simd::Store(st[a.T] + k, simd::Select(blend, test, T));
+  simd::Store(st[a.last] + k,
+              simd::Select(blend, simd::Splat<V>(jp1), simd::Load<V>(st[a.last] + k)));
+  simd::Store(st[a.live] + k, simd::Select(terminate, V{}, live));
+  return w;
+}
+
 // Blends Gaussian j (row `s`) into tile rows [ya, yb], columns [first, first + lanes of V).
 // Returns the sum of its blend weights there (both chains).
 template <class V>
@@ -185,7 +215,6 @@ float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const 
   const float jp1 = static_cast<float>(j + 1);
   const V dx = tl.Px<V>(first) - s.mx;
   const M lanes_ok = tl.Ok<V>(first);
-  const V max_alpha = simd::Splat<V>(kMaxAlpha);
   V weight_sum{};
   for (int y = ya; y <= yb; ++y) {
     const float dy = y + 0.5f - s.my;
@@ -195,41 +224,12 @@ float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const 
     const V power = RowPower(s, dx, dy, lanes_ok, &in);
     if (!simd::Any(in)) continue;
     const V G = simd::Exp(simd::Max(power, simd::Splat<V>(-80.0f)));
-    // Transmitted chain.
-    const V T = simd::Load<V>(st[aT] + k), live = simd::Load<V>(st[aLiveT] + k);
-    const V at = simd::Min(s.op * G, max_alpha);
-    const M vt = in & (live > 0.5f) & (at >= kMinAlpha);
-    const V test_t = T * (1.0f - at);
-    const M term_t = vt & (test_t < kMinTransmittance);
-    const M blend_t = vt & ~term_t;
-    const V wt = simd::Masked(blend_t, at * T);
-    simd::Store(st[aCt0] + k, simd::Load<V>(st[aCt0] + k) + wt * s.ct0);
-    simd::Store(st[aCt1] + k, simd::Load<V>(st[aCt1] + k) + wt * s.ct1);
-    simd::Store(st[aCt2] + k, simd::Load<V>(st[aCt2] + k) + wt * s.ct2);
+    const V wt = BlendChain(kTransmittedChain, st, k, in, G, s.op, s.ct0, s.ct1, s.ct2, jp1);
     simd::Store(st[aWs] + k, simd::Load<V>(st[aWs] + k) + wt * s.beta);
     simd::Store(st[aDs] + k, simd::Load<V>(st[aDs] + k) + wt * s.z);
-    simd::Store(st[aT] + k, simd::Select(blend_t, test_t, T));
-    simd::Store(st[aLastT] + k,
-                simd::Select(blend_t, simd::Splat<V>(jp1), simd::Load<V>(st[aLastT] + k)));
-    simd::Store(st[aLiveT] + k, simd::Select(term_t, V{}, live));
     weight_sum += wt;
-    if (!refl) continue;
-    // Reflected chain.
-    const V Tr = simd::Load<V>(st[aTr] + k), live_r = simd::Load<V>(st[aLiveR] + k);
-    const V ar = simd::Min(s.rop * G, max_alpha);
-    const M vr = in & (live_r > 0.5f) & (ar >= kMinAlpha);
-    const V test_r = Tr * (1.0f - ar);
-    const M term_r = vr & (test_r < kMinTransmittance);
-    const M blend_r = vr & ~term_r;
-    const V wr = simd::Masked(blend_r, ar * Tr);
-    simd::Store(st[aCr0] + k, simd::Load<V>(st[aCr0] + k) + wr * s.cr0);
-    simd::Store(st[aCr1] + k, simd::Load<V>(st[aCr1] + k) + wr * s.cr1);
-    simd::Store(st[aCr2] + k, simd::Load<V>(st[aCr2] + k) + wr * s.cr2);
-    simd::Store(st[aTr] + k, simd::Select(blend_r, test_r, Tr));
-    simd::Store(st[aLastR] + k,
-                simd::Select(blend_r, simd::Splat<V>(jp1), simd::Load<V>(st[aLastR] + k)));
-    simd::Store(st[aLiveR] + k, simd::Select(term_r, V{}, live_r));
-    weight_sum += wr;
+    if (refl)
+      weight_sum += BlendChain(kReflectedChain, st, k, in, G, s.rop, s.cr0, s.cr1, s.cr2, jp1);
   }
   return simd::Sum(weight_sum);
 }
