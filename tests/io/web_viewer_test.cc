@@ -106,7 +106,7 @@ TEST(SparkViewerInteropTest, ItsFrameOfOurPlyMatchesOurRender) {
                                  {"far", 50.0},
                                  {"camera_to_world", c2w_json},
                                  {"background", {background[0], background[1], background[2]}},
-                                 {"frames", 20}};
+                                 {"frames", 40}};
   ASSERT_TRUE(WriteStringToFileAtomic(dir + "/camera.json", camera.dump()).ok());
 
   const ProgramResult r = RunProgram(
