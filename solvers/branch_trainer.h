@@ -227,7 +227,11 @@ class PrimitiveTrainer : public BranchTrainer {
   }
   // A render of the trained model (outputs, evaluation).
   void Render(const Camera& camera, typename P::Render* out) {
-    renderer_.Forward(model_, RenderOptionsFor(camera), out);
+    Render(RenderOptionsFor(camera), out);
+  }
+  // The same with options derived from RenderOptionsFor (e.g. a cheaper variant).
+  void Render(const typename P::RenderOptions& options, typename P::Render* out) {
+    renderer_.Forward(model_, options, out);
     held_current_ = false;
   }
 

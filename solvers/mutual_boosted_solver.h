@@ -134,9 +134,13 @@ class MutualBoostedSolver {
   // Per-view colour transforms (indexed like scene.views; identity for test views).
   const ExposureModel& exposure(Branch branch) const { return trainer(branch).exposure(); }
 
-  // Renders of one view with the trained models (for outputs and evaluation).
-  void RenderGaussians(const Camera& camera, GaussianRender* out) {
-    gaussians_->Render(camera, out);
+  // Renders of one view with the trained models (for outputs and evaluation). Without
+  // `reflection` the 3DGS render skips its reflected chain: `tran`, depth and alpha are the same,
+  // the composite is the transmitted colour (what a mesh's colour needs, at less cost).
+  void RenderGaussians(const Camera& camera, GaussianRender* out, bool reflection = true) {
+    GaussianRenderOptions o = gaussians_->RenderOptionsFor(camera);
+    o.reflection = o.reflection && reflection;
+    gaussians_->Render(o, out);
   }
   void RenderSurfels(const Camera& camera, SurfelRender* out) { surfels_->Render(camera, out); }
 

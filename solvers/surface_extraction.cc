@@ -73,7 +73,9 @@ Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_o
   for (size_t i = 0; i < train.size(); ++i) {
     const View& v = scene.views[train[i]];
     const Camera& camera = cameras[i];
-    ViewRender rendered = RenderView(solver, solver_options, camera, options.surfel_color);
+    // The mesh takes the transmitted colour only: no reflected chain.
+    ViewRender rendered = RenderView(solver, solver_options, camera, options.surfel_color,
+                                     /*transmitted_only=*/true);
     Geometry& g = rendered.geometry;
     DepthFrame f;
     f.camera = camera;

@@ -5,7 +5,7 @@
 namespace mgsr {
 
 ViewRender RenderView(MutualBoostedSolver* solver, const SolverOptions& o, const Camera& camera,
-                      bool geometry_only) {
+                      bool geometry_only, bool transmitted_only) {
   ViewRender out;
   if (o.train_2d) {
     SurfelRender sr;
@@ -21,7 +21,7 @@ ViewRender RenderView(MutualBoostedSolver* solver, const SolverOptions& o, const
   }
   if (o.train_3d && !(geometry_only && o.train_2d)) {
     GaussianRender g;
-    solver->RenderGaussians(camera, &g);
+    solver->RenderGaussians(camera, &g, !transmitted_only);
     if (!o.train_2d) {
       // 3DGS geometry: expected depth (no median), normals from the depth where it is opaque.
       Image normal = DepthToNormal(g.depth, camera);

@@ -24,8 +24,9 @@ struct ViewRender {
 
 // Each trained branch is rendered once; `surfel_color` keeps the 2DGS colour for meshes coloured
 // by the 2DGS branch. With `geometry_only`, the 3DGS branch is rendered only when it supplies the
-// geometry (a 3DGS-only method).
+// geometry (a 3DGS-only method). With `transmitted_only`, the 3DGS render skips the reflected
+// chain (appearance.color is then the transmitted colour; ref and weight are zero).
 ViewRender RenderView(MutualBoostedSolver* solver, const SolverOptions& o, const Camera& camera,
-                      bool geometry_only = false);
+                      bool geometry_only = false, bool transmitted_only = false);
 
 }  // namespace mgsr
