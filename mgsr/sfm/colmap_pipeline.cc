@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -63,22 +64,27 @@ class StepRunner {
     }
     args.insert(args.begin(), colmap_);
     Timer timer;
-    // While it runs: a progress line every 5 s from what colmap has written to the log so far.
+    // While it runs: a progress line every 5 s from what colmap has written to the log. Each poll
+    // reads only what was appended since the last one (the mapper writes megabytes on large
+    // captures); a line not yet finished waits for the next poll. The latest count is kept across
+    // polls: the meter may show it on a later one.
     std::error_code ec;
-    const auto start_size = fs::file_size(summary_->log_path, ec);
+    uint64_t read_to = fs::file_size(summary_->log_path, ec);
+    std::string unfinished_line, unit;
+    double done = 0, total = 0;
     ProgressMeter meter(step, "", 5.0, options_.log);
     const auto show_progress = [&] {
       std::ifstream in(summary_->log_path, std::ios::binary);
       if (!in || ec) return;
-      in.seekg(static_cast<std::streamoff>(start_size));
-      const std::string text((std::istreambuf_iterator<char>(in)),
-                             std::istreambuf_iterator<char>());
-      double done = 0, total = 0;
-      std::string unit;
-      if (LatestColmapProgress(text, num_images_, &done, &total, &unit)) {
-        meter.set_unit(unit);
-        meter.UpdateAt(done, total, timer.ElapsedSeconds());
-      }
+      in.seekg(static_cast<std::streamoff>(read_to));
+      std::string text = unfinished_line + std::string((std::istreambuf_iterator<char>(in)),
+                                                       std::istreambuf_iterator<char>());
+      read_to += text.size() - unfinished_line.size();
+      const size_t last_newline = text.rfind('\n');
+      unfinished_line = last_newline == std::string::npos ? text : text.substr(last_newline + 1);
+      text.resize(last_newline == std::string::npos ? 0 : last_newline + 1);
+      if (LatestColmapProgress(text, num_images_, &done, &total, &unit)) meter.set_unit(unit);
+      if (total > 0) meter.UpdateAt(done, total, timer.ElapsedSeconds());
     };
     // Headless: colmap links Qt, which needs a display unless told otherwise.
     const ProgramResult r =
