@@ -76,6 +76,7 @@ void ColorTransformBackward(const ColorTransform& p, const ImageT<T>& in, const 
       const T* c = in.plane(k);
       T* dc = d_in->plane(k);
       double s = 0;
+#pragma omp simd reduction(+ : s)
       for (size_t i = 0; i < n; ++i) {
         const T w = m != nullptr ? m[i] : T(1);
         const T identity = (o == k) ? (T(1) - w) : T(0);
@@ -84,8 +85,10 @@ void ColorTransformBackward(const ColorTransform& p, const ImageT<T>& in, const 
       }
       sums[k] = s;
     }
-    for (size_t i = 0; i < n; ++i)
-      sums[3] += static_cast<double>(m != nullptr ? g[i] * m[i] : g[i]);
+    double sb = 0;
+#pragma omp simd reduction(+ : sb)
+    for (size_t i = 0; i < n; ++i) sb += static_cast<double>(m != nullptr ? g[i] * m[i] : g[i]);
+    sums[3] = sb;
     for (int k = 0; k < 3; ++k) dp[3 * o + k] = sums[k];
     dp[9 + o] = sums[3];
   }

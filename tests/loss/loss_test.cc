@@ -1,13 +1,17 @@
 #include <ceres/ceres.h>
 #include <ceres/gradient_checker.h>
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
+#include <vector>
 
 #include "mgsr/core/rng.h"
 #include "mgsr/eval/image_metrics.h"
 #include "mgsr/loss/dssim_loss.h"
+#include "mgsr/loss/dssim_plane.h"
 #include "mgsr/loss/edge_aware_tv_loss.h"
 #include "mgsr/loss/exposure_compensation.h"
 #include "mgsr/loss/l1_loss.h"
@@ -318,6 +322,91 @@ TEST(LossValueTest, HandComputedCases) {
   f.in.Set(Buffer::kDepth, &base);
   f.targets.other_depth = &twice;
   EXPECT_NEAR(MutualDepthLoss().Evaluate(f.in, f.targets, 1, nullptr), 0.0, 1e-15);
+}
+
+// Direct, non-separable SSIM map summed over one plane, in double: an independent reference for
+// the fused kernel.
+double DirectSsimSum(const std::vector<double>& a, const std::vector<double>& b, int w, int h) {
+  const double C1 = 1e-4, C2 = 9e-4, sigma = 1.5;
+  double g[11][11], norm = 0;
+  for (int i = 0; i < 11; ++i) {
+    for (int j = 0; j < 11; ++j)
+      norm += g[i][j] = std::exp(-((i - 5) * (i - 5) + (j - 5) * (j - 5)) / (2 * sigma * sigma));
+  }
+  double total = 0;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      double ma = 0, mb = 0, saa = 0, sbb = 0, sab = 0;
+      for (int i = 0; i < 11; ++i) {
+        for (int j = 0; j < 11; ++j) {
+          const int yy = y + i - 5, xx = x + j - 5;
+          if (yy < 0 || xx < 0 || yy >= h || xx >= w) continue;  // zero padding
+          const double wt = g[i][j] / norm, va = a[yy * w + xx], vb = b[yy * w + xx];
+          ma += wt * va;
+          mb += wt * vb;
+          saa += wt * va * va;
+          sbb += wt * vb * vb;
+          sab += wt * va * vb;
+        }
+      }
+      total += ((2 * ma * mb + C1) * (2 * (sab - ma * mb) + C2)) /
+               ((ma * ma + mb * mb + C1) * (saa - ma * ma + sbb - mb * mb + C2));
+    }
+  }
+  return total;
+}
+
+// The fused SSIM kernel behind DssimLoss: its value against the direct window sum, its gradient
+// against central differences (borders included), float against double, and the same bits with
+// one thread as with several. 300 x 230 takes the threaded path, 7 x 4 is smaller than the window.
+TEST(DssimPlaneTest, MatchesTheDirectWindowAndCentralDifferencesOnAnyThreadCount) {
+  for (const auto& [w, h] : std::vector<std::pair<int, int>>{{300, 230}, {7, 4}, {23, 17}}) {
+    SCOPED_TRACE(std::to_string(w) + " x " + std::to_string(h));
+    Rng rng(w * 31 + h);
+    const size_t n = static_cast<size_t>(w) * h;
+    std::vector<double> x(n), y(n);
+    for (size_t i = 0; i < n; ++i) {
+      y[i] = rng.Uniform();
+      x[i] = std::clamp(y[i] + rng.Uniform(-0.3, 0.3), 0.0, 1.0);
+    }
+    const double scale = -0.7;
+    std::vector<double> grad(n, 0.0);
+    const double value = SsimPlaneSum(x.data(), y.data(), w, h, scale, grad.data());
+    EXPECT_NEAR(value, DirectSsimSum(x, y, w, h), 1e-12 * n);
+    std::vector<size_t> probes = {0, static_cast<size_t>(w - 1), n - 1, n - w, n / 2 + w / 3};
+    for (int k = 0; k < 25; ++k) probes.push_back(rng.UniformInt(n));
+    for (size_t i : probes) {
+      // A sum over up to 69,000 pixels: a larger step than usual keeps its cancellation error
+      // (~1e-16 x sum / step) far below the tolerance.
+      const double keep = x[i], step = 1e-4;
+      x[i] = keep + step;
+      const double vp = SsimPlaneSum(x.data(), y.data(), w, h, 1.0, nullptr);
+      x[i] = keep - step;
+      const double vm = SsimPlaneSum(x.data(), y.data(), w, h, 1.0, nullptr);
+      x[i] = keep;
+      const double numeric = scale * (vp - vm) / (2 * step);
+      EXPECT_NEAR(grad[i], numeric, 1e-7 + 1e-5 * std::abs(numeric)) << "pixel " << i;
+    }
+    // Float, as training runs it.
+    const std::vector<float> xf(x.begin(), x.end()), yf(y.begin(), y.end());
+    std::vector<float> gf(n, 0.0f), gf1(n, 0.0f);
+    const double vf =
+        SsimPlaneSum(xf.data(), yf.data(), w, h, static_cast<float>(scale), gf.data());
+    EXPECT_NEAR(vf, value, 1e-5 * n);
+    double max_grad = 0, max_diff = 0;
+    for (size_t i = 0; i < n; ++i) {
+      max_grad = std::max(max_grad, std::abs(grad[i]));
+      max_diff = std::max(max_diff, std::abs(gf[i] - grad[i]));
+    }
+    EXPECT_LT(max_diff, 1e-4 * max_grad);
+    const int threads = omp_get_max_threads();
+    omp_set_num_threads(1);
+    const double vf1 =
+        SsimPlaneSum(xf.data(), yf.data(), w, h, static_cast<float>(scale), gf1.data());
+    omp_set_num_threads(threads);
+    EXPECT_EQ(vf1, vf);
+    EXPECT_EQ(gf1, gf);
+  }
 }
 
 TEST(LossValueTest, DepthOfATiltedPlaneGivesItsNormal) {
