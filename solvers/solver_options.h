@@ -110,8 +110,8 @@ struct SolverOptions {
   bool surfel_orientation_from_points = true;
   // Per-view exposure compensation (mgsr/loss/exposure_compensation.h): an affine colour model per
   // training view in front of every comparison with a photo, learned at its own rate with a weak
-  // prior towards identity, re-fitted with Ceres (Huber) against the warmed-up render when the
-  // mutual stage starts. Shared by both branches unless exposure_per_branch.
+  // prior towards identity, re-fitted (Huber, solvers/exposure_fit.h) against the warmed-up render
+  // when the mutual stage starts. Shared by both branches unless exposure_per_branch.
   // Default affine: measured best on the changing-light scenes (README, exposure compensation).
   ExposureMode exposure = ExposureMode::kAffine;
   double exposure_lr = 5e-3;

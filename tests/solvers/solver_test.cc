@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <functional>
@@ -648,9 +649,9 @@ TEST(ExposureModelTest, MeanPriorHoldsTheAverageTransformAtIdentity) {
   }
 }
 
-// The Ceres fit alone: a photo that is the render under a known transform (per-channel gains with
-// or without offsets, or a full colour matrix), with 5% of its foreground replaced by highlights
-// the transform cannot explain.
+// The exposure fit alone: a photo that is the render under a known transform (per-channel gains
+// with or without offsets, or a full colour matrix), with 5% of its foreground replaced by
+// highlights the transform cannot explain.
 TEST(ExposureFitTest, RecoversKnownTransformsDespiteHighlights) {
   const Scene scene = TinyScene(testing::ScratchDir());
   const View& v = scene.views[1];
@@ -702,6 +703,40 @@ TEST(ExposureFitTest, RecoversKnownTransformsDespiteHighlights) {
     EXPECT_LT(err / n, 0.005);
     if (k.mode == ExposureMode::kDiagonal) {
       EXPECT_EQ(fitted[1], 0.0);  // held at identity
+    }
+    // The fit is the minimum of its robust cost: with every usable pixel a sample, moving any
+    // free parameter either way from it costs more (the cost written out from its definition).
+    fo.max_samples = 1 << 30;
+    ASSERT_TRUE(FitColorTransform(render, photo, &v.mask, fo, &fitted, &summary).ok());
+    auto cost = [&](const ColorTransform& p) {
+      double c = 0;
+      int used = 0;
+      for (size_t i = 0; i < photo.plane_size(); ++i) {
+        if (!(v.mask.plane(0)[i] > fo.mask_threshold)) continue;
+        if (std::max({photo.plane(0)[i], photo.plane(1)[i], photo.plane(2)[i]}) >= fo.saturation)
+          continue;
+        double s = 0;
+        for (int o = 0; o < 3; ++o) {
+          const double r = p[3 * o] * render.plane(0)[i] + p[3 * o + 1] * render.plane(1)[i] +
+                           p[3 * o + 2] * render.plane(2)[i] + p[9 + o] - photo.plane(o)[i];
+          s += r * r;
+        }
+        const double d = fo.huber_delta;
+        c += s <= d * d ? s : 2 * d * std::sqrt(s) - d * d;
+        ++used;
+      }
+      for (int o = 0; o < 3; ++o) c += fo.offset_prior * used * p[9 + o] * p[9 + o];
+      return 0.5 * c;
+    };
+    const double at_fit = cost(fitted);
+    EXPECT_NEAR(summary.final_cost, at_fit, 1e-9 * at_fit);
+    for (int j = 0; j < kColorTransformSize; ++j) {
+      if (!ColorTransformParameterIsFree(k.mode, j)) continue;
+      for (double step : {-1e-4, 1e-4}) {
+        ColorTransform moved = fitted;
+        moved[j] += step;
+        EXPECT_GT(cost(moved), at_fit) << "parameter " << j << " moved by " << step;
+      }
     }
   }
   ColorTransform p;
