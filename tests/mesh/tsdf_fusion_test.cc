@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <utility>
+
 #include "mgsr/core/timer.h"
 #include "mgsr/eval/mesh_metrics.h"
 #include "mgsr/io/file_util.h"
@@ -68,6 +70,46 @@ TEST(TsdfFusionTest, EmptyInputIsAnErrorNotACrash) {
   const Status s = FuseDepthMaps({f}, TsdfOptions(), &mesh);
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("every depth map is empty"), std::string::npos);
+}
+
+// One view of two flat patches at the same depth, a large and a small one with empty pixels
+// between them: without the clean-up both are meshed; with keep_largest_component only the large
+// one is, and all of it.
+TEST(TsdfFusionTest, KeepsOnlyTheLargestConnectedPiece) {
+  DepthFrame f;
+  f.camera = LookAtCamera({0, -3, 0}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 64, 64, 64, 64);
+  f.depth = Image(64, 64, 1, 0.0f);
+  auto in_large = [](double x, double y) { return x > 4 && x < 44 && y > 10 && y < 50; };
+  auto in_small = [](double x, double y) { return x > 52 && x < 60 && y > 52 && y < 60; };
+  for (int y = 0; y < 64; ++y) {
+    for (int x = 0; x < 64; ++x) {
+      if (in_large(x + 0.5, y + 0.5) || in_small(x + 0.5, y + 0.5)) f.depth.at(0, y, x) = 3.0f;
+    }
+  }
+  TsdfOptions options;
+  options.voxel_size = 0.02;
+  // Triangles by where their first vertex lands in the view: large patch, small patch.
+  auto count = [&](const TriangleMesh& mesh) {
+    std::pair<int, int> n{0, 0};
+    for (const auto& t : mesh.triangles) {
+      const Eigen::Vector2d p = f.camera.WorldToPixel(mesh.vertices[t[0]].cast<double>());
+      n.first += in_large(p.x(), p.y());
+      n.second += in_small(p.x(), p.y());
+    }
+    return n;
+  };
+  TriangleMesh all, largest;
+  ASSERT_TRUE(FuseDepthMaps({f}, options, &all).ok());
+  options.keep_largest_component = true;
+  ASSERT_TRUE(FuseDepthMaps({f}, options, &largest).ok());
+  const auto [all_large, all_small] = count(all);
+  const auto [kept_large, kept_small] = count(largest);
+  EXPECT_GT(all_large, 100);
+  EXPECT_GT(all_small, 4);
+  EXPECT_EQ(kept_large, all_large);
+  EXPECT_EQ(kept_small, 0);
+  EXPECT_EQ(largest.triangles.size(), static_cast<size_t>(kept_large));
+  EXPECT_EQ(largest.vertices.size(), largest.vertex_colors.size());
 }
 
 }  // namespace
