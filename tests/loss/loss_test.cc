@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -13,6 +14,7 @@
 #include "mgsr/loss/dssim_loss.h"
 #include "mgsr/loss/dssim_plane.h"
 #include "mgsr/loss/edge_aware_tv_loss.h"
+#include "mgsr/loss/edge_aware_tv_plane.h"
 #include "mgsr/loss/exposure_compensation.h"
 #include "mgsr/loss/l1_loss.h"
 #include "mgsr/loss/loss_registry.h"
@@ -405,6 +407,79 @@ TEST(DssimPlaneTest, MatchesTheDirectWindowAndCentralDifferencesOnAnyThreadCount
         SsimPlaneSum(xf.data(), yf.data(), w, h, static_cast<float>(scale), gf1.data());
     omp_set_num_threads(threads);
     EXPECT_EQ(vf1, vf);
+    EXPECT_EQ(gf1, gf);
+  }
+}
+
+// The edge-aware TV kernel: its sums against the definition written out directly, float against
+// double, and the same bits with one thread as with several (300 x 230 takes the threaded path).
+// Its double gradient is checked by EveryTermMatchesNumericDifferentiation.
+TEST(EdgeAwareTvPlaneTest, MatchesTheDefinitionOnAnyThreadCount) {
+  for (const auto& [w, h, channels] :
+       std::vector<std::tuple<int, int, int>>{{300, 230, 3}, {300, 230, 1}, {17, 2, 3}}) {
+    SCOPED_TRACE(std::to_string(w) + " x " + std::to_string(h) + " x " + std::to_string(channels));
+    Rng rng(w + h + channels);
+    const size_t n = static_cast<size_t>(w) * h;
+    std::vector<double> P(channels * n), I(3 * n);
+    for (double& v : P) v = rng.Uniform(-1, 2);
+    for (double& v : I) v = rng.Uniform();
+    double direct_v = 0, direct_h = 0;
+    for (int c = 0; c < channels; ++c) {
+      for (int y = 0; y < h; ++y) {
+        for (int x = 0; x < w; ++x) {
+          auto at = [&](const std::vector<double>& im, int ch, int yy, int xx) {
+            return im[ch * n + static_cast<size_t>(yy) * w + xx];
+          };
+          auto weight = [&](int y1, int x1) {
+            double d = 0;
+            for (int k = 0; k < 3; ++k) d += std::abs(at(I, k, y1, x1) - at(I, k, y, x));
+            return std::exp(-d / 3);
+          };
+          if (y + 1 < h)
+            direct_v += weight(y + 1, x) * std::pow(at(P, c, y + 1, x) - at(P, c, y, x), 2);
+          if (x + 1 < w)
+            direct_h += weight(y, x + 1) * std::pow(at(P, c, y, x + 1) - at(P, c, y, x), 2);
+        }
+      }
+    }
+    double v = 0, hz = 0;
+    std::vector<double> g(P.size(), 0.0);
+    EdgeAwareTvSums(P.data(), channels, I.data(), 3, w, h, 0.3, 0.7, g.data(), &v, &hz);
+    EXPECT_NEAR(v, direct_v, 1e-10 * direct_v);
+    EXPECT_NEAR(hz, direct_h, 1e-10 * direct_h);
+    // The gradient at corners, edges and random pixels, against central differences.
+    std::vector<size_t> probes = {0, static_cast<size_t>(w - 1), n - 1, n - w, n + w / 2};
+    for (int k = 0; k < 12; ++k) probes.push_back(rng.UniformInt(P.size()));
+    for (size_t i : probes) {
+      if (i >= P.size()) continue;
+      const double keep = P[i], step = 1e-4;
+      double vp, hp, vm, hm;
+      P[i] = keep + step;
+      EdgeAwareTvSums(P.data(), channels, I.data(), 3, w, h, 0.0, 0.0, nullptr, &vp, &hp);
+      P[i] = keep - step;
+      EdgeAwareTvSums(P.data(), channels, I.data(), 3, w, h, 0.0, 0.0, nullptr, &vm, &hm);
+      P[i] = keep;
+      const double numeric = (0.3 * (vp - vm) + 0.7 * (hp - hm)) / (2 * step);
+      EXPECT_NEAR(g[i], numeric, 1e-7 + 1e-6 * std::abs(numeric)) << "element " << i;
+    }
+    const std::vector<float> Pf(P.begin(), P.end()), If(I.begin(), I.end());
+    std::vector<float> gf(P.size(), 0.0f), gf1(P.size(), 0.0f);
+    double vf = 0, hf = 0, vf1 = 0, hf1 = 0;
+    EdgeAwareTvSums(Pf.data(), channels, If.data(), 3, w, h, 0.3f, 0.7f, gf.data(), &vf, &hf);
+    EXPECT_NEAR(vf, v, 1e-5 * v);
+    EXPECT_NEAR(hf, hz, 1e-5 * hz);
+    double max_g = 0, max_diff = 0;
+    for (size_t i = 0; i < g.size(); ++i) {
+      max_g = std::max(max_g, std::abs(g[i]));
+      max_diff = std::max(max_diff, std::abs(gf[i] - g[i]));
+    }
+    EXPECT_LT(max_diff, 1e-5 * max_g);
+    const int threads = omp_get_max_threads();
+    omp_set_num_threads(1);
+    EdgeAwareTvSums(Pf.data(), channels, If.data(), 3, w, h, 0.3f, 0.7f, gf1.data(), &vf1, &hf1);
+    omp_set_num_threads(threads);
+    EXPECT_EQ(vf1, vf);
+    EXPECT_EQ(hf1, hf);
     EXPECT_EQ(gf1, gf);
   }
 }
