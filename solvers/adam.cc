@@ -37,7 +37,7 @@ void FlushTinyMoments(std::vector<float>* m, std::vector<float>* v) {
 
 std::string Adam::Step(const std::vector<ParamBlock>& params, const std::vector<ParamBlock>& grads,
                        const LearningRates& learning_rates) {
-  std::vector<float> rates;
+  std::vector<float>& rates = rates_;
   std::string nonfinite;
   CHECK_EQ(params.size(), grads.size());
   for (size_t b = 0; b < params.size(); ++b) {

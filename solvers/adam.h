@@ -45,6 +45,7 @@ class Adam {
 
  private:
   std::map<std::string, BlockState> state_;
+  std::vector<float> rates_;  // Step's scratch (no allocation once sized)
 };
 
 }  // namespace mgsr

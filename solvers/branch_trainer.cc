@@ -2,7 +2,6 @@
 
 #include <glog/logging.h>
 
-#include <deque>
 #include <limits>
 
 #include "mgsr/core/profiler.h"
@@ -29,9 +28,13 @@ BranchTrainer::BranchTrainer(Branch branch, const BranchTrainerOptions& options,
   CHECK(density_ != nullptr) << BranchLabel(branch) << ": " << status.message();
 }
 
+void BranchTrainer::BindRows(std::vector<ParamBlock> params) {
+  rows_ = std::make_unique<PrimitiveRows>(std::move(params), &adam_, &Layout());
+}
+
 void BranchTrainer::BeginDensity(std::vector<ParamBlock> params) {
-  PrimitiveRows rows(std::move(params), &adam_, &Layout());
-  density_->Begin(&rows, rng_);
+  BindRows(std::move(params));
+  density_->Begin(rows_.get(), rng_);
 }
 
 void BranchTrainer::AddLossRow(const LossSpec& row, std::unique_ptr<LossTerm> term,
@@ -63,7 +66,9 @@ double BranchTrainer::EvaluateLoss(Stage stage, int view, int iteration, const R
     }
     sp.checked = true;
   }
-  const double loss = sp.problem.Evaluate(branch_, in, targets, gradient, &last_terms_);
+  // LastTerms() is set once the density strategy's regulariser is known (or now if the step ends
+  // here), so its size stays the same from step to step.
+  const double loss = sp.problem.Evaluate(branch_, in, targets, gradient, &loss_terms_);
   if (!sp.exposure_terms.empty()) {
     ProfileScope exposure_scope("exposure");
     ColorTransform g{};
@@ -84,24 +89,24 @@ void BranchTrainer::TargetGradient(Stage stage, const RenderBuffers& at, const T
 std::string BranchTrainer::OptimizeAndControlDensity(const Camera& camera,
                                                      const std::vector<float>& mean2d,
                                                      const std::vector<float>& radii,
-                                                     std::vector<ParamBlock> params,
-                                                     std::vector<ParamBlock> gradients, int it) {
+                                                     const std::vector<ParamBlock>& gradients,
+                                                     int it) {
   // The strategy's statistics and regulariser gradient (reference 1.10: view-averaged screen
   // gradients while densifying), the Adam step, then the strategy's row operations.
-  const Adam::LearningRates rates = options_.learning_rates(it);
+  const Adam::LearningRates rates = RatesAt(it);
   DensityStep step;
   step.iteration = it;
   step.camera = &camera;
   step.mean2d = &mean2d;
   step.radii = &radii;
-  std::vector<float> position_rates;
-  rates("means", 3, &position_rates);
-  step.position_lr = position_rates.empty() ? 0.0f : position_rates[0];
-  PrimitiveRows rows(std::move(params), &adam_, &Layout());
+  position_rates_.clear();
+  rates("means", 3, &position_rates_);
+  step.position_lr = position_rates_.empty() ? 0.0f : position_rates_[0];
+  PrimitiveRows& rows = *rows_;
   {
     ProfileScope scope("density control");
     const double regulariser = density_->BeforeStep(step, rows, gradients);
-    if (regulariser != 0) last_terms_.push_back({"density_regulariser", 1.0, regulariser});
+    SetLastTerms(regulariser);
   }
   std::string nonfinite;
   {
@@ -118,7 +123,7 @@ void BranchTrainer::Save(BinaryWriter* w) const {
   w->Write<int32_t>(summary_.warmup_iterations);
   w->Write<uint8_t>(summary_.auto_stopped ? 1 : 0);
   w->Write<double>(summary_.final_loss);
-  WriteVector(w, std::vector<double>(auto_stop_.window().begin(), auto_stop_.window().end()));
+  WriteVector(w, auto_stop_.window());
   SaveModel(w);
   WriteAdamState(w, adam_);
   density_->Save(w);
@@ -148,7 +153,7 @@ void BranchTrainer::CommitRead() {
   CommitModel();
   adam_ = std::move(pending_.adam);
   density_->CommitRead();
-  auto_stop_.set_window(std::deque<double>(pending_.window.begin(), pending_.window.end()));
+  auto_stop_.set_window(pending_.window);
   summary_ = pending_.summary;
   pending_ = Pending();
 }

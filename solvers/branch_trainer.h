@@ -68,8 +68,9 @@ struct BranchTrainerOptions {
   nlohmann::json density_config;
   double extent = 1;     // the scene's extent: density control's and the position rate's scale
   float background = 0;  // the grey level the branch renders and compares on
-  // The Adam learning rates at a step, per block and column.
-  std::function<Adam::LearningRates(int iteration)> learning_rates;
+  // The Adam learning rates at a step, per block and column (fills `rates`, sized to `width`).
+  std::function<void(int iteration, const std::string& name, int width, std::vector<float>* rates)>
+      learning_rates;
   // The warm-up's auto-stop.
   int auto_stop_min_iteration = 15000, auto_stop_window = 100;
   double auto_stop_range = 0.01;
@@ -153,13 +154,23 @@ class BranchTrainer {
   double EvaluateLoss(Stage stage, int view, int iteration, const RenderBuffers& in,
                       const Targets& targets, RenderGradients* gradient);
   // After the backward pass: the density strategy's statistics and regulariser, Adam, then its
-  // row operations.
+  // row operations on the model's rows (BindRows).
   std::string OptimizeAndControlDensity(const Camera& camera, const std::vector<float>& mean2d,
                                         const std::vector<float>& radii,
-                                        std::vector<ParamBlock> params,
-                                        std::vector<ParamBlock> gradients, int iteration);
+                                        const std::vector<ParamBlock>& gradients, int iteration);
+  // Adam's learning rates at `iteration` (a callable that allocates nothing).
+  Adam::LearningRates RatesAt(int iteration) const {
+    return [this, iteration](const std::string& name, int width, std::vector<float>* rates) {
+      options_.learning_rates(iteration, name, width, rates);
+    };
+  }
+  // The model's parameter blocks, as density control and Adam see them: bound once (the blocks
+  // point at the model's member vectors, which stay where they are while rows change), again
+  // when a checkpoint replaced the model.
+  void BindRows(std::vector<ParamBlock> params);
   // The density strategy's first look at the initial model (the derived constructor calls it).
   void BeginDensity(std::vector<ParamBlock> params);
+  std::unique_ptr<PrimitiveRows> rows_;
   virtual void SaveModel(BinaryWriter* w) const = 0;
   virtual Status ReadModel(BinaryReader* r) = 0;
   virtual void CommitModel() = 0;
@@ -189,7 +200,22 @@ class BranchTrainer {
   StageProblem problems_[2];  // warm-up, mutual
   AutoStop auto_stop_;
   BranchSummary summary_;
-  std::vector<Problem::TermValue> last_terms_;
+
+ protected:
+  // The loss rows' values of the last evaluation, and LastTerms(): those and the regulariser,
+  // written in place (stable sizes within a stage: no allocation per step).
+  void SetLastTerms(double regulariser) {
+    size_t n = 0;
+    for (const Problem::TermValue& t : loss_terms_)
+      Problem::SetTermValue(&last_terms_, n++, t.name, t.weight, t.value);
+    static const std::string kRegulariser = "density_regulariser";
+    if (regulariser != 0) Problem::SetTermValue(&last_terms_, n++, kRegulariser, 1.0, regulariser);
+    last_terms_.resize(n);
+  }
+
+ private:
+  std::vector<Problem::TermValue> loss_terms_, last_terms_;
+  std::vector<float> position_rates_;  // scratch of OptimizeAndControlDensity
   // Read, not yet committed.
   struct Pending {
     Adam adam;
@@ -238,20 +264,21 @@ class PrimitiveTrainer : public BranchTrainer {
   double Step(Stage stage, int view, const Camera& camera, int iteration,
               const Targets& targets) override {
     ProfileContext context(name());
-    const typename P::RenderOptions ro = RenderOptionsFor(camera);
-    typename P::Render render;
-    renderer_.Forward(model_, ro, &render);
+    // The render, its gradients and the parameter gradients are members: after the first steps
+    // have sized them, a step allocates nothing.
+    step_options_ = RenderOptionsFor(camera);
+    renderer_.Forward(model_, step_options_, &step_render_);
     held_current_ = false;
-    RenderGradients g;
-    const double loss =
-        EvaluateLoss(stage, view, iteration, P::Buffers(camera, render), targets, &g);
-    if (!step_error_.ok()) return loss;
-    typename P::RenderGrad rg;
-    P::TakeGradients(&g, &rg);
-    typename P::Gradients grads;
-    renderer_.Backward(model_, ro, render, rg, &grads);
-    nonfinite_block_ = OptimizeAndControlDensity(camera, grads.mean2d, P::Radii(renderer_),
-                                                 model_.Blocks(), grads.params.Blocks(), iteration);
+    const double loss = EvaluateLoss(stage, view, iteration, P::Buffers(camera, step_render_),
+                                     targets, &step_buffer_grad_);
+    if (!step_error_.ok()) {
+      SetLastTerms(0.0);
+      return loss;
+    }
+    P::TakeGradients(&step_buffer_grad_, &step_render_grad_);
+    renderer_.Backward(model_, step_options_, step_render_, step_render_grad_, &grads_);
+    nonfinite_block_ = OptimizeAndControlDensity(camera, grads_.mean2d, P::Radii(renderer_),
+                                                 GradientBlocks(), iteration);
     return loss;
   }
 
@@ -270,12 +297,10 @@ class PrimitiveTrainer : public BranchTrainer {
                            " trainer: the held render's forward state is gone (the branch "
                            "rendered again since Hold)");
     }
-    typename P::RenderGrad rg;
-    P::TakeGradients(gradient, &rg);
-    typename P::Gradients grads;
-    renderer_.Backward(model_, held_options_, held_, rg, &grads);
+    P::TakeGradients(gradient, &step_render_grad_);
+    renderer_.Backward(model_, held_options_, held_, step_render_grad_, &grads_);
     ProfileScope scope("adam");
-    adam_.Step(model_.Blocks(), grads.params.Blocks(), options_.learning_rates(iteration));
+    adam_.Step(rows_->blocks(), GradientBlocks(), RatesAt(iteration));
     return Status::Ok();
   }
 
@@ -301,8 +326,7 @@ class PrimitiveTrainer : public BranchTrainer {
       }
     }
     if (dropped == 0 || dropped == total.size()) return 0;
-    PrimitiveRows rows(model_.Blocks(), &adam_, &Layout());
-    rows.KeepRows(keep);
+    rows_->KeepRows(keep);
     summary().pruned_by_contribution += dropped;
     return dropped;
   }
@@ -322,6 +346,8 @@ class PrimitiveTrainer : public BranchTrainer {
     model_ = std::move(pending_model_);
     pending_model_ = Model();
     held_current_ = false;
+    BindRows(model_.Blocks());
+    gradient_blocks_.clear();
   }
   const PrimitiveLayout& Layout() const override {
     static const PrimitiveLayout layout = P::Layout();
@@ -329,10 +355,20 @@ class PrimitiveTrainer : public BranchTrainer {
   }
 
  private:
+  // The parameter gradients' blocks, bound once the gradients have the model's layout.
+  const std::vector<ParamBlock>& GradientBlocks() {
+    if (gradient_blocks_.empty()) gradient_blocks_ = grads_.params.Blocks();
+    return gradient_blocks_;
+  }
+
   Model model_, pending_model_;
   typename P::Renderer renderer_;
-  typename P::RenderOptions render_options_, held_options_;
-  typename P::Render held_;
+  typename P::RenderOptions render_options_, held_options_, step_options_;
+  typename P::Render held_, step_render_;
+  RenderGradients step_buffer_grad_;
+  typename P::RenderGrad step_render_grad_;
+  typename P::Gradients grads_;
+  std::vector<ParamBlock> gradient_blocks_;
   bool held_current_ = false;
 };
 

@@ -10,7 +10,6 @@
 // changing anything.
 #include <cmath>
 #include <cstdio>
-#include <deque>
 #include <map>
 #include <sstream>
 

@@ -10,9 +10,8 @@ double ReferenceDensity::BeforeStep(const DensityStep& step, const PrimitiveRows
   // Statistics start afresh whenever the rows changed under them (a stage's pruning, a resume).
   if (stats_.grad_sum.size() != rows.size()) stats_.Reset(rows.size());
   if (step.iteration >= context_.schedule.densify_until) return 0;
-  std::vector<float> norms;
-  ScreenGradientNorms(*step.mean2d, step.camera->width, step.camera->height, &norms);
-  stats_.Accumulate(norms, *step.radii);
+  ScreenGradientNorms(*step.mean2d, step.camera->width, step.camera->height, &norms_);
+  stats_.Accumulate(norms_, *step.radii);
   return 0;
 }
 

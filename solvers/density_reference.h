@@ -22,6 +22,7 @@ class ReferenceDensity : public DensityStrategy {
   const DensityStats& stats() const { return stats_; }
 
  private:
+  std::vector<float> norms_;  // BeforeStep's scratch
   const DensityContext context_;
   DensityStats stats_, pending_;
 };

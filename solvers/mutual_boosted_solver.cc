@@ -25,8 +25,10 @@ double PositionLearningRate(const SolverOptions& o, int step, double extent) {
          std::exp(std::log(o.position_lr_init) * (1 - t) + std::log(o.position_lr_final) * t);
 }
 
-Adam::LearningRates Rates(const SolverOptions& o, int step, double extent) {
-  return [&o, step, extent](const std::string& name, int width, std::vector<float>* rates) {
+// The learning rates of a block at a step (BranchTrainerOptions::learning_rates).
+void Rates(const SolverOptions& o, int step, double extent, const std::string& name, int width,
+           std::vector<float>* rates) {
+  {
     float r = 0;
     if (name == "means")
       r = static_cast<float>(PositionLearningRate(o, step, extent));
@@ -48,7 +50,7 @@ Adam::LearningRates Rates(const SolverOptions& o, int step, double extent) {
       return;
     }
     std::fill(rates->begin(), rates->end(), r);
-  };
+  }
 }
 
 // What the mutual stage hands a learning branch from the supervising one (reference 1.5): the
@@ -180,7 +182,10 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   common.extent = scene.extent;
   const SolverOptions* o = &options_;
   const double extent = scene.extent;
-  common.learning_rates = [o, extent](int it) { return Rates(*o, it, extent); };
+  common.learning_rates = [o, extent](int it, const std::string& name, int width,
+                                      std::vector<float>* rates) {
+    Rates(*o, it, extent, name, width, rates);
+  };
   common.auto_stop_min_iteration = options.warmup_min_iterations;
   common.auto_stop_window = options.auto_stop_window;
   common.auto_stop_range = options.auto_stop_range;
@@ -262,14 +267,16 @@ int MutualBoostedSolver::NextView() {
 }
 
 void MutualBoostedSolver::Notify(Stage stage, int iteration, const BranchTrainer& t, double loss) {
-  IterationInfo info{stage,
-                     iteration,
-                     t.branch(),
-                     loss,
-                     gaussians_->size(),
-                     surfels_->size(),
-                     Now() - start_time_,
-                     t.LastTerms()};
+  // One per branch, assigned in place: its term list and labels keep their storage between steps.
+  IterationInfo& info = iteration_info_[BranchIndex(t.branch())];
+  info.stage = stage;
+  info.iteration = iteration;
+  info.branch = t.branch();
+  info.loss = loss;
+  info.num_gaussians = gaussians_->size();
+  info.num_surfels = surfels_->size();
+  info.seconds = Now() - start_time_;
+  info.terms = t.LastTerms();
   for (IterationCallback* c : callbacks_) Request((*c)(info), &callback_request_);
 }
 
@@ -297,8 +304,9 @@ Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* te
   const MutualSupervision sup = SupervisionFor(learner->branch());
   const float background =
       learner->branch() == Branch::kSurfels2D ? options_.background_2d : options_.background_3d;
-  // The teacher's render, a constant target (reference 1.5).
-  Image target;
+  // The teacher's render, a constant target (reference 1.5), copied into storage kept between
+  // iterations.
+  Image& target = mutual_target_;
   {
     ProfileScope scope("mutual targets");
     target = *teacher->Hold(v.camera).Get(sup.buffer);
@@ -387,25 +395,28 @@ bool MutualBoostedSolver::EndIteration(Stage stage, int iteration, bool last, St
     ProfileScope scope("callbacks");
     NotifyIterationEnd(stage, iteration);
   }
-  const std::string where = std::string(stage == Stage::kWarmup ? "warm-up" : "mutual") +
-                            " iteration " + std::to_string(iteration);
+  // Built only when the run ends here (an iteration allocates nothing otherwise).
+  const auto where = [&] {
+    return std::string(stage == Stage::kWarmup ? "warm-up" : "mutual") + " iteration " +
+           std::to_string(iteration);
+  };
   const CallbackReturnType request = callback_request_;
   callback_request_ = CallbackReturnType::kContinue;
   if (request == CallbackReturnType::kAbort) {
     summary_.termination_type = TerminationType::kUserAbort;
-    *status = Status::Error("aborted by an iteration callback after " + where);
+    *status = Status::Error("aborted by an iteration callback after " + where());
     return true;
   }
   if (request == CallbackReturnType::kTerminateSuccessfully) {
     finished_ = true;
     summary_.termination_type = TerminationType::kUserSuccess;
-    summary_.message = "after " + where;
+    summary_.message = "after " + where();
     *status = Status::Ok();
     return true;
   }
   if (stop_requested_ && !last) {
     summary_.termination_type = TerminationType::kInterrupted;
-    summary_.message = "after " + where;
+    summary_.message = "after " + where();
     *status = Status::Ok();
     return true;
   }

@@ -200,6 +200,8 @@ class MutualBoostedSolver {
   std::vector<int> view_stack_;
   int sh_degree_ = 0;
   std::vector<IterationCallback*> callbacks_;
+  IterationInfo iteration_info_[2];  // what Notify hands the callbacks, per branch
+  Image mutual_target_;              // MutualStep's copy of the teacher's render
   double start_time_ = 0;
   // Loop state (checkpointed).
   Stage stage_ = Stage::kWarmup;

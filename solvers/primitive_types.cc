@@ -5,7 +5,13 @@
 namespace mgsr {
 namespace {
 
-Image Take(RenderGradients* g, Buffer b) { return std::move(g->images[static_cast<int>(b)]); }
+// Moves the gradient image of `b` into `to`, the storage `to` had going back to `g` (empty), so
+// buffers kept across steps trade storage instead of allocating.
+void Take(RenderGradients* g, Buffer b, Image* to) {
+  Image& from = g->images[static_cast<int>(b)];
+  to->swap(from);
+  from.Clear();
+}
 
 }  // namespace
 
@@ -37,12 +43,12 @@ RenderBuffers SurfelPrimitive::Buffers(const Camera& camera, const Render& r) {
 }
 
 void SurfelPrimitive::TakeGradients(RenderGradients* g, RenderGrad* out) {
-  out->color = Take(g, Buffer::kColor);
-  out->depth = Take(g, Buffer::kDepth);
-  out->alpha = Take(g, Buffer::kAlpha);
-  out->normal_world = Take(g, Buffer::kNormal);
-  out->median_depth = Take(g, Buffer::kMedianDepth);
-  out->distortion = Take(g, Buffer::kDistortion);
+  Take(g, Buffer::kColor, &out->color);
+  Take(g, Buffer::kDepth, &out->depth);
+  Take(g, Buffer::kAlpha, &out->alpha);
+  Take(g, Buffer::kNormal, &out->normal_world);
+  Take(g, Buffer::kMedianDepth, &out->median_depth);
+  Take(g, Buffer::kDistortion, &out->distortion);
 }
 
 RenderBuffers GaussianPrimitive::Buffers(const Camera& camera, const Render& r) {
@@ -58,12 +64,12 @@ RenderBuffers GaussianPrimitive::Buffers(const Camera& camera, const Render& r) 
 }
 
 void GaussianPrimitive::TakeGradients(RenderGradients* g, RenderGrad* out) {
-  out->color = Take(g, Buffer::kColor);
-  out->tran = Take(g, Buffer::kTransmitted);
-  out->ref = Take(g, Buffer::kReflected);
-  out->weight = Take(g, Buffer::kWeight);
-  out->depth = Take(g, Buffer::kDepth);
-  out->alpha = Take(g, Buffer::kAlpha);
+  Take(g, Buffer::kColor, &out->color);
+  Take(g, Buffer::kTransmitted, &out->tran);
+  Take(g, Buffer::kReflected, &out->ref);
+  Take(g, Buffer::kWeight, &out->weight);
+  Take(g, Buffer::kDepth, &out->depth);
+  Take(g, Buffer::kAlpha, &out->alpha);
 }
 
 }  // namespace mgsr

@@ -56,6 +56,25 @@ class ImageT {
   }
 
   void Fill(T v) { data_.assign(data_.size(), v); }
+  // Reshapes to width x height x channels filled with `fill`, reusing the storage it already has
+  // (no allocation when it is large enough: buffers kept across training iterations).
+  void Reset(int width, int height, int channels, T fill = T(0)) {
+    width_ = width;
+    height_ = height;
+    channels_ = channels;
+    data_.assign(static_cast<size_t>(width) * height * channels, fill);
+  }
+  // Empty (0 x 0 x 0), keeping the storage for a later Reset.
+  void Clear() {
+    width_ = height_ = channels_ = 0;
+    data_.clear();
+  }
+  void swap(ImageT& o) noexcept {
+    std::swap(width_, o.width_);
+    std::swap(height_, o.height_);
+    std::swap(channels_, o.channels_);
+    data_.swap(o.data_);
+  }
   template <typename U>
   bool SameShape(const ImageT<U>& o) const {
     return width_ == o.width() && height_ == o.height() && channels_ == o.channels();

@@ -108,14 +108,16 @@ template <typename T>
 double ExposureCompensatedLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t,
                                         double scale, RenderGradientsT<T>* grad) const {
   const ImageT<T>& color = *in.Get(Buffer::kColor);
-  ImageT<T> mapped;
+  Scratch<T>& scratch = ScratchFor<T>();
+  ImageT<T>& mapped = scratch.mapped;
   ApplyColorTransform(transform_, color, t.mask, &mapped);
   RenderBuffersT<T> inner_in = in;
   inner_in.Set(Buffer::kColor, &mapped);
   parameter_gradient_ = ColorTransform{};
   if (grad == nullptr) return inner_->Evaluate(inner_in, t, scale, nullptr);
 
-  RenderGradientsT<T> inner_grad;
+  RenderGradientsT<T>& inner_grad = scratch.inner_grad;
+  inner_grad.Clear();
   const double value = inner_->Evaluate(inner_in, t, scale, &inner_grad);
   for (int b = 0; b < kNumBuffers; ++b) {
     const ImageT<T>& g = inner_grad.images[b];

@@ -11,6 +11,7 @@
 #include <array>
 #include <memory>
 #include <string>
+#include <type_traits>
 
 #include "mgsr/loss/loss_term.h"
 
@@ -66,6 +67,23 @@ class ExposureCompensatedLoss : public LossTermImpl<ExposureCompensatedLoss> {
   ColorTransform transform_;
   // Written by Compute (an output, like the gradient buffers).
   mutable ColorTransform parameter_gradient_{};
+  // Compute's mapped colour and the inner term's gradients, kept between calls (training calls it
+  // every step: no allocation once sized). One set per scalar type.
+  template <typename T>
+  struct Scratch {
+    ImageT<T> mapped;
+    RenderGradientsT<T> inner_grad;
+  };
+  template <typename T>
+  Scratch<T>& ScratchFor() const {
+    if constexpr (std::is_same_v<T, float>) {
+      return scratch_float_;
+    } else {
+      return scratch_double_;
+    }
+  }
+  mutable Scratch<float> scratch_float_;
+  mutable Scratch<double> scratch_double_;
 };
 
 }  // namespace mgsr

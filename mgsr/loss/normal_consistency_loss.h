@@ -87,8 +87,15 @@ double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const Targets
   const int w = D.width(), h = D.height();
   const double inv_n = 1.0 / (static_cast<double>(w) * h);
   const V C = cam.Center().template cast<T>();
-  // World rays of every pixel, once per call.
-  std::vector<V> rays(static_cast<size_t>(w) * h);
+  // World rays of every pixel, once per call, and per-row sums: scratch kept per thread between
+  // calls (no allocation once sized). Only pointers go into the parallel region below (a worker
+  // thread naming a thread_local would get its own).
+  static thread_local std::vector<V> ray_storage;
+  static thread_local std::vector<double> row_storage;
+  ray_storage.resize(static_cast<size_t>(w) * h);
+  row_storage.assign(h, 0.0);
+  V* const rays = ray_storage.data();
+  double* const row_total = row_storage.data();
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x)
       rays[static_cast<size_t>(y) * w + x] = internal::PixelRay<T>(cam, x, y);
@@ -100,7 +107,6 @@ double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const Targets
   // Pixel (x, y) writes the depth gradient of rows y - 1 .. y + 1: rows are processed in three
   // interleaved phases (y mod 3), each in parallel, so no two threads touch one row; per-row sums
   // are added in row order (deterministic for any thread count).
-  std::vector<double> row_total(h, 0.0);
   for (int phase = 0; phase < 3; ++phase) {
 #pragma omp parallel for schedule(static) if (static_cast <int64_t>(w) * h >= 16384)
     for (int y = phase; y < h; y += 3) {
@@ -140,7 +146,7 @@ double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const Targets
     }
   }
   double total = 0;
-  for (double r : row_total) total += r;
+  for (int y = 0; y < h; ++y) total += row_total[y];
   return total * inv_n;
 }
 

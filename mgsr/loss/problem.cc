@@ -33,16 +33,26 @@ Status Problem::Check(Branch branch, const RenderBuffers& in, const Targets& tar
 double Problem::Evaluate(Branch branch, const RenderBuffers& in, const Targets& targets,
                          RenderGradients* grad, std::vector<TermValue>* breakdown) const {
   if (grad != nullptr) grad->Clear();
-  if (breakdown != nullptr) breakdown->clear();
   double total = 0;
+  size_t rows = 0;
   for (const Entry& e : entries_) {
     if (e.branch != branch || e.weight == 0) continue;
     ProfileScope scope(e.profile_name.c_str());
     const double v = e.term->Evaluate(in, targets, e.weight, grad);
     total += e.weight * v;
-    if (breakdown != nullptr) breakdown->push_back({e.label, e.weight, v});
+    if (breakdown != nullptr) SetTermValue(breakdown, rows++, e.label, e.weight, v);
   }
+  if (breakdown != nullptr) breakdown->resize(rows);
   return total;
+}
+
+void Problem::SetTermValue(std::vector<TermValue>* values, size_t i, const std::string& name,
+                           double weight, double value) {
+  if (i == values->size()) values->push_back({name, weight, value});
+  TermValue& t = (*values)[i];
+  t.name.assign(name);
+  t.weight = weight;
+  t.value = value;
 }
 
 void Problem::EvaluateTargetGradient(Branch branch, const RenderBuffers& in, const Targets& targets,

@@ -29,6 +29,10 @@ class Problem {
     std::string name;
     double weight, value;  // value unweighted
   };
+  // Sets (*values)[i], growing the list by one when i is its size: in place, so a list refilled
+  // every step keeps its names' storage (no allocation once the rows are stable).
+  static void SetTermValue(std::vector<TermValue>* values, size_t i, const std::string& name,
+                           double weight, double value);
 
   void AddTerm(std::unique_ptr<LossTerm> term, double weight, Branch branch,
                std::string label = "");

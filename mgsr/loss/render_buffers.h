@@ -53,15 +53,17 @@ template <typename T>
 struct RenderGradientsT {
   std::array<ImageT<T>, kNumBuffers> images;
 
-  // The gradient image of `b`, created as zeros shaped like `like` on first use.
+  // The gradient image of `b`, created as zeros shaped like `like` on first use (in the storage
+  // it kept from earlier use).
   ImageT<T>& Get(Buffer b, const ImageT<T>& like) {
     ImageT<T>& g = images[static_cast<int>(b)];
-    if (!g.SameShape(like)) g = ImageT<T>(like.width(), like.height(), like.channels());
+    if (!g.SameShape(like) || g.empty()) g.Reset(like.width(), like.height(), like.channels());
     return g;
   }
   const ImageT<T>& Get(Buffer b) const { return images[static_cast<int>(b)]; }
+  // Every image empty (zero gradient), their storage kept.
   void Clear() {
-    for (auto& im : images) im = ImageT<T>();
+    for (auto& im : images) im.Clear();
   }
 };
 

@@ -90,8 +90,9 @@ void ProjectedGaussiansGrad::ResizeAndZero(size_t n) {
 
 void GaussianGradients::ResizeAndZero(const GaussianModel& model) {
   params.max_sh_degree = model.max_sh_degree;
+  // Emptied, then grown back: every entry zero, in the storage the blocks already have.
+  params.Resize(0);
   params.Resize(model.size());
-  for (const ParamBlock& b : params.Blocks()) std::fill(b.data->begin(), b.data->end(), 0.0f);
   mean2d.assign(2 * model.size(), 0.0f);
 }
 

@@ -174,10 +174,8 @@ BranchTrainerOptions StubOptions() {
   o.schedule.densify_until = 40;
   o.schedule.densify_interval = 10;
   o.schedule.opacity_reset_interval = 25;
-  o.learning_rates = [](int) {
-    return [](const std::string&, int width, std::vector<float>* rates) {
-      rates->assign(width, 0.02f);
-    };
+  o.learning_rates = [](int, const std::string&, int width, std::vector<float>* rates) {
+    rates->assign(width, 0.02f);
   };
   o.auto_stop_min_iteration = 0;
   o.auto_stop_window = 10;
