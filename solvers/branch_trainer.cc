@@ -99,9 +99,10 @@ std::string BranchTrainer::OptimizeAndControlDensity(const Camera& camera,
   step.camera = &camera;
   step.mean2d = &mean2d;
   step.radii = &radii;
-  position_rates_.clear();
+  // Sized first: a rate function fills the list it is given (as Adam hands it one per block).
+  position_rates_.assign(3, 0.0f);
   rates("means", 3, &position_rates_);
-  step.position_lr = position_rates_.empty() ? 0.0f : position_rates_[0];
+  step.position_lr = position_rates_[0];
   PrimitiveRows& rows = *rows_;
   {
     ProfileScope scope("density control");

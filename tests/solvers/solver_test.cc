@@ -18,6 +18,7 @@
 #include "solvers/auto_stop.h"
 #include "solvers/checkpoint_callback.h"
 #include "solvers/density_control.h"
+#include "solvers/density_strategy.h"
 #include "solvers/exposure_fit.h"
 #include "solvers/loss_table.h"
 #include "solvers/mutual_boosted_solver.h"
@@ -207,6 +208,50 @@ TEST(MutualBoostedSolverTest, EndToEndLossFallsAndPsnrRises) {
   EXPECT_GT(psnr_after, psnr_before + 3) << psnr_before << " -> " << psnr_after;
   EXPECT_EQ(summary.branch(Branch::kSurfels2D).warmup_iterations, 120);
   EXPECT_EQ(summary.mutual_iterations, 20);
+}
+
+// The density strategy is handed the means' learning rate of the step (what MCMC scales its
+// position noise by). It was 0 for every run of mgsr_solve until the fix: the solver's rate
+// function fills the list it is given, and the trainer gave it an empty one.
+struct PositionRateProbe : DensityStrategy {
+  static std::vector<float> seen;
+  void Begin(PrimitiveRows*, Rng*) override {}
+  double BeforeStep(const DensityStep& step, const PrimitiveRows&,
+                    const std::vector<ParamBlock>&) override {
+    seen.push_back(step.position_lr);
+    return 0;
+  }
+  DensifyResult AfterStep(const DensityStep&, PrimitiveRows*, Rng*) override { return {}; }
+  void Save(BinaryWriter*) const override {}
+  Status Read(BinaryReader*) override { return Status::Ok(); }
+  void CommitRead() override {}
+};
+std::vector<float> PositionRateProbe::seen;
+
+TEST(MutualBoostedSolverTest, DensityStrategiesSeeTheStepsPositionRate) {
+  DensityStrategyRegistry::Get().Register("position_rate_probe",
+                                          [](const DensityContext&, const nlohmann::json&,
+                                             Status*) -> std::unique_ptr<DensityStrategy> {
+                                            return std::make_unique<PositionRateProbe>();
+                                          });
+  const Scene scene = TinyScene(testing::ScratchDir());
+  SolverOptions o = TinyOptions();
+  o.warmup_max_iterations = 10;
+  o.mutual_iterations = 0;
+  o.density = "position_rate_probe";
+  ASSERT_TRUE(o.Validate().ok());
+  PositionRateProbe::seen.clear();
+  MutualBoostedSolver solver(o, scene);
+  SolveSummary summary;
+  ASSERT_TRUE(solver.Solve(&summary).ok());
+  ASSERT_EQ(PositionRateProbe::seen.size(), 20u);  // both branches, 10 steps each
+  for (float lr : PositionRateProbe::seen) {
+    // The log-linear schedule from position_lr_init x extent, 10 steps into its 30,000.
+    EXPECT_GT(
+        lr, 0.99 * o.position_lr_init * scene.extent *
+                std::pow(o.position_lr_final / o.position_lr_init, 10.0 / o.position_lr_max_steps));
+    EXPECT_LE(lr, 1.0001 * o.position_lr_init * scene.extent);
+  }
 }
 
 TEST(MutualBoostedSolverTest, ProfileAccountsForEachStage) {
