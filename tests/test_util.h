@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -68,6 +69,39 @@ inline CommandResult RunCommand(const std::string& command) {
   const int status = pclose(pipe);
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return r;
+}
+
+// The SSIM map of plane b against plane a (w x h, row-major), summed: a direct, non-separable
+// 11x11 Gaussian window (sigma 1.5) with zero padding, C1 = 0.01^2, C2 = 0.03^2, in double
+// precision. An independent reference for the separable and fused implementations.
+inline double DirectSsimSum(const double* a, const double* b, int w, int h) {
+  const double C1 = 1e-4, C2 = 9e-4, sigma = 1.5;
+  double g[11][11], norm = 0;
+  for (int i = 0; i < 11; ++i) {
+    for (int j = 0; j < 11; ++j)
+      norm += g[i][j] = std::exp(-((i - 5) * (i - 5) + (j - 5) * (j - 5)) / (2 * sigma * sigma));
+  }
+  double total = 0;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      double ma = 0, mb = 0, saa = 0, sbb = 0, sab = 0;
+      for (int i = 0; i < 11; ++i) {
+        for (int j = 0; j < 11; ++j) {
+          const int yy = y + i - 5, xx = x + j - 5;
+          if (yy < 0 || xx < 0 || yy >= h || xx >= w) continue;  // zero padding
+          const double wt = g[i][j] / norm, va = a[yy * w + xx], vb = b[yy * w + xx];
+          ma += wt * va;
+          mb += wt * vb;
+          saa += wt * va * va;
+          sbb += wt * vb * vb;
+          sab += wt * va * vb;
+        }
+      }
+      total += ((2 * ma * mb + C1) * (2 * (sab - ma * mb) + C2)) /
+               ((ma * ma + mb * mb + C1) * (saa - ma * ma + sbb - mb * mb + C2));
+    }
+  }
+  return total;
 }
 
 inline std::string SharedDataDir() { return MGSR_SHARED_DATA_DIR; }

@@ -22,6 +22,7 @@
 #include "mgsr/loss/normal_consistency_loss.h"
 #include "mgsr/loss/problem.h"
 #include "mgsr/loss/render_loss.h"
+#include "test_util.h"
 
 namespace mgsr {
 namespace {
@@ -326,38 +327,6 @@ TEST(LossValueTest, HandComputedCases) {
   EXPECT_NEAR(MutualDepthLoss().Evaluate(f.in, f.targets, 1, nullptr), 0.0, 1e-15);
 }
 
-// Direct, non-separable SSIM map summed over one plane, in double: an independent reference for
-// the fused kernel.
-double DirectSsimSum(const std::vector<double>& a, const std::vector<double>& b, int w, int h) {
-  const double C1 = 1e-4, C2 = 9e-4, sigma = 1.5;
-  double g[11][11], norm = 0;
-  for (int i = 0; i < 11; ++i) {
-    for (int j = 0; j < 11; ++j)
-      norm += g[i][j] = std::exp(-((i - 5) * (i - 5) + (j - 5) * (j - 5)) / (2 * sigma * sigma));
-  }
-  double total = 0;
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      double ma = 0, mb = 0, saa = 0, sbb = 0, sab = 0;
-      for (int i = 0; i < 11; ++i) {
-        for (int j = 0; j < 11; ++j) {
-          const int yy = y + i - 5, xx = x + j - 5;
-          if (yy < 0 || xx < 0 || yy >= h || xx >= w) continue;  // zero padding
-          const double wt = g[i][j] / norm, va = a[yy * w + xx], vb = b[yy * w + xx];
-          ma += wt * va;
-          mb += wt * vb;
-          saa += wt * va * va;
-          sbb += wt * vb * vb;
-          sab += wt * va * vb;
-        }
-      }
-      total += ((2 * ma * mb + C1) * (2 * (sab - ma * mb) + C2)) /
-               ((ma * ma + mb * mb + C1) * (saa - ma * ma + sbb - mb * mb + C2));
-    }
-  }
-  return total;
-}
-
 // The fused SSIM kernel behind DssimLoss: its value against the direct window sum, its gradient
 // against central differences (borders included), float against double, and the same bits with
 // one thread as with several. 300 x 230 takes the threaded path, 7 x 4 is smaller than the window.
@@ -374,7 +343,7 @@ TEST(DssimPlaneTest, MatchesTheDirectWindowAndCentralDifferencesOnAnyThreadCount
     const double scale = -0.7;
     std::vector<double> grad(n, 0.0);
     const double value = SsimPlaneSum(x.data(), y.data(), w, h, scale, grad.data());
-    EXPECT_NEAR(value, DirectSsimSum(x, y, w, h), 1e-12 * n);
+    EXPECT_NEAR(value, testing::DirectSsimSum(x.data(), y.data(), w, h), 1e-12 * n);
     std::vector<size_t> probes = {0, static_cast<size_t>(w - 1), n - 1, n - w, n / 2 + w / 3};
     for (int k = 0; k < 25; ++k) probes.push_back(rng.UniformInt(n));
     for (size_t i : probes) {

@@ -271,7 +271,9 @@ TEST(DensityStrategyTest, McmcNoiseMovesOnlyTransparentPrimitivesAndKeepsSurfels
   Adam adam;
   const PrimitiveLayout layout = SurfelPrimitive::Layout();
   PrimitiveRows rows(m.Blocks(), &adam, &layout);
-  McmcDensity mcmc(McmcContext(2), McmcOptions());
+  McmcOptions noisy;
+  noisy.noise_lr = 5e5f;  // gsplat's (the default is off)
+  McmcDensity mcmc(McmcContext(2), noisy);
   Rng rng(11);
   DensityStep step = EventStep(15);  // not an event: noise only
   step.position_lr = 1.6e-4f;
