@@ -66,8 +66,8 @@ double BranchTrainer::EvaluateLoss(Stage stage, int view, int iteration, const R
     }
     sp.checked = true;
   }
-  // LastTerms() is set once the density strategy's regulariser is known (or now if the step ends
-  // here), so its size stays the same from step to step.
+  // LastTerms() is set once the density strategy's regulariser is known (OptimizeAndControlDensity,
+  // or Step when the step ends at the loss), so its size stays the same from step to step.
   const double loss = sp.problem.Evaluate(branch_, in, targets, gradient, &loss_terms_);
   if (!sp.exposure_terms.empty()) {
     ProfileScope exposure_scope("exposure");

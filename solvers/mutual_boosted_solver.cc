@@ -28,29 +28,27 @@ double PositionLearningRate(const SolverOptions& o, int step, double extent) {
 // The learning rates of a block at a step (BranchTrainerOptions::learning_rates).
 void Rates(const SolverOptions& o, int step, double extent, const std::string& name, int width,
            std::vector<float>* rates) {
-  {
-    float r = 0;
-    if (name == "means")
-      r = static_cast<float>(PositionLearningRate(o, step, extent));
-    else if (name == "log_scales")
-      r = static_cast<float>(o.scaling_lr);
-    else if (name == "quats")
-      r = static_cast<float>(o.rotation_lr);
-    else if (name == "opacity_logits" || name == "ref_opacity_logits" || name == "beta_logits")
-      r = static_cast<float>(o.opacity_lr);
-    if (!o.reflection &&
-        (name == "ref_sh" || name == "ref_opacity_logits" || name == "beta_logits")) {
-      std::fill(rates->begin(), rates->end(), 0.0f);
-      return;
-    }
-    if (name == "sh" || name == "ref_sh") {
-      // Band 0 (the first 3 columns) at the feature rate, higher bands at 1/20 of it.
-      for (int k = 0; k < width; ++k)
-        (*rates)[k] = static_cast<float>(k < 3 ? o.feature_lr : o.feature_lr / 20);
-      return;
-    }
-    std::fill(rates->begin(), rates->end(), r);
+  float r = 0;
+  if (name == "means")
+    r = static_cast<float>(PositionLearningRate(o, step, extent));
+  else if (name == "log_scales")
+    r = static_cast<float>(o.scaling_lr);
+  else if (name == "quats")
+    r = static_cast<float>(o.rotation_lr);
+  else if (name == "opacity_logits" || name == "ref_opacity_logits" || name == "beta_logits")
+    r = static_cast<float>(o.opacity_lr);
+  if (!o.reflection &&
+      (name == "ref_sh" || name == "ref_opacity_logits" || name == "beta_logits")) {
+    std::fill(rates->begin(), rates->end(), 0.0f);
+    return;
   }
+  if (name == "sh" || name == "ref_sh") {
+    // Band 0 (the first 3 columns) at the feature rate, higher bands at 1/20 of it.
+    for (int k = 0; k < width; ++k)
+      (*rates)[k] = static_cast<float>(k < 3 ? o.feature_lr : o.feature_lr / 20);
+    return;
+  }
+  std::fill(rates->begin(), rates->end(), r);
 }
 
 // What the mutual stage hands a learning branch from the supervising one (reference 1.5): the

@@ -48,7 +48,10 @@ double Problem::Evaluate(Branch branch, const RenderBuffers& in, const Targets& 
 
 void Problem::SetTermValue(std::vector<TermValue>* values, size_t i, const std::string& name,
                            double weight, double value) {
-  if (i == values->size()) values->push_back({name, weight, value});
+  if (i == values->size()) {
+    values->push_back({name, weight, value});
+    return;
+  }
   TermValue& t = (*values)[i];
   t.name.assign(name);
   t.weight = weight;

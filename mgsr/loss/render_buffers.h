@@ -57,7 +57,7 @@ struct RenderGradientsT {
   // it kept from earlier use).
   ImageT<T>& Get(Buffer b, const ImageT<T>& like) {
     ImageT<T>& g = images[static_cast<int>(b)];
-    if (!g.SameShape(like) || g.empty()) g.Reset(like.width(), like.height(), like.channels());
+    if (!g.SameShape(like)) g.Reset(like.width(), like.height(), like.channels());
     return g;
   }
   const ImageT<T>& Get(Buffer b) const { return images[static_cast<int>(b)]; }
