@@ -117,6 +117,7 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
   const int tiles_y = (cam.height + kTileSize - 1) / kTileSize;
   const int K = m.sh_coeffs();
   const int degree = std::min(sh_degree, m.max_sh_degree);
+  const int n_coeffs = (degree + 1) * (degree + 1);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     out->radius[i] = 0;
@@ -158,12 +159,14 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
     const Eigen::Vector3f mean(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
     const Eigen::Vector3f dir = (mean - center).normalized();
     for (int k = 0; k < 3; ++k) out->view_dir[3 * i + k] = dir[k];
-    EvalShColor(degree, &m.sh[static_cast<size_t>(i) * K * 3], dir.data(), &out->color_t[3 * i],
-                &out->clamp_t[3 * i]);
+    float basis[kMaxShCoeffs];  // shared by the transmitted and the reflected colour
+    ShBasis(degree, dir.data(), basis);
+    EvalShColorFromBasis(n_coeffs, basis, &m.sh[static_cast<size_t>(i) * K * 3],
+                         &out->color_t[3 * i], &out->clamp_t[3 * i]);
     if (reflection) {
       out->beta[i] = Sigmoid(m.beta_logits[i]);
-      EvalShColor(degree, &m.ref_sh[static_cast<size_t>(i) * K * 3], dir.data(),
-                  &out->color_r[3 * i], &out->clamp_r[3 * i]);
+      EvalShColorFromBasis(n_coeffs, basis, &m.ref_sh[static_cast<size_t>(i) * K * 3],
+                           &out->color_r[3 * i], &out->clamp_r[3 * i]);
     }
   }
 }
@@ -178,6 +181,7 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
   const float fx = static_cast<float>(cam.fx), fy = static_cast<float>(cam.fy);
   const int K = m.sh_coeffs();
   const int degree = std::min(sh_degree, m.max_sh_degree);
+  const int n_coeffs = (degree + 1) * (degree + 1);
   GaussianModel& G = grads->params;
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
@@ -192,15 +196,18 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
     }
     // Colours -> SH coefficients and the view direction.
     Eigen::Vector3f d_mean = Eigen::Vector3f::Zero();
-    float d_dir[3], d_dir_r[3] = {0, 0, 0}, d_v[3];
-    const float* dir = &p.view_dir[3 * i];
-    EvalShColorBackward(degree, &m.sh[static_cast<size_t>(i) * K * 3], dir, &p.clamp_t[3 * i],
-                        &d.color_t[3 * i], &G.sh[static_cast<size_t>(i) * K * 3], d_dir);
+    float sum_dir[3] = {0, 0, 0}, d_v[3];  // d/d dir from both colours
+    float basis[kMaxShCoeffs], dbasis[kMaxShCoeffs][3];
+    ShBasisWithGradient(degree, &p.view_dir[3 * i], basis, dbasis);
+    EvalShColorBackwardFromBasis(n_coeffs, basis, dbasis, &m.sh[static_cast<size_t>(i) * K * 3],
+                                 &p.clamp_t[3 * i], &d.color_t[3 * i],
+                                 &G.sh[static_cast<size_t>(i) * K * 3], sum_dir);
     if (reflection) {
-      EvalShColorBackward(degree, &m.ref_sh[static_cast<size_t>(i) * K * 3], dir, &p.clamp_r[3 * i],
-                          &d.color_r[3 * i], &G.ref_sh[static_cast<size_t>(i) * K * 3], d_dir_r);
+      EvalShColorBackwardFromBasis(n_coeffs, basis, dbasis,
+                                   &m.ref_sh[static_cast<size_t>(i) * K * 3], &p.clamp_r[3 * i],
+                                   &d.color_r[3 * i], &G.ref_sh[static_cast<size_t>(i) * K * 3],
+                                   sum_dir);
     }
-    const float sum_dir[3] = {d_dir[0] + d_dir_r[0], d_dir[1] + d_dir_r[1], d_dir[2] + d_dir_r[2]};
     const Eigen::Vector3f mean(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
     const Eigen::Vector3f v = mean - center;
     NormalizeBackward(v.data(), sum_dir, d_v);

@@ -70,17 +70,41 @@ void ShBasisWithGradient(int degree, const float d[3], float b[kMaxShCoeffs],
   set(15, kC3[6] * (3 * xx - 3 * yy), -6 * kC3[6] * x * y, 0);
 }
 
+// The sums over coefficients run in four interleaved partial sums (k mod 4): sixteen dependent
+// multiply-adds per channel would otherwise be one long latency chain per primitive.
+void EvalShColorFromBasis(int n, const float b[kMaxShCoeffs], const float* coeffs, float rgb[3],
+                          uint8_t clamped[3]) {
+  float acc[4][3] = {};
+  for (int k = 0; k < n; ++k) {
+    for (int c = 0; c < 3; ++c) acc[k & 3][c] += b[k] * coeffs[k * 3 + c];
+  }
+  for (int c = 0; c < 3; ++c) {
+    const float v = 0.5f + ((acc[0][c] + acc[1][c]) + (acc[2][c] + acc[3][c]));
+    clamped[c] = v < 0.0f;
+    rgb[c] = v < 0.0f ? 0.0f : v;
+  }
+}
+
 void EvalShColor(int degree, const float* coeffs, const float dir[3], float rgb[3],
                  uint8_t clamped[3]) {
   float b[kMaxShCoeffs];
   ShBasis(degree, dir, b);
-  const int n = (degree + 1) * (degree + 1);
-  for (int c = 0; c < 3; ++c) {
-    float v = 0.5f;
-    for (int k = 0; k < n; ++k) v += b[k] * coeffs[k * 3 + c];
-    clamped[c] = v < 0.0f;
-    rgb[c] = v < 0.0f ? 0.0f : v;
+  EvalShColorFromBasis((degree + 1) * (degree + 1), b, coeffs, rgb, clamped);
+}
+
+void EvalShColorBackwardFromBasis(int n, const float b[kMaxShCoeffs],
+                                  const float g[kMaxShCoeffs][3], const float* coeffs,
+                                  const uint8_t clamped[3], const float d_rgb[3], float* d_coeffs,
+                                  float d_dir[3]) {
+  const float dc[3] = {clamped[0] ? 0.0f : d_rgb[0], clamped[1] ? 0.0f : d_rgb[1],
+                       clamped[2] ? 0.0f : d_rgb[2]};
+  float acc[4][3] = {};
+  for (int k = 0; k < n; ++k) {
+    const float s = coeffs[k * 3] * dc[0] + coeffs[k * 3 + 1] * dc[1] + coeffs[k * 3 + 2] * dc[2];
+    for (int c = 0; c < 3; ++c) d_coeffs[k * 3 + c] += b[k] * dc[c];
+    for (int c = 0; c < 3; ++c) acc[k & 3][c] += s * g[k][c];
   }
+  for (int c = 0; c < 3; ++c) d_dir[c] += (acc[0][c] + acc[1][c]) + (acc[2][c] + acc[3][c]);
 }
 
 void EvalShColorBackward(int degree, const float* coeffs, const float dir[3],
@@ -88,17 +112,9 @@ void EvalShColorBackward(int degree, const float* coeffs, const float dir[3],
                          float d_dir[3]) {
   float b[kMaxShCoeffs], g[kMaxShCoeffs][3];
   ShBasisWithGradient(degree, dir, b, g);
-  const int n = (degree + 1) * (degree + 1);
-  const float dc[3] = {clamped[0] ? 0.0f : d_rgb[0], clamped[1] ? 0.0f : d_rgb[1],
-                       clamped[2] ? 0.0f : d_rgb[2]};
   d_dir[0] = d_dir[1] = d_dir[2] = 0;
-  for (int k = 0; k < n; ++k) {
-    const float s = coeffs[k * 3] * dc[0] + coeffs[k * 3 + 1] * dc[1] + coeffs[k * 3 + 2] * dc[2];
-    for (int c = 0; c < 3; ++c) d_coeffs[k * 3 + c] += b[k] * dc[c];
-    d_dir[0] += s * g[k][0];
-    d_dir[1] += s * g[k][1];
-    d_dir[2] += s * g[k][2];
-  }
+  EvalShColorBackwardFromBasis((degree + 1) * (degree + 1), b, g, coeffs, clamped, d_rgb, d_coeffs,
+                               d_dir);
 }
 
 void NormalizeBackward(const float v[3], const float d_dir[3], float d_v[3]) {

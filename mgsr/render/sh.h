@@ -21,11 +21,23 @@ void ShBasisWithGradient(int degree, const float dir[3], float basis[kMaxShCoeff
 void EvalShColor(int degree, const float* coeffs, const float dir[3], float rgb[3],
                  uint8_t clamped[3]);
 
+// The same from basis values computed once (ShBasis) for `n` = (degree + 1)^2 coefficients: a
+// primitive with two colour sets (transmitted and reflected) shares one basis.
+void EvalShColorFromBasis(int n, const float basis[kMaxShCoeffs], const float* coeffs, float rgb[3],
+                          uint8_t clamped[3]);
+
 // Backward of EvalShColor: adds d/d coeffs into d_coeffs (same layout) and returns d/d dir
 // (of the unit direction; chain through the normalisation is the caller's, see NormalizeBackward).
 void EvalShColorBackward(int degree, const float* coeffs, const float dir[3],
                          const uint8_t clamped[3], const float d_rgb[3], float* d_coeffs,
                          float d_dir[3]);
+
+// The same from a basis and its gradient computed once (ShBasisWithGradient); *adds* d/d dir
+// into `d_dir`.
+void EvalShColorBackwardFromBasis(int n, const float basis[kMaxShCoeffs],
+                                  const float dbasis[kMaxShCoeffs][3], const float* coeffs,
+                                  const uint8_t clamped[3], const float d_rgb[3], float* d_coeffs,
+                                  float d_dir[3]);
 
 // dir = v / |v|: given d/d dir, returns d/d v.
 void NormalizeBackward(const float v[3], const float d_dir[3], float d_v[3]);

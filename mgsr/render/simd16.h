@@ -9,6 +9,10 @@
 #include <cstdint>
 #include <cstring>
 
+#if defined(__AVX__)
+#include <immintrin.h>
+#endif
+
 namespace mgsr::simd {
 
 typedef float F16 __attribute__((vector_size(64)));
@@ -82,18 +86,32 @@ inline float Sum(F16 v) {
   return Sum(a + b);
 }
 
+// Whether any lane of a mask is set: one test instruction where the build targets AVX / AVX-512
+// (the rasterizers' per-row "does this row blend anything" branch), shuffles otherwise.
 inline bool Any(I4 m) { return (m[0] | m[1] | m[2] | m[3]) != 0; }
 inline bool Any(I8 mask) {
+#if defined(__AVX__)
+  __m256i v;
+  std::memcpy(&v, &mask, sizeof(v));
+  return !_mm256_testz_si256(v, v);
+#else
   I4 a, b;
   std::memcpy(&a, &mask, sizeof(a));
   std::memcpy(&b, reinterpret_cast<const char*>(&mask) + sizeof(a), sizeof(b));
   return Any(a | b);
+#endif
 }
 inline bool Any(I16 mask) {
+#if defined(__AVX512F__)
+  __m512i v;
+  std::memcpy(&v, &mask, sizeof(v));
+  return _mm512_test_epi32_mask(v, v) != 0;
+#else
   I8 a, b;
   std::memcpy(&a, &mask, sizeof(a));
   std::memcpy(&b, reinterpret_cast<const char*>(&mask) + sizeof(a), sizeof(b));
   return Any(a | b);
+#endif
 }
 
 // exp(x) for x in [-88, 0], lane by lane (Cephes' expf: range reduction by ln 2 and a degree-6
