@@ -243,7 +243,10 @@ class PrimitiveTrainer : public BranchTrainer {
   const Model& model() const { return model_; }
   // For tools and tests that edit a model between runs (the optimiser state keeps its rows: change
   // values, not sizes).
-  Model* mutable_model() { return &model_; }
+  Model* mutable_model() {
+    held_is_current_model_ = false;
+    return &model_;
+  }
 
   typename P::RenderOptions RenderOptionsFor(const Camera& camera) const {
     typename P::RenderOptions o = render_options_;
@@ -258,7 +261,7 @@ class PrimitiveTrainer : public BranchTrainer {
   // The same with options derived from RenderOptionsFor (e.g. a cheaper variant).
   void Render(const typename P::RenderOptions& options, typename P::Render* out) {
     renderer_.Forward(model_, options, out);
-    held_current_ = false;
+    held_current_ = held_is_current_model_ = false;
   }
 
   double Step(Stage stage, int view, const Camera& camera, int iteration,
@@ -267,16 +270,23 @@ class PrimitiveTrainer : public BranchTrainer {
     // The render, its gradients and the parameter gradients are members: after the first steps
     // have sized them, a step allocates nothing.
     step_options_ = RenderOptionsFor(camera);
-    renderer_.Forward(model_, step_options_, &step_render_);
-    held_current_ = false;
-    const double loss = EvaluateLoss(stage, view, iteration, P::Buffers(camera, step_render_),
-                                     targets, &step_buffer_grad_);
+    // A mutual iteration's teacher render is often this very render: the branch supervised the
+    // other one on this view and has not changed since (joint mode, 3DGS). Then the renderer
+    // still holds its forward state and the step reuses it (the same bytes a new forward gives).
+    const bool reuse = held_current_ && held_is_current_model_ &&
+                       held_options_.sh_degree == step_options_.sh_degree &&
+                       held_options_.camera == camera;
+    if (!reuse) renderer_.Forward(model_, step_options_, &step_render_);
+    const typename P::Render& render = reuse ? held_ : step_render_;
+    held_current_ = held_is_current_model_ = false;
+    const double loss = EvaluateLoss(stage, view, iteration, P::Buffers(camera, render), targets,
+                                     &step_buffer_grad_);
     if (!step_error_.ok()) {
       SetLastTerms(0.0);
       return loss;
     }
     P::TakeGradients(&step_buffer_grad_, &step_render_grad_);
-    renderer_.Backward(model_, step_options_, step_render_, step_render_grad_, &grads_);
+    renderer_.Backward(model_, step_options_, render, step_render_grad_, &grads_);
     nonfinite_block_ = OptimizeAndControlDensity(camera, grads_.mean2d, P::Radii(renderer_),
                                                  GradientBlocks(), iteration);
     return loss;
@@ -286,7 +296,7 @@ class PrimitiveTrainer : public BranchTrainer {
     ProfileContext context(name());
     held_options_ = RenderOptionsFor(camera);
     renderer_.Forward(model_, held_options_, &held_);
-    held_current_ = true;
+    held_current_ = held_is_current_model_ = true;
     return P::Buffers(held_options_.camera, held_);
   }
 
@@ -299,6 +309,7 @@ class PrimitiveTrainer : public BranchTrainer {
     }
     P::TakeGradients(gradient, &step_render_grad_);
     renderer_.Backward(model_, held_options_, held_, step_render_grad_, &grads_);
+    held_is_current_model_ = false;  // the step below changes the model
     ProfileScope scope("adam");
     adam_.Step(rows_->blocks(), GradientBlocks(), RatesAt(iteration));
     return Status::Ok();
@@ -316,7 +327,7 @@ class PrimitiveTrainer : public BranchTrainer {
       for (size_t i = 0; i < total.size() && i < r.contribution.size(); ++i)
         total[i] += r.contribution[i];
     }
-    held_current_ = false;
+    held_current_ = held_is_current_model_ = false;
     std::vector<uint8_t> keep(total.size(), 1);
     size_t dropped = 0;
     for (size_t i = 0; i < total.size(); ++i) {
@@ -345,7 +356,7 @@ class PrimitiveTrainer : public BranchTrainer {
   void CommitModel() override {
     model_ = std::move(pending_model_);
     pending_model_ = Model();
-    held_current_ = false;
+    held_current_ = held_is_current_model_ = false;
     BindRows(model_.Blocks());
     gradient_blocks_.clear();
   }
@@ -369,7 +380,10 @@ class PrimitiveTrainer : public BranchTrainer {
   typename P::RenderGrad step_render_grad_;
   typename P::Gradients grads_;
   std::vector<ParamBlock> gradient_blocks_;
+  // held_current_: the renderer still holds the forward state of held_ (BackpropHeld may run);
+  // held_is_current_model_: and the model has not changed since (a step may reuse held_).
   bool held_current_ = false;
+  bool held_is_current_model_ = false;
 };
 
 }  // namespace mgsr

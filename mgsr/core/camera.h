@@ -19,6 +19,11 @@ struct Camera {
   void SetRotationFromQuaternion(double qw, double qx, double qy, double qz);
   // COLMAP quaternion (w, x, y, z) of R with w >= 0.
   Eigen::Vector4d RotationQuaternion() const;
+  // Exactly the same intrinsics and pose.
+  bool operator==(const Camera& o) const {
+    return width == o.width && height == o.height && fx == o.fx && fy == o.fy && cx == o.cx &&
+           cy == o.cy && R == o.R && t == o.t;
+  }
 
   Eigen::Vector3d Center() const { return -R.transpose() * t; }
   Eigen::Vector3d WorldToCamera(const Eigen::Vector3d& X) const { return R * X + t; }

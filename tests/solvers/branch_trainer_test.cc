@@ -51,6 +51,7 @@ int BandOfRow(int row, int height, size_t bands) {
 class BandRenderer {
  public:
   void Forward(const BandModel& m, const BandRenderOptions& o, BandRender* out) {
+    ++forwards;
     out->color = Image(o.camera.width, o.camera.height, 3);
     for (int y = 0; y < o.camera.height; ++y) {
       const int k = BandOfRow(y, o.camera.height, m.size());
@@ -74,10 +75,13 @@ class BandRenderer {
     }
   }
   const std::vector<float>& radius() const { return radius_; }
+  static int forwards;  // every Forward of every band renderer
 
  private:
   std::vector<float> radius_;
 };
+
+int BandRenderer::forwards = 0;
 
 // The primitive type's description for PrimitiveTrainer: no density control (a fixed band count).
 struct BandPrimitive {
@@ -278,6 +282,60 @@ TEST(BranchTrainerTest, AStubPrimitiveTrainsChecksPointsAndSupervisesThroughTheG
   RenderGradients g2;
   g2.Get(Buffer::kColor, photo).Fill(1.0f);
   EXPECT_FALSE(t->BackpropHeld(&g2, it).ok());
+}
+
+// A step on the view the branch has just rendered as a teacher, with the model unchanged since,
+// reuses that render (no second forward) and trains exactly as a step that renders afresh; any
+// change in between (a step sent back through the held render, another camera, another SH
+// degree) renders again.
+TEST(BranchTrainerTest, AStepReusesTheHeldRenderOfTheSameViewAndModel) {
+  const Camera camera = SmallCamera();
+  Camera other = camera;
+  other.t.x() += 0.5;
+  const Image photo = BandPhoto(camera);
+  Targets targets;
+  targets.image = &photo;
+  ExposureModel exposure;
+  exposure.Reset(1, ExposureMode::kOff);
+  Rng rng_a(3), rng_b(3);
+  std::unique_ptr<BandTrainer> a = MakeTrainer(&exposure, &rng_a);
+  std::unique_ptr<BandTrainer> b = MakeTrainer(&exposure, &rng_b);
+  for (int it = 1; it <= 3; ++it) {
+    a->Step(Stage::kWarmup, 0, camera, it, targets);
+    b->Step(Stage::kWarmup, 0, camera, it, targets);
+  }
+  // Reused: one forward (the hold's) for hold + step; the same model as without the hold.
+  int before = BandRenderer::forwards;
+  a->Hold(camera);
+  const double loss_a = a->Step(Stage::kWarmup, 0, camera, 4, targets);
+  EXPECT_EQ(BandRenderer::forwards - before, 1);
+  before = BandRenderer::forwards;
+  const double loss_b = b->Step(Stage::kWarmup, 0, camera, 4, targets);
+  EXPECT_EQ(BandRenderer::forwards - before, 1);
+  EXPECT_EQ(loss_a, loss_b);
+  EXPECT_EQ(a->model().colour, b->model().colour);
+  // Not reused: the model changed through the held render, the camera or the SH degree differ.
+  RenderGradients g;
+  g.Get(Buffer::kColor, *a->Hold(camera).Get(Buffer::kColor)).Fill(1.0f);
+  ASSERT_TRUE(a->BackpropHeld(&g, 5).ok());
+  before = BandRenderer::forwards;
+  a->Step(Stage::kWarmup, 0, camera, 6, targets);
+  EXPECT_EQ(BandRenderer::forwards - before, 1);
+  a->Hold(other);
+  before = BandRenderer::forwards;
+  a->Step(Stage::kWarmup, 0, camera, 7, targets);
+  EXPECT_EQ(BandRenderer::forwards - before, 1);
+  a->Hold(camera);
+  a->set_sh_degree(1);
+  before = BandRenderer::forwards;
+  a->Step(Stage::kWarmup, 0, camera, 8, targets);
+  EXPECT_EQ(BandRenderer::forwards - before, 1);
+  a->set_sh_degree(0);
+  a->Hold(camera);
+  a->mutable_model()->colour[0] += 0.1f;
+  before = BandRenderer::forwards;
+  a->Step(Stage::kWarmup, 0, camera, 9, targets);
+  EXPECT_EQ(BandRenderer::forwards - before, 1);
 }
 
 TEST(BranchTrainerTest, ARowTheBranchCannotFeedStopsTheStepNamingIt) {
