@@ -203,10 +203,9 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
                                  &p.clamp_t[3 * i], &d.color_t[3 * i],
                                  &G.sh[static_cast<size_t>(i) * K * 3], sum_dir);
     if (reflection) {
-      EvalShColorBackwardFromBasis(n_coeffs, basis, dbasis,
-                                   &m.ref_sh[static_cast<size_t>(i) * K * 3], &p.clamp_r[3 * i],
-                                   &d.color_r[3 * i], &G.ref_sh[static_cast<size_t>(i) * K * 3],
-                                   sum_dir);
+      EvalShColorBackwardFromBasis(
+          n_coeffs, basis, dbasis, &m.ref_sh[static_cast<size_t>(i) * K * 3], &p.clamp_r[3 * i],
+          &d.color_r[3 * i], &G.ref_sh[static_cast<size_t>(i) * K * 3], sum_dir);
     }
     const Eigen::Vector3f mean(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
     const Eigen::Vector3f v = mean - center;
