@@ -26,12 +26,9 @@ void BM_SyntheticView(benchmark::State& state) {
   o.num_views = 3;
   mgsr::SyntheticScene scene;
   if (!mgsr::MakeSyntheticScene(o, &scene).ok()) state.SkipWithError("scene");
-  mgsr::RayCaster caster(scene.mesh);
+  const mgsr::SyntheticRenderer renderer(scene, o);
   mgsr::Image rgba, depth, normal;
-  for (auto _ : state) {
-    mgsr::RenderSyntheticView(caster, scene.mesh, scene.cameras[0], scene.lights[0], o, &rgba,
-                              &depth, &normal);
-  }
+  for (auto _ : state) renderer.Render(scene.cameras[0], scene.lights[0], &rgba, &depth, &normal);
 }
 BENCHMARK(BM_SyntheticView)->Arg(128)->Arg(256)->Unit(benchmark::kMillisecond);
 

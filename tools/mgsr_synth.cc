@@ -9,6 +9,13 @@
 #include "tools/tool_flags.h"
 
 DEFINE_string(output, "", "Folder to write the scene into (created).");
+DEFINE_string(scene_type, "object",
+              "object: the shape alone, cameras on a sphere around it; outdoor: on a textured "
+              "ground under a sky, cameras at standing height on a wide orbit, no masks; indoor: "
+              "the same in a closed room.");
+DEFINE_double(region_half, 2.0,
+              "Scene-level: half the side of the central region (gt/region.json) whose ground "
+              "truth gt/mesh.ply holds.");
 DEFINE_string(shape, "sphere",
               "sphere | torus | rounded_box | dented (concavities and a thin rod)");
 DEFINE_int32(detail, 1, "Mesh detail 0..2.");
@@ -38,6 +45,7 @@ int main(int argc, char** argv) {
   mgsr_tools::ParseToolFlags(
       "mgsr_synth --output DIR [--shape sphere] [--num_views 48] ...",
       {{"Output", {"output", "text", "masks", "constant_light_copy"}},
+       {"Scene", {"scene_type", "region_half"}},
        {"Object", {"shape", "detail", "specular", "shininess", "mirror", "num_points"}},
        {"Cameras and photos",
         {"num_views", "width", "height", "distance", "test_every", "supersampling",
@@ -50,6 +58,8 @@ int main(int argc, char** argv) {
     return 2;
   }
   mgsr::SynthOptions o;
+  o.scene_type = FLAGS_scene_type;
+  o.region_half = FLAGS_region_half;
   o.shape = FLAGS_shape;
   o.detail = FLAGS_detail;
   o.num_views = FLAGS_num_views;
@@ -76,7 +86,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "error: %s\n", s.message().c_str());
     return 1;
   }
-  std::printf("wrote %s scene (%d views, %dx%d) to %s in %.1f s\n", o.shape.c_str(), o.num_views,
-              o.width, o.height, FLAGS_output.c_str(), timer.ElapsedSeconds());
+  std::printf("wrote %s %s scene (%d views, %dx%d) to %s in %.1f s\n", o.shape.c_str(),
+              o.scene_type.c_str(), o.num_views, o.width, o.height, FLAGS_output.c_str(),
+              timer.ElapsedSeconds());
   return 0;
 }

@@ -11,43 +11,17 @@
 #include "mgsr/io/image_io.h"
 #include "mgsr/io/ply.h"
 #include "mgsr/synth/ray_caster.h"
+#include "mgsr/synth/scene_layout.h"
 #include "mgsr/synth/shapes.h"
+#include "mgsr/synth/solid_noise.h"
 
 namespace mgsr {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-double Smoothstep(double a, double b, double x) {
-  const double t = std::min(1.0, std::max(0.0, (x - a) / (b - a)));
-  return t * t * (3 - 2 * t);
-}
-
-// Hash-based 3-D value noise in [0, 1]: a solid texture, so it is consistent across views.
-double Hash3(long x, long y, long z) {
-  uint64_t h = static_cast<uint64_t>(x) * 0x8DA6B343ull ^ static_cast<uint64_t>(y) * 0xD8163841ull ^
-               static_cast<uint64_t>(z) * 0xCB1AB31Full;
-  h ^= h >> 29;
-  h *= 0xBF58476D1CE4E5B9ull;
-  h ^= h >> 32;
-  return (h & 0xFFFFFF) / static_cast<double>(0xFFFFFF);
-}
-
-double ValueNoise(const Eigen::Vector3d& p) {
-  const Eigen::Vector3d f(std::floor(p.x()), std::floor(p.y()), std::floor(p.z()));
-  const Eigen::Vector3d t = p - f;
-  const Eigen::Vector3d s(Smoothstep(0, 1, t.x()), Smoothstep(0, 1, t.y()),
-                          Smoothstep(0, 1, t.z()));
-  const long x = static_cast<long>(f.x()), y = static_cast<long>(f.y()),
-             z = static_cast<long>(f.z());
-  double v = 0;
-  for (int c = 0; c < 8; ++c) {
-    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
-    const double w = (dx ? s.x() : 1 - s.x()) * (dy ? s.y() : 1 - s.y()) * (dz ? s.z() : 1 - s.z());
-    v += w * Hash3(x + dx, y + dy, z + dz);
-  }
-  return v;
-}
+using synth::Smoothstep;
+using synth::ValueNoise;
 
 // Diffuse albedo (linear): two colours mixed by multi-scale noise, with fine dark speckles so
 // feature matchers (SIFT) find texture.
@@ -85,35 +59,48 @@ double LinearToSrgb(double x) {
   return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1.0 / 2.4) - 0.055;
 }
 
-Eigen::Vector3d Shade(const RayCaster& caster, const Eigen::Vector3d& p,
-                      const Eigen::Vector3d& n_in, const Eigen::Vector3d& view_dir,
-                      const ViewLight& light, const SynthOptions& o) {
-  // view_dir points from the camera to the surface.
-  Eigen::Vector3d n = n_in;
-  if (n.dot(view_dir) > 0) n = -n;  // inside faces of open parts
-  const Eigen::Vector3d albedo = Albedo(p);
+// Ambient, Lambert with a shadow ray and (specular > 0) a Blinn-Phong highlight, in linear
+// unexposed units; view_dir points from the eye to the surface, n may face either way.
+Eigen::Vector3d DirectLight(const RayCaster& shadow_caster, const Eigen::Vector3d& albedo,
+                            const Eigen::Vector3d& p, const Eigen::Vector3d& n,
+                            const Eigen::Vector3d& view_dir, const ViewLight& light,
+                            double specular, double shininess) {
   const Eigen::Vector3d sky(0.55, 0.65, 0.85), ground(0.25, 0.23, 0.2);
   const Eigen::Vector3d ambient =
       0.35 * light.environment * (ground + (sky - ground) * (0.5 + 0.5 * n.z()));
   const double ndotl = n.dot(light.direction);
   double visible = 0;
-  if (ndotl > 0) visible = caster.Occluded(p + 1e-6 * n, light.direction, 1e-6, 1e3) ? 0.0 : 1.0;
+  if (ndotl > 0)
+    visible = shadow_caster.Occluded(p + 1e-6 * n, light.direction, 1e-6, 1e3) ? 0.0 : 1.0;
   Eigen::Vector3d c =
       albedo.cwiseProduct(ambient + light.intensity * std::max(0.0, ndotl) * visible * light.color);
-  if (visible > 0) {
+  if (visible > 0 && specular > 0) {
     const Eigen::Vector3d h = (light.direction - view_dir).normalized();
-    const double spec = std::pow(std::max(0.0, n.dot(h)), o.shininess);
+    const double spec = std::pow(std::max(0.0, n.dot(h)), shininess);
     // Normalised so the peak is bright enough to clip: a highlight that moves with the light.
-    c += o.specular * light.intensity * spec * (o.shininess + 8) / 8.0 * light.color * 0.25;
+    c += specular * light.intensity * spec * (shininess + 8) / 8.0 * light.color * 0.25;
   }
+  return c;
+}
+
+// The object's colour: direct light, then mixed with what its mirror reflects (`reflect` of the
+// reflected direction), Fresnel-weighted; exposure applied by the caller.
+template <typename Reflect>
+Eigen::Vector3d ShadeObject(const RayCaster& shadow_caster, const Eigen::Vector3d& p,
+                            const Eigen::Vector3d& n_in, const Eigen::Vector3d& view_dir,
+                            const ViewLight& light, const SynthOptions& o, Reflect reflect) {
+  Eigen::Vector3d n = n_in;
+  if (n.dot(view_dir) > 0) n = -n;  // inside faces of open parts
+  Eigen::Vector3d c =
+      DirectLight(shadow_caster, Albedo(p), p, n, view_dir, light, o.specular, o.shininess);
   if (o.mirror > 0) {
     const Eigen::Vector3d r = view_dir - 2 * view_dir.dot(n) * n;
     const double cos_theta = std::max(0.0, -view_dir.dot(n));
     const double fresnel = 0.04 + 0.96 * std::pow(1 - cos_theta, 5.0);
     const double w = o.mirror * (0.6 + 0.4 * fresnel);
-    c = (1 - w) * c + w * Environment(r, light);
+    c = (1 - w) * c + w * reflect(p + 1e-6 * n, r);
   }
-  return c * std::pow(2.0, light.exposure_stops);
+  return c;
 }
 
 ViewLight FixedLight() {
@@ -126,6 +113,17 @@ ViewLight FixedLight() {
 }  // namespace
 
 Status SynthOptions::Validate() const {
+  SceneType type;
+  if (!ParseSceneType(scene_type, &type))
+    return Status::Error("unknown --scene_type '" + scene_type + "' (object, outdoor or indoor)");
+  if (type != SceneType::kObject) {
+    if (!(region_half >= 1.0 && region_half <= 4.0))
+      return Status::Error("--region_half must be in [1, 4] (the object has radius 1)");
+    if (!(distance > region_half * 0.75))
+      return Status::Error("--distance must be > 0.75 x --region_half for a scene-level capture");
+    if (type == SceneType::kIndoor && !(distance <= 4.5))
+      return Status::Error("--distance must be <= 4.5 indoors (the room is 10 units wide)");
+  }
   TriangleMesh unused;
   if (!MakeShape(shape, 0, &unused)) {
     std::string names;
@@ -153,7 +151,10 @@ Status SynthOptions::Validate() const {
 Status MakeSyntheticScene(const SynthOptions& o, SyntheticScene* s) {
   MGSR_RETURN_IF_ERROR(o.Validate());
   *s = SyntheticScene();
-  MakeShape(o.shape, o.detail, &s->mesh);
+  ParseSceneType(o.scene_type, &s->type);
+  TriangleMesh object;
+  MakeShape(o.shape, o.detail, &object);
+  s->layout = MakeSceneLayout(object, s->type, o.region_half);
   Rng rng(o.seed);
   const double fx = 0.5 * o.width / std::tan(0.5 * o.fov_x);
   const double lo = std::sin(o.min_elevation_deg * kPi / 180),
@@ -161,16 +162,23 @@ Status MakeSyntheticScene(const SynthOptions& o, SyntheticScene* s) {
   for (int i = 0; i < o.num_views; ++i) {
     // A Fibonacci spiral over the elevation band gives even coverage; a little jitter avoids
     // symmetry.
-    const double z = lo + (hi - lo) * (i + 0.5) / o.num_views;
-    const double azimuth = i * kPi * (3 - std::sqrt(5.0)) + rng.Uniform(-0.05, 0.05);
-    const double r = std::sqrt(std::max(0.0, 1 - z * z));
-    const double dist = o.distance * (1 + rng.Uniform(-0.03, 0.03));
-    const Eigen::Vector3d center =
-        dist * Eigen::Vector3d(r * std::cos(azimuth), r * std::sin(azimuth), z);
-    const Eigen::Vector3d target(rng.Uniform(-0.03, 0.03), rng.Uniform(-0.03, 0.03),
-                                 rng.Uniform(-0.03, 0.03));
-    s->cameras.push_back(
-        LookAtCamera(center, target, Eigen::Vector3d::UnitZ(), o.width, o.height, fx, fx));
+    if (s->type == SceneType::kObject) {
+      const double z = lo + (hi - lo) * (i + 0.5) / o.num_views;
+      const double azimuth = i * kPi * (3 - std::sqrt(5.0)) + rng.Uniform(-0.05, 0.05);
+      const double r = std::sqrt(std::max(0.0, 1 - z * z));
+      const double dist = o.distance * (1 + rng.Uniform(-0.03, 0.03));
+      const Eigen::Vector3d center =
+          dist * Eigen::Vector3d(r * std::cos(azimuth), r * std::sin(azimuth), z);
+      const Eigen::Vector3d target(rng.Uniform(-0.03, 0.03), rng.Uniform(-0.03, 0.03),
+                                   rng.Uniform(-0.03, 0.03));
+      s->cameras.push_back(
+          LookAtCamera(center, target, Eigen::Vector3d::UnitZ(), o.width, o.height, fx, fx));
+    } else {
+      // Once around at standing height, evenly with a little jitter.
+      const double azimuth = 2 * kPi * (i + rng.Uniform(-0.2, 0.2)) / o.num_views;
+      s->cameras.push_back(
+          SceneOrbitCamera(s->layout, azimuth, o.distance, o.width, o.height, fx, &rng));
+    }
     char name[32];
     std::snprintf(name, sizeof(name), "v%03d.png", i);
     s->names.push_back(name);
@@ -194,11 +202,55 @@ Status MakeSyntheticScene(const SynthOptions& o, SyntheticScene* s) {
   return Status::Ok();
 }
 
-void RenderSyntheticView(const RayCaster& caster, const TriangleMesh& mesh, const Camera& cam,
-                         const ViewLight& light, const SynthOptions& o, Image* rgba, Image* depth,
-                         Image* normal) {
-  (void)mesh;
-  const int w = cam.width, h = cam.height, ss = o.supersampling;
+SyntheticRenderer::SyntheticRenderer(const SyntheticScene& scene, const SynthOptions& options)
+    : scene_(scene), options_(options) {
+  const SceneLayout& l = scene.layout;
+  caster_ = std::make_unique<RayCaster>(l.mesh);
+  if (scene.type != SceneType::kObject) {
+    object_.vertices = l.mesh.vertices;
+    object_.triangles.assign(l.mesh.triangles.begin(),
+                             l.mesh.triangles.begin() + l.object_triangles);
+    shadow_caster_ = std::make_unique<RayCaster>(object_);
+  }
+}
+
+SyntheticRenderer::~SyntheticRenderer() = default;
+
+Eigen::Vector3d SyntheticRenderer::ShadeHit(const RayHit& hit, const Eigen::Vector3d& origin,
+                                            const Eigen::Vector3d& d, const ViewLight& light,
+                                            bool reflections) const {
+  const Eigen::Vector3d p = origin + hit.t * d;
+  const Eigen::Vector3d view_dir = d.normalized();
+  const RayCaster& shadows = shadow_caster_ ? *shadow_caster_ : *caster_;
+  const SurfaceMaterial material = scene_.layout.materials[hit.triangle];
+  if (material == SurfaceMaterial::kObject) {
+    if (scene_.type == SceneType::kObject) {
+      return ShadeObject(shadows, p, caster_->ShadingNormal(hit), view_dir, light, options_,
+                         [&](const Eigen::Vector3d&, const Eigen::Vector3d& r) {
+                           return Environment(r, light);
+                         });
+    }
+    // In a scene the mirror shows the scene: one bounce, the hit shaded without reflections.
+    return ShadeObject(shadows, p, caster_->ShadingNormal(hit), view_dir, light, options_,
+                       [&](const Eigen::Vector3d& from, const Eigen::Vector3d& r) {
+                         RayHit bounce;
+                         if (!reflections || !caster_->Intersect(from, r, 1e-6, 1e9, &bounce))
+                           return Environment(r, light);
+                         return ShadeHit(bounce, from, r, light, false);
+                       });
+  }
+  Eigen::Vector3d n = caster_->ShadingNormal(hit);
+  if (n.dot(view_dir) > 0) n = -n;
+  const Eigen::Vector3d albedo =
+      material == SurfaceMaterial::kGround ? GroundAlbedo(p, scene_.type) : WallAlbedo(p);
+  return DirectLight(shadows, albedo, p, n, view_dir, light, 0.0, 1.0);
+}
+
+void SyntheticRenderer::Render(const Camera& cam, const ViewLight& light, Image* rgba,
+                               Image* depth, Image* normal) const {
+  const int w = cam.width, h = cam.height, ss = options_.supersampling;
+  const bool scene_level = scene_.type != SceneType::kObject;
+  const double exposure = std::pow(2.0, light.exposure_stops);
   *rgba = Image(w, h, 4);
   *depth = Image(w, h, 1);
   *normal = Image(w, h, 3);
@@ -214,22 +266,26 @@ void RenderSyntheticView(const RayCaster& caster, const TriangleMesh& mesh, cons
           // Unnormalised direction with camera-space z = 1: the hit distance t is the z-depth.
           const Eigen::Vector3d d = Rt * cam.PixelToRay(x + (sx + 0.5) / ss, y + (sy + 0.5) / ss);
           RayHit hit;
-          if (!caster.Intersect(origin, d, 1e-9, 1e9, &hit)) continue;
-          const Eigen::Vector3d p = origin + hit.t * d;
-          sum += Shade(caster, p, caster.ShadingNormal(hit), d.normalized(), light, o);
+          if (!caster_->Intersect(origin, d, 1e-9, 1e9, &hit)) {
+            if (scene_level) sum += Environment(d.normalized(), light) * exposure;
+            continue;
+          }
+          sum += ShadeHit(hit, origin, d, light, true) * exposure;
           ++hits;
         }
       }
-      if (hits > 0) {
-        sum /= hits;  // straight (not premultiplied) colour
+      // Straight (not premultiplied) colour; a scene's sky fills what nothing covers.
+      const int samples = scene_level ? ss * ss : hits;
+      if (samples > 0) {
+        sum /= samples;
         for (int c = 0; c < 3; ++c) rgba->at(c, y, x) = static_cast<float>(LinearToSrgb(sum[c]));
       }
-      rgba->at(3, y, x) = static_cast<float>(hits) / (ss * ss);
+      rgba->at(3, y, x) = scene_level ? 1.0f : static_cast<float>(hits) / (ss * ss);
       const Eigen::Vector3d d = Rt * cam.PixelToRay(x + 0.5, y + 0.5);
       RayHit hit;
-      if (caster.Intersect(origin, d, 1e-9, 1e9, &hit)) {
+      if (caster_->Intersect(origin, d, 1e-9, 1e9, &hit)) {
         depth->at(0, y, x) = static_cast<float>(hit.t);
-        Eigen::Vector3d n = caster.ShadingNormal(hit);
+        Eigen::Vector3d n = caster_->ShadingNormal(hit);
         if (n.dot(d) > 0) n = -n;
         for (int c = 0; c < 3; ++c) normal->at(c, y, x) = static_cast<float>(n[c]);
       }
@@ -264,19 +320,22 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
   for (const char* d : {"images", "sparse/0", "gt/depth", "gt/normal"}) {
     MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, d)));
   }
-  if (o.masks) MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, "masks")));
+  const bool masks = o.masks && s.type == SceneType::kObject;
+  if (masks) MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, "masks")));
   if (o.constant_light_copy)
     MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, "images_constant")));
-  const RayCaster caster(s.mesh);
+  const SyntheticRenderer renderer(s, o);
+  const RayCaster& caster = renderer.caster();
+  const TriangleMesh& mesh = s.layout.mesh;
 
   for (size_t i = 0; i < s.cameras.size(); ++i) {
     Image rgba, depth, normal;
-    RenderSyntheticView(caster, s.mesh, s.cameras[i], s.lights[i], o, &rgba, &depth, &normal);
+    renderer.Render(s.cameras[i], s.lights[i], &rgba, &depth, &normal);
     Image mask(rgba.width(), rgba.height(), 1);
     for (size_t k = 0; k < mask.size(); ++k)
       mask.data()[k] = rgba.plane(3)[k] >= 0.5f ? 1.0f : 0.0f;
     const std::string stem = FileStem(s.names[i]);
-    if (o.masks) {
+    if (masks) {
       MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "images/" + s.names[i]), rgba));
       MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "masks/" + stem + ".png"), mask));
     } else {
@@ -294,11 +353,19 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
     MGSR_RETURN_IF_ERROR(WritePfm(JoinPath(out, "gt/depth/" + stem + ".pfm"), depth));
     MGSR_RETURN_IF_ERROR(WritePfm(JoinPath(out, "gt/normal/" + stem + ".pfm"), normal));
     if (o.constant_light_copy) {
-      RenderSyntheticView(caster, s.mesh, s.cameras[i], FixedLight(), o, &rgba, &depth, &normal);
+      renderer.Render(s.cameras[i], FixedLight(), &rgba, &depth, &normal);
       MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "images_constant/" + s.names[i]), rgba));
     }
   }
-  MGSR_RETURN_IF_ERROR(WriteTriangleMesh(JoinPath(out, "gt/mesh.ply"), s.mesh));
+  MGSR_RETURN_IF_ERROR(WriteTriangleMesh(JoinPath(out, "gt/mesh.ply"), s.layout.ground_truth));
+  if (s.type != SceneType::kObject) {
+    const Eigen::Vector3d lo = s.layout.region.min(), hi = s.layout.region.max();
+    const nlohmann::json region = {{"min", {lo.x(), lo.y(), lo.z()}},
+                                   {"max", {hi.x(), hi.y(), hi.z()}},
+                                   {"scene_type", o.scene_type}};
+    MGSR_RETURN_IF_ERROR(
+        WriteStringToFileAtomic(JoinPath(out, "gt/region.json"), region.dump(2)));
+  }
 
   // COLMAP model: one shared PINHOLE camera, every view, and surface points seen by >= 2 training
   // views with exact projections as their observations (test views carry no observations).
@@ -323,30 +390,44 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
     model.images.push_back(im);
   }
   Rng rng(o.seed ^ 0xC0FFEEull);
+  // Triangles drawn by area; in a scene each material by its share of the points (object and
+  // ground half each outdoors; 40 / 40 / 20 with walls), as SfM finds texture on all of them.
+  const auto area = [&](const Eigen::Vector3i& f) {
+    return 0.5 * (mesh.vertices[f[1]] - mesh.vertices[f[0]])
+                     .cross(mesh.vertices[f[2]] - mesh.vertices[f[0]])
+                     .norm();
+  };
+  double scale[3] = {1, 1, 1};
+  if (s.type != SceneType::kObject) {
+    double material_area[3] = {0, 0, 0};
+    for (size_t t = 0; t < mesh.triangles.size(); ++t)
+      material_area[static_cast<int>(s.layout.materials[t])] += area(mesh.triangles[t]);
+    const double share[3] = {s.type == SceneType::kIndoor ? 0.4 : 0.5,
+                             s.type == SceneType::kIndoor ? 0.4 : 0.5, 0.2};
+    for (int m = 0; m < 3; ++m) scale[m] = material_area[m] > 0 ? share[m] / material_area[m] : 0;
+  }
   std::vector<double> cumulative;
   double total = 0;
-  for (const auto& f : s.mesh.triangles) {
-    total += 0.5 * (s.mesh.vertices[f[1]] - s.mesh.vertices[f[0]])
-                       .cross(s.mesh.vertices[f[2]] - s.mesh.vertices[f[0]])
-                       .norm();
+  for (size_t t = 0; t < mesh.triangles.size(); ++t) {
+    total += area(mesh.triangles[t]) * scale[static_cast<int>(s.layout.materials[t])];
     cumulative.push_back(total);
   }
   TriangleMesh cloud;
-  for (int attempt = 0;
-       attempt < o.num_points * 4 && static_cast<int>(model.points.size()) < o.num_points;
+  const int attempts = o.num_points * (s.type == SceneType::kObject ? 4 : 12);
+  for (int attempt = 0; attempt < attempts && static_cast<int>(model.points.size()) < o.num_points;
        ++attempt) {
     const int tri = static_cast<int>(
         std::lower_bound(cumulative.begin(), cumulative.end(), rng.Uniform() * total) -
         cumulative.begin());
-    const auto& f = s.mesh.triangles[std::min<size_t>(tri, s.mesh.triangles.size() - 1)];
+    const size_t picked = std::min<size_t>(tri, mesh.triangles.size() - 1);
+    const auto& f = mesh.triangles[picked];
     double a = rng.Uniform(), b = rng.Uniform();
     if (a + b > 1) {
       a = 1 - a;
       b = 1 - b;
     }
-    const Eigen::Vector3d X = s.mesh.vertices[f[0]] +
-                              a * (s.mesh.vertices[f[1]] - s.mesh.vertices[f[0]]) +
-                              b * (s.mesh.vertices[f[2]] - s.mesh.vertices[f[0]]);
+    const Eigen::Vector3d X = mesh.vertices[f[0]] + a * (mesh.vertices[f[1]] - mesh.vertices[f[0]]) +
+                              b * (mesh.vertices[f[2]] - mesh.vertices[f[0]]);
     ColmapPoint3D p;
     p.point3D_id = model.points.size() + 1;
     p.xyz = X;
@@ -371,7 +452,11 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
       }
       continue;
     }
-    const Eigen::Vector3d albedo = Albedo(X);
+    const SurfaceMaterial material = s.layout.materials[picked];
+    const Eigen::Vector3d albedo = material == SurfaceMaterial::kObject ? Albedo(X)
+                                   : material == SurfaceMaterial::kGround
+                                       ? GroundAlbedo(X, s.type)
+                                       : WallAlbedo(X);
     for (int k = 0; k < 3; ++k)
       p.rgb[k] = static_cast<uint8_t>(std::lround(255 * LinearToSrgb(albedo[k])));
     p.error = 0;
@@ -407,7 +492,7 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
     nlohmann::json m = nlohmann::json::array();
     for (int r = 0; r < 4; ++r) m.push_back({c2w(r, 0), c2w(r, 1), c2w(r, 2), c2w(r, 3)});
     nlohmann::json frame = {{"file_path", "./images/" + stem}, {"transform_matrix", m}};
-    if (o.masks) frame["mask_path"] = "./masks/" + stem + ".png";
+    if (masks) frame["mask_path"] = "./masks/" + stem + ".png";
     (s.is_test[i] ? test : train)["frames"].push_back(frame);
     const ViewLight& l = s.lights[i];
     lights.push_back({{"name", s.names[i]},
@@ -434,7 +519,8 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
                          {"exposure_stops", o.exposure_stops},
                          {"pose_noise_deg", o.pose_noise_deg},
                          {"pose_noise_rel", o.pose_noise_rel},
-                         {"masks", o.masks},
+                         {"masks", masks},
+                         {"scene_type", o.scene_type},
                          {"views", lights}};
   return WriteStringToFileAtomic(JoinPath(out, "lights.json"), info.dump(2));
 }

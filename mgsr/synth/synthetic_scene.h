@@ -2,11 +2,14 @@
 // a textured diffuse surface, strong specular highlights and optional mirror-like reflection of a
 // simple environment, under light that changes per view (direction, intensity, colour, environment
 // strength, exposure). Written as a COLMAP workspace and a Blender folder at once (they share
-// images/).
+// images/). Scene-level captures (scene_type outdoor / indoor, see scene_layout.h) put the object
+// on a textured ground in a far environment, seen from standing height on a wide orbit, without
+// masks; their ground truth is the central region's mesh.
 #pragma once
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -14,13 +17,16 @@
 #include "mgsr/core/image.h"
 #include "mgsr/core/status.h"
 #include "mgsr/core/triangle_mesh.h"
+#include "mgsr/synth/scene_layout.h"
 
 namespace mgsr {
 
 class RayCaster;
+struct RayHit;
 
 struct SynthOptions {
-  std::string shape = "sphere";  // see ShapeNames()
+  std::string scene_type = "object";  // object | outdoor | indoor (ParseSceneType)
+  std::string shape = "sphere";       // see ShapeNames()
   int detail = 1;                // mesh detail 0..2
   int num_views = 48;
   int width = 128, height = 128;
@@ -42,8 +48,12 @@ struct SynthOptions {
   // degrees (rms, random axes) and moved by this fraction of the camera distance (rms); the images
   // are rendered with the true cameras.
   double pose_noise_deg = 0.0, pose_noise_rel = 0.0;
-  // false: no masks/ and no alpha; RGB photos with the object on a grey background.
+  // false: no masks/ and no alpha; RGB photos with the object on a grey background. Scene-level
+  // captures never have masks (their photos are RGB whatever this says).
   bool masks = true;
+  // Scene-level: half the side of the central region's square (the object has radius 1); the
+  // cameras stand `distance` away from its centre, horizontally.
+  double region_half = 2.0;
 
   Status Validate() const;
 };
@@ -57,7 +67,10 @@ struct ViewLight {
 };
 
 struct SyntheticScene {
-  TriangleMesh mesh;
+  SceneType type = SceneType::kObject;
+  // layout.mesh: everything the cameras see; layout.ground_truth: what the mesh is measured
+  // against (the object, or the central region's object and ground).
+  SceneLayout layout;
   std::vector<Camera> cameras;
   std::vector<std::string> names;  // image file names, e.g. v000.png
   std::vector<bool> is_test;
@@ -67,15 +80,32 @@ struct SyntheticScene {
 // Builds the mesh, cameras and lights (no rendering).
 Status MakeSyntheticScene(const SynthOptions& options, SyntheticScene* scene);
 
-// Renders one view: RGBA (sRGB, straight alpha), z-depth at pixel centres (0 = background) and
-// world-space unit normals (0 = background).
-void RenderSyntheticView(const RayCaster& caster, const TriangleMesh& mesh, const Camera& camera,
-                         const ViewLight& light, const SynthOptions& options, Image* rgba,
-                         Image* depth, Image* normal);
+// Renders views of a scene: ray casters over everything (primary and reflection rays) and over the
+// object alone (shadows: the light of a room is inside it).
+class SyntheticRenderer {
+ public:
+  SyntheticRenderer(const SyntheticScene& scene, const SynthOptions& options);
+  ~SyntheticRenderer();
+  // RGBA (sRGB, straight alpha; scene-level: the sky where nothing is hit, alpha 1), z-depth at
+  // pixel centres (0 = nothing hit) and world-space unit normals (0 = nothing hit).
+  void Render(const Camera& camera, const ViewLight& light, Image* rgba, Image* depth,
+              Image* normal) const;
+  const RayCaster& caster() const { return *caster_; }
+
+ private:
+  Eigen::Vector3d ShadeHit(const RayHit& hit, const Eigen::Vector3d& origin,
+                           const Eigen::Vector3d& direction, const ViewLight& light,
+                           bool reflections) const;
+  const SyntheticScene& scene_;
+  const SynthOptions options_;
+  TriangleMesh object_;
+  std::unique_ptr<RayCaster> caster_, shadow_caster_;
+};
 
 // Writes the whole scene into `out_dir` (created). Files: images/, masks/ (unless !masks),
 // sparse/0/, split.txt,
-// transforms_{train,test}.json, points3d.ply, lights.json, gt/mesh.ply, gt/depth/*.pfm,
+// transforms_{train,test}.json, points3d.ply, lights.json, gt/mesh.ply (layout.ground_truth),
+// gt/region.json (scene-level: the region's box), gt/depth/*.pfm,
 // gt/normal/*.pfm and, if asked, images_constant/.
 Status WriteSyntheticScene(const SynthOptions& options, const std::string& out_dir);
 
