@@ -76,11 +76,21 @@ Status TsdfIntegrator::Integrate(const DepthFrame& f) {
   const bool has_weight =
       f.weight.channels() == 1 && f.weight.width() == w && f.weight.height() == h;
   double frame_max = 0;
+  const bool clip = !options_.region.isEmpty();
+  Eigen::AlignedBox3d reach = options_.region;
+  if (clip) {
+    const double band = options_.truncation_voxels * options_.voxel_size;
+    reach.min() -= Eigen::Vector3d::Constant(band);
+    reach.max() += Eigen::Vector3d::Constant(band);
+  }
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       float z = f.depth.at(0, y, x);
       if (!std::isfinite(z) || z <= 0 ||
           (has_weight && f.weight.at(0, y, x) < options_.weight_threshold))
+        z = 0;
+      if (z > 0 && clip &&
+          !reach.contains(f.camera.CameraToWorld(f.camera.PixelToRay(x + 0.5, y + 0.5) * z)))
         z = 0;
       frame_max = std::max<double>(frame_max, z);
       *depth.PointerAt<float>(x, y) = z;
@@ -110,11 +120,13 @@ Status TsdfIntegrator::Integrate(const DepthFrame& f) {
 
 namespace {
 
-// The triangles outside the largest edge-connected component (the largest by triangle count; of
-// equal ones, the one holding the lowest triangle index), as Open3D's ClusterConnectedTriangles
-// would choose, but by sorting the edges and a union-find instead of its hash map of edge lists
-// (0.4 s -> a few ms for 200k triangles).
-std::vector<bool> OutsideLargestComponent(const std::vector<Eigen::Vector3i>& triangles) {
+// The triangles outside the edge-connected components kept: the largest (by triangle count; of
+// equal ones, the one holding the lowest triangle index, as Open3D's ClusterConnectedTriangles
+// would choose) and, with min_share < 1, every other one of at least min_share of its size. By
+// sorting the edges and a union-find instead of Open3D's hash map of edge lists (0.4 s -> a few
+// ms for 200k triangles).
+std::vector<bool> OutsideKeptComponents(const std::vector<Eigen::Vector3i>& triangles,
+                                        double min_share) {
   const size_t n = triangles.size();
   std::vector<uint32_t> parent(n);
   for (size_t t = 0; t < n; ++t) parent[t] = static_cast<uint32_t>(t);
@@ -146,7 +158,10 @@ std::vector<bool> OutsideLargestComponent(const std::vector<Eigen::Vector3i>& tr
     if (size[t] > size[largest]) largest = static_cast<uint32_t>(t);
   }
   std::vector<bool> outside(n);
-  for (size_t t = 0; t < n; ++t) outside[t] = find(static_cast<uint32_t>(t)) != largest;
+  for (size_t t = 0; t < n; ++t) {
+    const uint32_t root = find(static_cast<uint32_t>(t));
+    outside[t] = root != largest && (min_share >= 1 || size[root] < min_share * size[largest]);
+  }
   return outside;
 }
 
@@ -158,8 +173,20 @@ Status TsdfIntegrator::Extract(TriangleMesh* mesh) {
   omp_set_num_threads(1);
   auto result = volume_->tsdf.ExtractTriangleMesh();
   omp_set_num_threads(threads);
+  if (!options_.region.isEmpty()) {
+    std::vector<bool> outside(result->triangles_.size());
+    for (size_t t = 0; t < outside.size(); ++t) {
+      for (int k = 0; k < 3; ++k) {
+        outside[t] =
+            outside[t] || !options_.region.contains(result->vertices_[result->triangles_[t][k]]);
+      }
+    }
+    result->RemoveTrianglesByMask(outside);
+    result->RemoveUnreferencedVertices();
+  }
   if (options_.keep_largest_component && !result->triangles_.empty()) {
-    result->RemoveTrianglesByMask(OutsideLargestComponent(result->triangles_));
+    result->RemoveTrianglesByMask(
+        OutsideKeptComponents(result->triangles_, options_.min_component_share));
     result->RemoveUnreferencedVertices();
   }
   result->ComputeVertexNormals();

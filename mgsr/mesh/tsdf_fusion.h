@@ -2,6 +2,7 @@
 // Open3D's ScalableTSDFVolume from Debian's libopen3d-dev.
 #pragma once
 
+#include <Eigen/Geometry>
 #include <memory>
 #include <vector>
 
@@ -27,6 +28,13 @@ struct TsdfOptions {
   double depth_max = 0;          // 0: beyond every depth in the frames
   float weight_threshold = 0.5f;
   bool keep_largest_component = false;  // drop floating fragments
+  // With keep_largest_component: also keep every other component of at least this share of the
+  // largest one's triangles (1: the largest alone). A scene's object need not touch its ground.
+  double min_component_share = 1.0;
+  // When not empty, what is meshed (fusion_region.h): depth whose point lies outside this box
+  // grown by the truncation band is not fused, and triangles with a vertex outside the box are
+  // removed before the clean-up (so the largest component is one inside it).
+  Eigen::AlignedBox3d region;
 };
 
 // The median over views of (distance from the camera to `center`) / focal length: one voxel per

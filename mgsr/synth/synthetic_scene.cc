@@ -225,10 +225,9 @@ Eigen::Vector3d SyntheticRenderer::ShadeHit(const RayHit& hit, const Eigen::Vect
   const SurfaceMaterial material = scene_.layout.materials[hit.triangle];
   if (material == SurfaceMaterial::kObject) {
     if (scene_.type == SceneType::kObject) {
-      return ShadeObject(shadows, p, caster_->ShadingNormal(hit), view_dir, light, options_,
-                         [&](const Eigen::Vector3d&, const Eigen::Vector3d& r) {
-                           return Environment(r, light);
-                         });
+      return ShadeObject(
+          shadows, p, caster_->ShadingNormal(hit), view_dir, light, options_,
+          [&](const Eigen::Vector3d&, const Eigen::Vector3d& r) { return Environment(r, light); });
     }
     // In a scene the mirror shows the scene: one bounce, the hit shaded without reflections.
     return ShadeObject(shadows, p, caster_->ShadingNormal(hit), view_dir, light, options_,
@@ -246,8 +245,8 @@ Eigen::Vector3d SyntheticRenderer::ShadeHit(const RayHit& hit, const Eigen::Vect
   return DirectLight(shadows, albedo, p, n, view_dir, light, 0.0, 1.0);
 }
 
-void SyntheticRenderer::Render(const Camera& cam, const ViewLight& light, Image* rgba,
-                               Image* depth, Image* normal) const {
+void SyntheticRenderer::Render(const Camera& cam, const ViewLight& light, Image* rgba, Image* depth,
+                               Image* normal) const {
   const int w = cam.width, h = cam.height, ss = options_.supersampling;
   const bool scene_level = scene_.type != SceneType::kObject;
   const double exposure = std::pow(2.0, light.exposure_stops);
@@ -363,8 +362,7 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
     const nlohmann::json region = {{"min", {lo.x(), lo.y(), lo.z()}},
                                    {"max", {hi.x(), hi.y(), hi.z()}},
                                    {"scene_type", o.scene_type}};
-    MGSR_RETURN_IF_ERROR(
-        WriteStringToFileAtomic(JoinPath(out, "gt/region.json"), region.dump(2)));
+    MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(JoinPath(out, "gt/region.json"), region.dump(2)));
   }
 
   // COLMAP model: one shared PINHOLE camera, every view, and surface points seen by >= 2 training
@@ -426,7 +424,8 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
       a = 1 - a;
       b = 1 - b;
     }
-    const Eigen::Vector3d X = mesh.vertices[f[0]] + a * (mesh.vertices[f[1]] - mesh.vertices[f[0]]) +
+    const Eigen::Vector3d X = mesh.vertices[f[0]] +
+                              a * (mesh.vertices[f[1]] - mesh.vertices[f[0]]) +
                               b * (mesh.vertices[f[2]] - mesh.vertices[f[0]]);
     ColmapPoint3D p;
     p.point3D_id = model.points.size() + 1;
@@ -453,10 +452,9 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
       continue;
     }
     const SurfaceMaterial material = s.layout.materials[picked];
-    const Eigen::Vector3d albedo = material == SurfaceMaterial::kObject ? Albedo(X)
-                                   : material == SurfaceMaterial::kGround
-                                       ? GroundAlbedo(X, s.type)
-                                       : WallAlbedo(X);
+    const Eigen::Vector3d albedo = material == SurfaceMaterial::kObject   ? Albedo(X)
+                                   : material == SurfaceMaterial::kGround ? GroundAlbedo(X, s.type)
+                                                                          : WallAlbedo(X);
     for (int k = 0; k < 3; ++k)
       p.rgb[k] = static_cast<uint8_t>(std::lround(255 * LinearToSrgb(albedo[k])));
     p.error = 0;

@@ -27,7 +27,7 @@ struct RayHit;
 struct SynthOptions {
   std::string scene_type = "object";  // object | outdoor | indoor (ParseSceneType)
   std::string shape = "sphere";       // see ShapeNames()
-  int detail = 1;                // mesh detail 0..2
+  int detail = 1;                     // mesh detail 0..2
   int num_views = 48;
   int width = 128, height = 128;
   double fov_x = 0.6911112;  // radians (as the shared suzanne scene)

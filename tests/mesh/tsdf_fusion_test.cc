@@ -110,6 +110,15 @@ TEST(TsdfFusionTest, KeepsOnlyTheLargestConnectedPiece) {
   EXPECT_EQ(kept_small, 0);
   EXPECT_EQ(largest.triangles.size(), static_cast<size_t>(kept_large));
   EXPECT_EQ(largest.vertices.size(), largest.vertex_colors.size());
+  // Small-cluster clean-up instead: pieces of at least a share of the largest stay (the small
+  // patch has about 4% of the large one's triangles).
+  TriangleMesh both, one;
+  options.min_component_share = 0.01;
+  ASSERT_TRUE(FuseDepthMaps({f}, options, &both).ok());
+  options.min_component_share = 0.1;
+  ASSERT_TRUE(FuseDepthMaps({f}, options, &one).ok());
+  EXPECT_EQ(count(both), count(all));
+  EXPECT_EQ(count(one), count(largest));
 }
 
 }  // namespace
