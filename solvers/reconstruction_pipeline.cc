@@ -439,6 +439,12 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   std::printf("budget: %s Gaussians, %s surfels (%s), density: %s\n",
               budget_text(options.max_gaussians).c_str(), budget_text(options.max_surfels).c_str(),
               budget_why.c_str(), options.density.c_str());
+  // The mesh's region, from the cameras unless given.
+  SurfaceOptions surface = o.surface;
+  std::string region_note;
+  s = ResolveMeshRegion(o.mesh_region, scene, &surface, &region_note);
+  if (!s.ok()) return fail(s.message());
+  std::printf("mesh region: %s\n", region_note.c_str());
   s = options.Validate();
   if (!s.ok()) return fail(s.message());
 
@@ -636,7 +642,6 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   // colour).
   if (stop_requested_) return stop_writing();
   Timer mesh_timer;
-  const SurfaceOptions& surface = o.surface;
   TriangleMesh mesh;
   ProgressMeter mesh_progress("meshing", "views fused", 3.0, [](const std::string& line) {
     std::printf("%s\n", line.c_str());
@@ -703,6 +708,7 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
         {"triangles", mesh.triangles.size()},
         {"resolution_scale", surface.resolution_scale},
         {"voxel_size", SurfaceTsdfOptions(scene, surface).voxel_size},
+        {"region", region_note},
         {"pixel_footprint", TrainingFootprint(scene)}}}};
   if (!colmap_metrics.is_null()) metrics["colmap"] = colmap_metrics;
   if (o.profile) metrics["profile"] = ProfileToJson(summary.profile);

@@ -58,8 +58,10 @@ struct ReconstructionOptions {
   std::string budget;
   int64_t max_gaussians = -1, max_surfels = -1;
 
-  // The mesh.
+  // The mesh. `mesh_region` resolves surface.region once the scene is read (ResolveMeshRegion):
+  // "auto", "none", a box "x0,y0,z0,x1,y1,z1" or a region file.
   SurfaceOptions surface;
+  std::string mesh_region = "auto";
   // Formats of the 3DGS model: "ply" (point_cloud_3d.ply, with the reflection attributes),
   // "splat", "spz" (splat_formats.h); ParseExportFormats checks the list.
   std::vector<std::string> export_formats = {"ply"};

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "mgsr/mesh/exact_depth_ceiling.h"
+#include "mgsr/mesh/fusion_region.h"
 #include "mgsr/synth/ray_caster.h"
 #include "solvers/trained_views.h"
 
@@ -60,7 +61,33 @@ TsdfOptions SurfaceTsdfOptions(const Scene& scene, const SurfaceOptions& options
   // keep it in training footprints.
   t.truncation_voxels = options.truncation_voxels * footprint / t.voxel_size;
   t.keep_largest_component = options.keep_largest_component;
+  t.region = options.region;
+  t.min_component_share = options.min_component_share;
   return t;
+}
+
+Status ResolveMeshRegion(const std::string& spec, const Scene& scene, SurfaceOptions* options,
+                         std::string* note) {
+  options->region.setEmpty();
+  if (spec == "auto") {
+    std::vector<Camera> cameras;
+    for (int i : scene.TrainIndices()) cameras.push_back(scene.views[i].camera);
+    options->region = RegionFromCameras(cameras);
+    *note = options->region.isEmpty()
+                ? "auto: the training cameras share no view; everything the depth reaches"
+                : "auto (where half the training cameras' frusta meet): " +
+                      RegionToString(options->region);
+  } else if (spec == "none" || spec.empty()) {
+    *note = "none: everything the depth reaches";
+  } else {
+    const Status s = ParseRegion(spec, &options->region);
+    if (!s.ok()) return Status::Error("--mesh_region: " + s.message());
+    *note = "given: " + RegionToString(options->region);
+  }
+  options->min_component_share = scene.has_masks() ? 1.0 : 0.02;
+  *note += scene.has_masks() ? "; clean-up: the largest piece"
+                             : "; clean-up: pieces of at least 2% of the largest (no masks)";
+  return Status::Ok();
 }
 
 Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_options,

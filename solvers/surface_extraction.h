@@ -5,7 +5,9 @@
 // cameras and settings, and signed depth diagnostics against a ground-truth mesh.
 #pragma once
 
+#include <Eigen/Geometry>
 #include <functional>
+#include <string>
 
 #include "mgsr/core/status.h"
 #include "mgsr/core/triangle_mesh.h"
@@ -26,7 +28,18 @@ struct SurfaceOptions {
   double voxel_size = 0;         // 0: the pixel footprint at the object / resolution_scale
   double truncation_voxels = 4;  // at resolution_scale 1; kept in scene units at finer scales
   bool keep_largest_component = true;
+  // What is meshed (fusion_region.h): empty for everything the depth reaches. With it, the
+  // clean-up keeps components of at least min_component_share of the largest (see TsdfOptions).
+  Eigen::AlignedBox3d region;
+  double min_component_share = 1.0;
 };
+
+// Sets options->region and the clean-up from `spec`: "auto" (RegionFromCameras over the training
+// cameras), "none", or a box / region file (ParseRegion). Without masks, components of at least 2%
+// of the largest stay (a scene's object need not touch its ground); with masks the largest alone,
+// as ever. `note` says what was chosen, for the log and metrics.json.
+Status ResolveMeshRegion(const std::string& spec, const Scene& scene, SurfaceOptions* options,
+                         std::string* note);
 
 // The scene units one training pixel covers at the object (median over the training cameras,
 // at the point their optical axes meet).

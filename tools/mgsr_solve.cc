@@ -149,6 +149,11 @@ DEFINE_int32(mesh_resolution_scale, 1,
              "Render the depth for fusion at this many times the training resolution (the voxel "
              "follows the finer footprint).");
 DEFINE_double(tsdf_truncation, 4, "TSDF truncation band in training pixel footprints.");
+DEFINE_string(mesh_region, "auto",
+              "What the mesh covers: auto (where half the training cameras' view frusta meet; "
+              "far background and sky stay out), none (everything the depth reaches), a box "
+              "x0,y0,z0,x1,y1,z1, or a JSON file with \"min\" and \"max\" (mgsr_synth's "
+              "gt/region.json).");
 DEFINE_int32(checkpoint_every, 500,
              "Write OUTPUT/checkpoints/latest.ckpt every N iterations (0: only on Ctrl-C).");
 DEFINE_bool(resume, false,
@@ -228,7 +233,8 @@ int main(int argc, char** argv) {
          "max_surfels", "surfel_low_pass", "surfel_filter_sigma", "surfel_init"}},
        {"Models", {"export"}},
        {"Mesh",
-        {"mesh_depth", "mesh_color", "voxel_size", "mesh_resolution_scale", "tsdf_truncation"}}},
+        {"mesh_depth", "mesh_color", "voxel_size", "mesh_resolution_scale", "tsdf_truncation",
+         "mesh_region"}}},
       &argc, &argv);
   const bool listing = FLAGS_list_losses;  // needs no scene
   mgsr::ReconstructionOptions ro;
@@ -317,6 +323,7 @@ int main(int argc, char** argv) {
   ro.surface.surfel_color = FLAGS_mesh_color == "surfel";
   ro.surface.voxel_size = FLAGS_voxel_size;
   ro.surface.truncation_voxels = FLAGS_tsdf_truncation;
+  ro.mesh_region = FLAGS_mesh_region;
   ro.checkpoint_every = FLAGS_checkpoint_every;
   ro.log_every = FLAGS_log_every;
   ro.eval_every = FLAGS_eval_every;
