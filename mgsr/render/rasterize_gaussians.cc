@@ -390,7 +390,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
   const int threads = omp_get_max_threads();
   EnsureScratch(scratch, threads);
   const bool refl = o.reflection;
-  const float bg[3] = {o.background[0], o.background[1], o.background[2]};
+  const Image* bg_image = o.background_image;
   PackGaussians(p, refl, &scratch->packed);
   const float* packed = scratch->packed.data();
   // Per tile entry: the entry's summed blend weights (only when recording contributions).
@@ -442,7 +442,8 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
         const float ct[3] = {st[aCt0][k], st[aCt1][k], st[aCt2][k]},
                     cr[3] = {st[aCr0][k], st[aCr1][k], st[aCr2][k]};
         for (int c = 0; c < 3; ++c) {
-          const float tran = ct[c] + T * bg[c];
+          const float bg = bg_image != nullptr ? bg_image->plane(c)[pix] : o.background[c];
+          const float tran = ct[c] + T * bg;
           out->tran.plane(c)[pix] = tran;
           out->ref.plane(c)[pix] = cr[c];
           out->color.plane(c)[pix] = tran + st[aWs][k] * cr[c];
@@ -465,6 +466,20 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
   }
 }
 
+void GaussianBackgroundGradient(const GaussianRender& r, const GaussianRenderGrad& g,
+                                Image* d_background) {
+  const int W = r.color.width(), H = r.color.height();
+  EnsureImage(d_background, W, H, 3);
+  const size_t np = static_cast<size_t>(W) * H;
+  for (int c = 0; c < 3; ++c) {
+    float* out = d_background->plane(c);
+    const float* gc = g.color.empty() ? nullptr : g.color.plane(c);
+    const float* gt = g.tran.empty() ? nullptr : g.tran.plane(c);
+    for (size_t i = 0; i < np; ++i)
+      out[i] = r.final_t[i] * ((gc != nullptr ? gc[i] : 0.0f) + (gt != nullptr ? gt[i] : 0.0f));
+  }
+}
+
 void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bins,
                                 const GaussianRenderOptions& o, const GaussianRender& r,
                                 const GaussianRenderGrad& g, ProjectedGaussiansGrad* d,
@@ -474,7 +489,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
   const int threads = omp_get_max_threads();
   EnsureScratch(scratch, threads);
   const bool refl = o.reflection;
-  const float bg[3] = {o.background[0], o.background[1], o.background[2]};
+  const Image* bg_image = o.background_image;
   PackGaussians(p, refl, &scratch->packed);
   const float* packed = scratch->packed.data();
 
@@ -524,7 +539,10 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
             a_grad -= gD * r.depth_sum[pix] / (A * A);
           }
           // The background and A terms share d T_N / d a_i = -T_N / (1 - a_i).
-          st[bGA][k] = a_grad - (bg[0] * gtc[0] + bg[1] * gtc[1] + bg[2] * gtc[2]);
+          float bg_dot = 0;
+          for (int c = 0; c < 3; ++c)
+            bg_dot += (bg_image != nullptr ? bg_image->plane(c)[pix] : o.background[c]) * gtc[c];
+          st[bGA][k] = a_grad - bg_dot;
           st[bGN][k] = n_grad;
           st[bT][k] = st[bTfin][k] = r.final_t[pix];
           st[bTr][k] = r.final_tr[pix];

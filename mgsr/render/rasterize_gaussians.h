@@ -37,6 +37,9 @@ struct GaussianRenderOptions {
   int sh_degree = 3;
   bool reflection = true;  // false: plain 3DGS (C = C_tran; C_ref and W are zero)
   float background[3] = {0, 0, 0};
+  // When set (3 channels, the camera's size): a background per pixel instead of `background`, e.g.
+  // a learnt environment (solvers/environment_background.h). Not owned.
+  const Image* background_image = nullptr;
   // Also sum each Gaussian's blend weights over the image (GaussianRender::contribution): what
   // pruning by contribution reads. Off in training steps (it costs a reduction per row).
   bool record_contribution = false;
@@ -62,6 +65,11 @@ struct GaussianRenderGrad {
 void RasterizeGaussians(const ProjectedGaussians& projected, const TileBins& bins,
                         const GaussianRenderOptions& options, GaussianRender* out,
                         RasterScratch* scratch);
+
+// d loss / d (the background of each pixel), 3 channels: the transmitted colour and the colour
+// both hold T_N * background, so it is T_N * (gradient of colour + gradient of tran).
+void GaussianBackgroundGradient(const GaussianRender& render, const GaussianRenderGrad& grad,
+                                Image* d_background);
 
 // Adds d loss / d projected quantities into `d_projected` (sized by the caller).
 void RasterizeGaussiansBackward(const ProjectedGaussians& projected, const TileBins& bins,

@@ -448,7 +448,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   out->median_index.resize(npix);
   const int threads = omp_get_max_threads();
   EnsureScratch(scratch, threads);
-  const float bg[3] = {o.background[0], o.background[1], o.background[2]};
+  const Image* bg_image = o.background_image;
   const Eigen::Matrix3f Rt = o.camera.R.transpose().cast<float>();
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
@@ -499,7 +499,8 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
         const Eigen::Vector3f nv(st[aN0][k], st[aN1][k], st[aN2][k]);
         const Eigen::Vector3f nw = Rt * nv;
         for (int c = 0; c < 3; ++c) {
-          out->color.plane(c)[pix] = cs[c] + T * bg[c];
+          out->color.plane(c)[pix] =
+              cs[c] + T * (bg_image != nullptr ? bg_image->plane(c)[pix] : o.background[c]);
           out->normal.plane(c)[pix] = nv[c];
           out->normal_world.plane(c)[pix] = nw[c];
         }
@@ -528,6 +529,18 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   }
 }
 
+void SurfelBackgroundGradient(const SurfelRender& r, const SurfelRenderGrad& g,
+                              Image* d_background) {
+  const int W = r.color.width(), H = r.color.height();
+  EnsureImage(d_background, W, H, 3);
+  const size_t np = static_cast<size_t>(W) * H;
+  for (int c = 0; c < 3; ++c) {
+    float* out = d_background->plane(c);
+    const float* gc = g.color.empty() ? nullptr : g.color.plane(c);
+    for (size_t i = 0; i < np; ++i) out[i] = gc != nullptr ? r.final_t[i] * gc[i] : 0.0f;
+  }
+}
+
 void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
                               const SurfelRenderOptions& o, const SurfelRender& r,
                               const SurfelRenderGrad& g, ProjectedSurfelsGrad* d,
@@ -536,7 +549,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
   const size_t num = p.size();
   const int threads = omp_get_max_threads();
   EnsureScratch(scratch, threads);
-  const float bg[3] = {o.background[0], o.background[1], o.background[2]};
+  const Image* bg_image = o.background_image;
   const Eigen::Matrix3f Rc = o.camera.R.cast<float>();
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
@@ -592,7 +605,10 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
           }
           st[bGDs][k] = ds_grad;
           // The background and A terms share d T_N / d a_i = -T_N / (1 - a_i).
-          st[bGA][k] = a_grad - (bg[0] * gc[0] + bg[1] * gc[1] + bg[2] * gc[2]);
+          float bg_dot = 0;
+          for (int c = 0; c < 3; ++c)
+            bg_dot += (bg_image != nullptr ? bg_image->plane(c)[pix] : o.background[c]) * gc[c];
+          st[bGA][k] = a_grad - bg_dot;
           st[bGZmed][k] = g.median_depth.empty() ? 0.0f : g.median_depth.plane(0)[pix];
           st[bGDist][k] = g.distortion.empty() ? 0.0f : g.distortion.plane(0)[pix];
           st[bT][k] = st[bTfin][k] = r.final_t[pix];

@@ -41,6 +41,9 @@ struct SurfelRenderOptions {
   Camera camera;
   int sh_degree = 3;
   float background[3] = {0, 0, 0};
+  // When set (3 channels, the camera's size): a background per pixel instead of `background`.
+  // Not owned.
+  const Image* background_image = nullptr;
   SurfelLowPass low_pass = SurfelLowPass::kReference;
   // The screen low-pass Gaussian's sigma in pixels (rho2d = |m - pixel|^2 / sigma^2). Smaller
   // dilates silhouettes less: every footprint is at least this wide, so an edge-on disk at a
@@ -78,6 +81,10 @@ struct SurfelRenderGrad {
 void RasterizeSurfels(const ProjectedSurfels& projected, const TileBins& bins,
                       const SurfelRenderOptions& options, SurfelRender* out,
                       RasterScratch* scratch);
+
+// d loss / d (the background of each pixel), 3 channels: T_N * (gradient of colour).
+void SurfelBackgroundGradient(const SurfelRender& render, const SurfelRenderGrad& grad,
+                              Image* d_background);
 
 void RasterizeSurfelsBackward(const ProjectedSurfels& projected, const TileBins& bins,
                               const SurfelRenderOptions& options, const SurfelRender& render,

@@ -185,6 +185,77 @@ TEST(GaussianRendererGradientTest, AllParametersAllOutputsMatchNumericDifferenti
   }
 }
 
+// A background per pixel (a learnt environment): the render matches the reference, the Gaussians'
+// gradients still match numeric differentiation, and d loss / d background is T_N times the
+// colour and transmitted gradients (GaussianBackgroundGradient), checked numerically too.
+TEST(GaussianRendererGradientTest, PerPixelBackgroundMatchesNumericDifferentiation) {
+  const Camera cam = testing::RenderTestCamera();
+  const GaussianModel m = RandomScene(8, 11, 0.1, 0.3);
+  const size_t np = static_cast<size_t>(cam.width) * cam.height;
+  Rng rng(7);
+  Image background(cam.width, cam.height, 3);
+  for (size_t i = 0; i < background.size(); ++i)
+    background.data()[i] = static_cast<float>(rng.Uniform(0, 1));
+  std::vector<double> bg_d(background.data(), background.data() + background.size());
+  GaussianRenderOptions o = Options(cam);
+  o.background_image = &background;
+  const double unused[3] = {0, 0, 0};
+  GaussianRenderer renderer;
+  GaussianRender out;
+  renderer.Forward(m, o, &out);
+  const testing::GaussianModelD base(m);
+  const auto ref = testing::RenderGaussiansReference(base, cam, 3, true, unused, &bg_d);
+  for (size_t i = 0; i < 3 * np; ++i) {
+    ASSERT_NEAR(out.color.data()[i], ref.color[i], 1e-4) << i;
+    ASSERT_NEAR(out.tran.data()[i], ref.tran[i], 1e-4) << i;
+  }
+  GaussianRenderGrad grad;
+  grad.color = Image(cam.width, cam.height, 3);
+  grad.tran = Image(cam.width, cam.height, 3);
+  for (Image* g : {&grad.color, &grad.tran}) {
+    for (size_t i = 0; i < g->size(); ++i) g->data()[i] = static_cast<float>(rng.Uniform(-1, 1));
+  }
+  auto loss = [&](const testing::GaussianModelD& md, const std::vector<double>& bg) {
+    const auto r = testing::RenderGaussiansReference(md, cam, 3, true, unused, &bg);
+    double l = 0;
+    for (size_t i = 0; i < 3 * np; ++i)
+      l += grad.color.data()[i] * r.color[i] + grad.tran.data()[i] * r.tran[i];
+    return l;
+  };
+  GaussianGradients analytic;
+  renderer.Backward(m, o, out, grad, &analytic);
+  testing::GaussianModelD md = base;
+  int checked = 0;
+  for (size_t k = 0; k < md.opacity_logits.size(); ++k) {
+    const double h = 1e-6, keep = md.opacity_logits[k];
+    md.opacity_logits[k] = keep + h;
+    const double lp = loss(md, bg_d);
+    md.opacity_logits[k] = keep - h;
+    const double lm = loss(md, bg_d);
+    md.opacity_logits[k] = keep;
+    const double n = (lp - lm) / (2 * h);
+    EXPECT_NEAR(analytic.params.opacity_logits[k], n, 1e-3 * std::abs(n) + 1e-5) << k;
+    checked += std::abs(n) > 1e-3;
+  }
+  EXPECT_GT(checked, 2);
+  // d / d background at every 7th value (all channels of many pixels).
+  Image d_background;
+  GaussianBackgroundGradient(out, grad, &d_background);
+  double largest = 0;
+  for (size_t i = 0; i < bg_d.size(); i += 7) {
+    const double h = 1e-6, keep = bg_d[i];
+    bg_d[i] = keep + h;
+    const double lp = loss(base, bg_d);
+    bg_d[i] = keep - h;
+    const double lm = loss(base, bg_d);
+    bg_d[i] = keep;
+    const double n = (lp - lm) / (2 * h);
+    EXPECT_NEAR(d_background.data()[i], n, 1e-4 * std::abs(n) + 1e-6) << i;
+    largest = std::max(largest, std::abs(n));
+  }
+  EXPECT_GT(largest, 0.5);  // the background shows somewhere
+}
+
 TEST(GaussianRendererEdgeCaseTest, EmptyBehindWholeImageAndDegenerate) {
   const Camera cam = testing::RenderTestCamera(32, 32);
   const GaussianRenderOptions o = Options(cam);

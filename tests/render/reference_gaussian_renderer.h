@@ -70,9 +70,9 @@ inline void ReferenceShColor(int degree, const Scalar* sh, const Eigen::Vector3d
 
 // Works on GaussianModel (float) and on the double copy below.
 template <typename Model>
-inline ReferenceGaussianRender RenderGaussiansReference(const Model& m, const Camera& cam,
-                                                        int sh_degree, bool reflection,
-                                                        const double bg[3]) {
+inline ReferenceGaussianRender RenderGaussiansReference(
+    const Model& m, const Camera& cam, int sh_degree, bool reflection, const double bg[3],
+    const std::vector<double>* bg_image = nullptr) {
   struct Splat {
     double u, v, a, b, c, radius, z, o, ro, beta, ct[3], cr[3];
   };
@@ -172,7 +172,7 @@ inline ReferenceGaussianRender RenderGaussiansReference(const Model& m, const Ca
       const size_t p = static_cast<size_t>(y) * cam.width + x;
       const double A = 1 - T;
       for (int c = 0; c < 3; ++c) {
-        r.tran[c * np + p] = Ct[c] + T * bg[c];
+        r.tran[c * np + p] = Ct[c] + T * (bg_image != nullptr ? (*bg_image)[c * np + p] : bg[c]);
         r.ref[c * np + p] = Cr[c];
         r.color[c * np + p] = r.tran[c * np + p] + W * Cr[c];
       }

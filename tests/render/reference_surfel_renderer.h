@@ -38,7 +38,8 @@ struct ReferenceSurfelRender {
 template <typename Model>
 ReferenceSurfelRender RenderSurfelsReference(const Model& m, const Camera& cam, int sh_degree,
                                              const double bg[3], bool area_preserving,
-                                             double filter_sigma = 0.70710678118654752) {
+                                             double filter_sigma = 0.70710678118654752,
+                                             const std::vector<double>* bg_image = nullptr) {
   const double inv_square = 1 / (filter_sigma * filter_sigma);
   struct S {
     Eigen::Matrix3d M;  // rows T_u, T_v, T_w
@@ -139,7 +140,7 @@ ReferenceSurfelRender RenderSurfelsReference(const Model& m, const Camera& cam, 
       const size_t q = static_cast<size_t>(y) * cam.width + x;
       const Eigen::Vector3d Nw = cam.R.transpose() * N;
       for (int c = 0; c < 3; ++c) {
-        r.color[c * np + q] = C[c] + T * bg[c];
+        r.color[c * np + q] = C[c] + T * (bg_image != nullptr ? (*bg_image)[c * np + q] : bg[c]);
         r.normal[c * np + q] = N[c];
         r.normal_world[c * np + q] = Nw[c];
       }
