@@ -26,6 +26,8 @@ BranchTrainer::BranchTrainer(Branch branch, const BranchTrainerOptions& options,
   density_ = DensityStrategyRegistry::Get().Create(options.density_strategy, context,
                                                    options.density_config, &status);
   CHECK(density_ != nullptr) << BranchLabel(branch) << ": " << status.message();
+  if (options.environment)
+    environment_ = std::make_unique<EnvironmentBackground>(options.environment_options);
 }
 
 void BranchTrainer::BindRows(std::vector<ParamBlock> params) {
@@ -128,6 +130,7 @@ void BranchTrainer::Save(BinaryWriter* w) const {
   SaveModel(w);
   WriteAdamState(w, adam_);
   density_->Save(w);
+  if (environment_ != nullptr) environment_->Save(w);
 }
 
 Status BranchTrainer::Read(BinaryReader* r) {
@@ -146,6 +149,7 @@ Status BranchTrainer::Read(BinaryReader* r) {
   MGSR_RETURN_IF_ERROR(ReadModel(r));
   MGSR_RETURN_IF_ERROR(ReadAdamState(r, &p.adam));
   MGSR_RETURN_IF_ERROR(density_->Read(r));
+  if (environment_ != nullptr) MGSR_RETURN_IF_ERROR(environment_->Read(r));
   pending_ = std::move(p);
   return Status::Ok();
 }
@@ -154,6 +158,7 @@ void BranchTrainer::CommitRead() {
   CommitModel();
   adam_ = std::move(pending_.adam);
   density_->CommitRead();
+  if (environment_ != nullptr) environment_->CommitRead();
   auto_stop_.set_window(pending_.window);
   summary_ = pending_.summary;
   pending_ = Pending();

@@ -38,6 +38,7 @@
 #include "solvers/checkpoint_io.h"
 #include "solvers/density_control.h"
 #include "solvers/density_strategy.h"
+#include "solvers/environment_background.h"
 #include "solvers/exposure_model.h"
 #include "solvers/loss_table.h"
 #include "solvers/solver_options.h"
@@ -76,7 +77,19 @@ struct BranchTrainerOptions {
   double auto_stop_range = 0.01;
   // The step of the per-view colour transform behind the branch's exposure rows.
   double exposure_lr = 0, exposure_prior = 0, exposure_offset_prior = 0, exposure_mean_prior = 0;
+  // A learnt background per viewing direction behind the branch's renders (instead of the grey
+  // `background`), for primitive types whose render options take one (kLearntBackground).
+  bool environment = false;
+  EnvironmentOptions environment_options;
 };
+
+// Whether a primitive type's renders take a background image (P::kLearntBackground, with
+// P::BackgroundGradient); a type without it renders on its constant background.
+template <typename P, typename = void>
+struct HasLearntBackground : std::false_type {};
+template <typename P>
+struct HasLearntBackground<P, std::void_t<decltype(P::kLearntBackground)>>
+    : std::integral_constant<bool, P::kLearntBackground> {};
 
 class BranchTrainer {
  public:
@@ -120,6 +133,8 @@ class BranchTrainer {
   bool UpdateAutoStop(int iteration, double loss) { return auto_stop_.Update(iteration, loss); }
   BranchSummary& summary() { return summary_; }
   const BranchSummary& summary() const { return summary_; }
+  // The learnt background (options.environment), or null.
+  const EnvironmentBackground* environment() const { return environment_.get(); }
 
   // --- Supervising the other branch.
   // Renders the view with the current parameters into a render the trainer keeps until its next
@@ -184,8 +199,9 @@ class BranchTrainer {
   int sh_degree_ = 0;
   Adam adam_;
   std::unique_ptr<DensityStrategy> density_;
-  Status step_error_;            // of the last step
-  std::string nonfinite_block_;  // of the last step
+  std::unique_ptr<EnvironmentBackground> environment_;  // with options.environment
+  Status step_error_;                                   // of the last step
+  std::string nonfinite_block_;                         // of the last step
 
  private:
   struct StageProblem {
@@ -248,12 +264,12 @@ class PrimitiveTrainer : public BranchTrainer {
     return &model_;
   }
 
-  typename P::RenderOptions RenderOptionsFor(const Camera& camera) const {
-    typename P::RenderOptions o = render_options_;
-    o.camera = camera;
-    o.sh_degree = sh_degree_;
-    return o;
+  // With a learnt background, the options point at this view's background, rendered into
+  // storage the trainer keeps until its next RenderOptionsFor.
+  typename P::RenderOptions RenderOptionsFor(const Camera& camera) {
+    return OptionsFor(camera, &render_background_);
   }
+
   // A render of the trained model (outputs, evaluation).
   void Render(const Camera& camera, typename P::Render* out) {
     Render(RenderOptionsFor(camera), out);
@@ -269,7 +285,7 @@ class PrimitiveTrainer : public BranchTrainer {
     ProfileContext context(name());
     // The render, its gradients and the parameter gradients are members: after the first steps
     // have sized them, a step allocates nothing.
-    step_options_ = RenderOptionsFor(camera);
+    step_options_ = OptionsFor(camera, &step_background_);
     // A mutual iteration's teacher render is often this very render: the branch supervised the
     // other one on this view and has not changed since (joint mode, 3DGS). Then the renderer
     // still holds its forward state and the step reuses it (the same bytes a new forward gives).
@@ -289,12 +305,14 @@ class PrimitiveTrainer : public BranchTrainer {
     renderer_.Backward(model_, step_options_, render, step_render_grad_, &grads_);
     nonfinite_block_ = OptimizeAndControlDensity(camera, grads_.mean2d, P::Radii(renderer_),
                                                  GradientBlocks(), iteration);
+    const std::string background = StepBackground(camera, render);
+    if (nonfinite_block_.empty()) nonfinite_block_ = background;
     return loss;
   }
 
   RenderBuffers Hold(const Camera& camera) override {
     ProfileContext context(name());
-    held_options_ = RenderOptionsFor(camera);
+    held_options_ = OptionsFor(camera, &held_background_);
     renderer_.Forward(model_, held_options_, &held_);
     held_current_ = held_is_current_model_ = true;
     return P::Buffers(held_options_.camera, held_);
@@ -312,6 +330,7 @@ class PrimitiveTrainer : public BranchTrainer {
     held_is_current_model_ = false;  // the step below changes the model
     ProfileScope scope("adam");
     adam_.Step(rows_->blocks(), GradientBlocks(), RatesAt(iteration));
+    StepBackground(held_options_.camera, held_);
     return Status::Ok();
   }
 
@@ -366,6 +385,33 @@ class PrimitiveTrainer : public BranchTrainer {
   }
 
  private:
+  typename P::RenderOptions OptionsFor(const Camera& camera, Image* background) {
+    typename P::RenderOptions o = render_options_;
+    o.camera = camera;
+    o.sh_degree = sh_degree_;
+    if constexpr (HasLearntBackground<P>::value) {
+      if (environment_ != nullptr) {
+        environment_->Render(camera, background);
+        o.background_image = background;
+      }
+    }
+    return o;
+  }
+  // One step of the learnt background from the gradient the last backward pass left in
+  // step_render_grad_; the name of a non-finite block or "".
+  std::string StepBackground(const Camera& camera, const typename P::Render& render) {
+    if constexpr (HasLearntBackground<P>::value) {
+      if (environment_ != nullptr) {
+        ProfileScope scope("environment");
+        P::BackgroundGradient(render, step_render_grad_, &background_grad_);
+        return environment_->Step(camera, background_grad_);
+      }
+    }
+    (void)camera;
+    (void)render;
+    return "";
+  }
+
   // The parameter gradients' blocks, bound once the gradients have the model's layout.
   const std::vector<ParamBlock>& GradientBlocks() {
     if (gradient_blocks_.empty()) gradient_blocks_ = grads_.params.Blocks();
@@ -380,6 +426,8 @@ class PrimitiveTrainer : public BranchTrainer {
   typename P::RenderGrad step_render_grad_;
   typename P::Gradients grads_;
   std::vector<ParamBlock> gradient_blocks_;
+  // The learnt background of the step's, the held and other renders, and its gradient.
+  Image step_background_, held_background_, render_background_, background_grad_;
   // held_current_: the renderer still holds the forward state of held_ (BackpropHeld may run);
   // held_is_current_model_: and the model has not changed since (a step may reuse held_).
   bool held_current_ = false;

@@ -191,6 +191,7 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   common.exposure_prior = options.exposure_prior;
   common.exposure_offset_prior = options.exposure_offset_prior;
   common.exposure_mean_prior = options.exposure_mean_prior;
+  common.environment = options.environment;
 
   BranchTrainerOptions o2 = common;
   o2.schedule = options.schedule_2d;

@@ -131,6 +131,10 @@ class MutualBoostedSolver {
   GaussianModel* mutable_gaussians() { return gaussians_->mutable_model(); }
   SurfelModel* mutable_surfels() { return surfels_->mutable_model(); }
   int active_sh_degree() const { return sh_degree_; }
+  // A branch's learnt background (SolverOptions::environment), or null.
+  const EnvironmentBackground* environment(Branch branch) const {
+    return trainer(branch).environment();
+  }
   // Per-view colour transforms (indexed like scene.views; identity for test views).
   const ExposureModel& exposure(Branch branch) const { return trainer(branch).exposure(); }
 

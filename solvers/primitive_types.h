@@ -30,6 +30,10 @@ struct SurfelPrimitive : ProjectedPrimitive<SurfelModel, SurfelRenderer> {
   using RenderGrad = SurfelRenderGrad;
   using Gradients = SurfelGradients;
   static constexpr Branch kBranch = Branch::kSurfels2D;
+  static constexpr bool kLearntBackground = true;
+  static void BackgroundGradient(const Render& r, const RenderGrad& g, Image* d_background) {
+    SurfelBackgroundGradient(r, g, d_background);
+  }
   // Flat disks: two scale axes; the opacity reset caps the opacity at 0.01.
   static PrimitiveLayout Layout();
 
@@ -43,6 +47,10 @@ struct GaussianPrimitive : ProjectedPrimitive<GaussianModel, GaussianRenderer> {
   using RenderGrad = GaussianRenderGrad;
   using Gradients = GaussianGradients;
   static constexpr Branch kBranch = Branch::kGaussians3D;
+  static constexpr bool kLearntBackground = true;
+  static void BackgroundGradient(const Render& r, const RenderGrad& g, Image* d_background) {
+    GaussianBackgroundGradient(r, g, d_background);
+  }
   // Three scale axes; the reflected opacity follows the primitive's; the opacity reset caps both
   // opacities at 0.01 and beta at 0.1 (reference 1.10).
   static PrimitiveLayout Layout();

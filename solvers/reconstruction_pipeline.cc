@@ -257,11 +257,22 @@ std::string ChooseBackground(const std::string& flag, double level, const Scene&
     o->background_2d = o->background_3d = static_cast<float>(level);
     return "grey " + flag + " (both branches, --background)";
   }
+  const std::string environment =
+      "learnt per viewing direction (a 64x32 environment map per branch)";
+  if (flag == "env") {
+    o->environment = true;
+    return environment + ", --background env";
+  }
   if (flag == "auto") {
     const Backdrop b = EstimateBackdrop(scene);
     if (b.uniform) {
       o->background_2d = o->background_3d = b.level;
       return "the photos' uniform backdrop, grey " + std::to_string(b.level) + " (both branches)";
+    }
+    if (!ForegroundKnown(scene)) {
+      // No masks and a backdrop that varies: a scene in the world (sky, ground, walls).
+      o->environment = true;
+      return environment + ": no masks and " + b.reason;
     }
     return "reference (2DGS white, 3DGS black): " + b.reason;
   }
@@ -272,12 +283,13 @@ std::string ChooseBackground(const std::string& flag, double level, const Scene&
 
 Status ParseBackground(const std::string& background, double* level) {
   *level = -1;
-  if (background == "auto" || background == "reference") return Status::Ok();
+  if (background == "auto" || background == "reference" || background == "env") return Status::Ok();
   char* end = nullptr;
   const double v = std::strtod(background.c_str(), &end);
   if (end == background.c_str() || *end != '\0' || !(v >= 0 && v <= 1)) {
-    return Status::Error("--background must be auto, reference or a grey level in [0, 1], not '" +
-                         background + "'");
+    return Status::Error(
+        "--background must be auto, reference, env or a grey level in [0, 1], not '" + background +
+        "'");
   }
   *level = v;
   return Status::Ok();

@@ -168,6 +168,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"sh_interval", Text(sh_interval)},
           {"background_2d", Text(background_2d)},
           {"background_3d", Text(background_3d)},
+          {"environment", Text(environment)},
           {"surfel_area_preserving_low_pass", Text(surfel_area_preserving_low_pass)},
           {"surfel_filter_sigma", Text(surfel_filter_sigma)},
           {"surfel_orientation_from_points", Text(surfel_orientation_from_points)},

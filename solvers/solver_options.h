@@ -95,6 +95,10 @@ struct SolverOptions {
   // them both are set to the backdrop's level (solvers/backdrop.h) and empty space needs no
   // primitives.
   float background_2d = 1.0f, background_3d = 0.0f;
+  // Instead: each branch learns a background per viewing direction
+  // (solvers/environment_background.h) for what no primitive covers, the sky and far background of
+  // a scene-level capture.
+  bool environment = false;
   // The 2DGS screen low-pass floor (mgsr/render/rasterize_surfels.h): the reference's
   // full-opacity one, or area-preserving (edge-on and sub-pixel surfels do not dilate silhouettes),
   // and its sigma in pixels: the reference's sqrt(2)/2, or by default 0.29, the spread of the

@@ -122,9 +122,10 @@ DEFINE_bool(exposure_fit, true,
             "Re-fit every view's transform with Ceres (Huber) when the mutual stage starts.");
 DEFINE_string(
     background, "auto",
-    "Grey level the branches render on: auto (masked photos: 2DGS white, 3DGS black as in "
-    "the reference; photos without masks: their backdrop's grey when it is uniform), "
-    "reference, or a level in [0, 1] for both branches.");
+    "What the branches render on: auto (masked photos: 2DGS white, 3DGS black as in the "
+    "reference; photos without masks: their backdrop's grey when it is uniform, else env), "
+    "reference, env (a background per viewing direction, learnt: sky and far background of a "
+    "scene), or a grey level in [0, 1] for both branches.");
 DEFINE_int32(auto_stop_window, -1, "Auto-stop window in iterations (-1: preset).");
 DEFINE_double(auto_stop_range, 0.01,
               "Auto-stop when max - min of the window's losses falls below this.");

@@ -441,18 +441,33 @@ void ExpectSameModels(const MutualBoostedSolver& a, const MutualBoostedSolver& b
   for (size_t k = 0; k < ba.size(); ++k) EXPECT_EQ(*ba[k].data, *bb[k].data) << ba[k].name;
   const auto ca = sa.Blocks(), cb = sb.Blocks();
   for (size_t k = 0; k < ca.size(); ++k) EXPECT_EQ(*ca[k].data, *cb[k].data) << ca[k].name;
+  for (Branch branch : {Branch::kSurfels2D, Branch::kGaussians3D}) {
+    ASSERT_EQ(a.environment(branch) == nullptr, b.environment(branch) == nullptr);
+    if (a.environment(branch) != nullptr) {
+      EXPECT_EQ(a.environment(branch)->map().texels, b.environment(branch)->map().texels);
+    }
+  }
 }
 
 TEST(CheckpointTest, InterruptedAndResumedRunEqualsAnUninterruptedOne) {
   const std::string dir = testing::ScratchDir();
   const Scene scene = TinyScene(dir + "/scene");
-  for (const auto& [exposure, density] : {std::make_pair(ExposureMode::kOff, "reference"),
-                                          std::make_pair(ExposureMode::kAffine, "reference"),
-                                          std::make_pair(ExposureMode::kOff, "mcmc")}) {
-    SCOPED_TRACE(std::string(ExposureModeName(exposure)) + " " + density);
+  struct Variant {
+    ExposureMode exposure;
+    const char* density;
+    bool environment;
+  };
+  for (const Variant& variant :
+       {Variant{ExposureMode::kOff, "reference", false},
+        Variant{ExposureMode::kAffine, "reference", false},
+        Variant{ExposureMode::kOff, "mcmc", false}, Variant{ExposureMode::kAffine, "mcmc", true}}) {
+    const ExposureMode exposure = variant.exposure;
+    SCOPED_TRACE(std::string(ExposureModeName(exposure)) + " " + variant.density +
+                 (variant.environment ? " environment" : ""));
     SolverOptions o = TinyOptions();
     o.exposure = exposure;
-    o.density = density;
+    o.density = variant.density;
+    o.environment = variant.environment;
     o.max_gaussians = 400;  // MCMC's caps (the reference stays below them here)
     o.max_surfels = 300;
     o.warmup_max_iterations = 60;

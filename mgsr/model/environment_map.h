@@ -1,0 +1,59 @@
+// A learnable background for scene-level captures: a colour per viewing direction, stored as an
+// equirectangular map (longitude around +z, latitude from +z down) and looked up bilinearly, for
+// what no primitive covers (sky, far background). The render is linear in the texels; its
+// gradient scatters each pixel's gradient to the four texels it read.
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "mgsr/core/camera.h"
+#include "mgsr/core/image.h"
+#include "mgsr/model/param_block.h"
+
+namespace mgsr {
+
+// The four texels a direction reads and their bilinear weights (summing to 1).
+struct EnvironmentTaps {
+  int texel[4] = {0, 0, 0, 0};
+  double weight[4] = {0, 0, 0, 0};
+};
+
+struct EnvironmentMap {
+  int width = 0, height = 0;  // texels in longitude and latitude
+  std::vector<float> texels;  // height x width rows of 3 (RGB), row-major from the +z pole
+
+  void Reset(int w, int h, float value);
+  // The taps of a unit direction: longitude wraps around, latitude clamps at the poles.
+  EnvironmentTaps Taps(const Eigen::Vector3d& direction) const;
+  // The colour of a direction from the given texels (any scalar type, for numeric tests).
+  template <typename T>
+  void Lookup(const EnvironmentTaps& taps, const std::vector<T>& values, T rgb[3]) const {
+    for (int c = 0; c < 3; ++c) {
+      T v = 0;
+      for (int k = 0; k < 4; ++k) v += static_cast<T>(taps.weight[k]) * values[3 * taps.texel[k] + c];
+      rgb[c] = v;
+    }
+  }
+  std::vector<ParamBlock> Blocks() { return {{"environment", &texels, 3}}; }
+};
+
+// The taps of every pixel centre of a camera, kept while the camera stays the same (a step renders
+// and back-propagates one view; a held render is the same view again).
+class EnvironmentRenderer {
+ public:
+  // Per pixel: the map's colour of the pixel centre's viewing direction (3 channels).
+  void Render(const EnvironmentMap& map, const Camera& camera, Image* out);
+  // Adds d loss / d texels for d loss / d (rendered image) `grad` into `d_texels` (sized as the
+  // map's texels).
+  void Backward(const EnvironmentMap& map, const Camera& camera, const Image& grad,
+                std::vector<float>* d_texels);
+
+ private:
+  const std::vector<EnvironmentTaps>& TapsFor(const EnvironmentMap& map, const Camera& camera);
+  Camera camera_;
+  int map_width_ = 0, map_height_ = 0;
+  std::vector<EnvironmentTaps> taps_;
+};
+
+}  // namespace mgsr
