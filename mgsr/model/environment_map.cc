@@ -34,7 +34,7 @@ EnvironmentTaps EnvironmentMap::Taps(const Eigen::Vector3d& d) const {
 }
 
 const std::vector<EnvironmentTaps>& EnvironmentRenderer::TapsFor(const EnvironmentMap& map,
-                                                                const Camera& camera) {
+                                                                 const Camera& camera) {
   const size_t n = static_cast<size_t>(camera.width) * camera.height;
   if (taps_.size() == n && camera_ == camera && map_width_ == map.width &&
       map_height_ == map.height)

@@ -31,7 +31,8 @@ struct EnvironmentMap {
   void Lookup(const EnvironmentTaps& taps, const std::vector<T>& values, T rgb[3]) const {
     for (int c = 0; c < 3; ++c) {
       T v = 0;
-      for (int k = 0; k < 4; ++k) v += static_cast<T>(taps.weight[k]) * values[3 * taps.texel[k] + c];
+      for (int k = 0; k < 4; ++k)
+        v += static_cast<T>(taps.weight[k]) * values[3 * taps.texel[k] + c];
       rgb[c] = v;
     }
   }
