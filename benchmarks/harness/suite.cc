@@ -42,6 +42,17 @@ std::vector<SceneSpec> Scenes(bool quick) {
        {"--shape", "torus", "--masks=false"},
        0,
        true},
+      {"outdoor",
+       "scene-level: an object on textured ground under a sky, no masks, cameras at standing "
+       "height; mesh and ground truth on the central region",
+       {"--scene_type", "outdoor", "--shape", "dented"},
+       0,
+       true},
+      {"indoor_mirror",
+       "scene-level: a mirror-like object in a closed room, no masks; central region",
+       {"--scene_type", "indoor", "--shape", "rounded_box", "--mirror", "0.6"},
+       0,
+       true},
   };
   if (!quick) return all;
   return {all[0], all[1]};
