@@ -148,9 +148,8 @@ TEST(HarnessTest, SuiteCoversTheStressCasesAndMethods) {
   std::vector<std::string> scenes, methods;
   for (const SceneSpec& s : Scenes(false)) scenes.push_back(s.name);
   for (const MethodSpec& m : Methods(false)) methods.push_back(m.name);
-  for (const char* s :
-       {"control", "main", "exposure", "mirror", "sparse", "thin", "noisy_poses", "no_masks",
-        "outdoor", "indoor_mirror"}) {
+  for (const char* s : {"control", "main", "exposure", "mirror", "sparse", "thin", "noisy_poses",
+                        "no_masks", "outdoor", "indoor_mirror"}) {
     EXPECT_NE(std::find(scenes.begin(), scenes.end(), s), scenes.end()) << s;
   }
   for (const char* m :

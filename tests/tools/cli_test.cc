@@ -446,7 +446,7 @@ TEST_F(CliTest, SolveRejectsBadOptions) {
                             " --output /tmp/x --background " + bad);
     EXPECT_EQ(r.exit_code, 1) << bad;
     EXPECT_NE(
-        r.output.find("--background must be auto, reference or a grey level in [0, 1], not '" +
+        r.output.find("--background must be auto, reference, env or a grey level in [0, 1], not '" +
                       std::string(bad) + "'"),
         std::string::npos)
         << r.output;
