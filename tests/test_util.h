@@ -109,4 +109,16 @@ inline bool HaveSharedData() {
   return std::filesystem::exists(std::filesystem::path(SharedDataDir()) / "suzanne" / "sparse");
 }
 
+// d loss / d *value by central differences (the value is restored).
+template <typename Loss>
+double CentralDifference(const Loss& loss, double* value, double h = 1e-6) {
+  const double keep = *value;
+  *value = keep + h;
+  const double plus = loss();
+  *value = keep - h;
+  const double minus = loss();
+  *value = keep;
+  return (plus - minus) / (2 * h);
+}
+
 }  // namespace mgsr::testing

@@ -123,6 +123,21 @@ class PixelArrays {
   float* arrays_[kMaxArrays] = {};
 };
 
+// d loss / d (each pixel's background) for a render whose colour outputs hold
+// T_N * background: T_N times the sum of those outputs' gradients (an empty image counts 0).
+inline void BackgroundGradientOf(const std::vector<float>& final_t, int width, int height,
+                                 const Image& grad_a, const Image& grad_b, Image* d_background) {
+  EnsureImage(d_background, width, height, 3);
+  const size_t np = static_cast<size_t>(width) * height;
+  for (int c = 0; c < 3; ++c) {
+    float* out = d_background->plane(c);
+    const float* ga = grad_a.empty() ? nullptr : grad_a.plane(c);
+    const float* gb = grad_b.empty() ? nullptr : grad_b.plane(c);
+    for (size_t i = 0; i < np; ++i)
+      out[i] = final_t[i] * ((ga != nullptr ? ga[i] : 0.0f) + (gb != nullptr ? gb[i] : 0.0f));
+  }
+}
+
 // Per-primitive sums of per-entry values (entries in bins order, one per tile list slot), in
 // entry order whatever the thread count: the contribution a forward pass records.
 inline void SumEntriesPerPrimitive(const TileBins& bins, const std::vector<float>& entry,

@@ -468,16 +468,8 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
 
 void GaussianBackgroundGradient(const GaussianRender& r, const GaussianRenderGrad& g,
                                 Image* d_background) {
-  const int W = r.color.width(), H = r.color.height();
-  EnsureImage(d_background, W, H, 3);
-  const size_t np = static_cast<size_t>(W) * H;
-  for (int c = 0; c < 3; ++c) {
-    float* out = d_background->plane(c);
-    const float* gc = g.color.empty() ? nullptr : g.color.plane(c);
-    const float* gt = g.tran.empty() ? nullptr : g.tran.plane(c);
-    for (size_t i = 0; i < np; ++i)
-      out[i] = r.final_t[i] * ((gc != nullptr ? gc[i] : 0.0f) + (gt != nullptr ? gt[i] : 0.0f));
-  }
+  raster_internal::BackgroundGradientOf(r.final_t, r.color.width(), r.color.height(), g.color,
+                                        g.tran, d_background);
 }
 
 void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bins,

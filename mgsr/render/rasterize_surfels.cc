@@ -531,14 +531,8 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
 
 void SurfelBackgroundGradient(const SurfelRender& r, const SurfelRenderGrad& g,
                               Image* d_background) {
-  const int W = r.color.width(), H = r.color.height();
-  EnsureImage(d_background, W, H, 3);
-  const size_t np = static_cast<size_t>(W) * H;
-  for (int c = 0; c < 3; ++c) {
-    float* out = d_background->plane(c);
-    const float* gc = g.color.empty() ? nullptr : g.color.plane(c);
-    for (size_t i = 0; i < np; ++i) out[i] = gc != nullptr ? r.final_t[i] * gc[i] : 0.0f;
-  }
+  raster_internal::BackgroundGradientOf(r.final_t, r.color.width(), r.color.height(), g.color,
+                                        Image(), d_background);
 }
 
 void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,

@@ -9,6 +9,7 @@
 
 #include "mgsr/core/rng.h"
 #include "solvers/environment_background.h"
+#include "test_util.h"
 
 namespace mgsr {
 namespace {
@@ -87,13 +88,7 @@ TEST(EnvironmentMapTest, GradientMatchesNumericDifferentiationInDoublePrecision)
   }
   int seen = 0;
   for (size_t k = 0; k < values.size(); ++k) {
-    const double h = 1e-6, keep = values[k];
-    values[k] = keep + h;
-    const double lp = loss(values);
-    values[k] = keep - h;
-    const double lm = loss(values);
-    values[k] = keep;
-    const double numeric = (lp - lm) / (2 * h);
+    const double numeric = testing::CentralDifference([&] { return loss(values); }, &values[k]);
     EXPECT_NEAR(analytic[k], numeric, 1e-4 * std::abs(numeric) + 1e-6) << "texel value " << k;
     seen += std::abs(numeric) > 1e-3;
   }

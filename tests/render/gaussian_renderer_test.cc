@@ -10,6 +10,7 @@
 #include "mgsr/core/rng.h"
 #include "reference_gaussian_renderer.h"
 #include "render_test_util.h"
+#include "test_util.h"
 
 namespace mgsr {
 namespace {
@@ -227,13 +228,8 @@ TEST(GaussianRendererGradientTest, PerPixelBackgroundMatchesNumericDifferentiati
   testing::GaussianModelD md = base;
   int checked = 0;
   for (size_t k = 0; k < md.opacity_logits.size(); ++k) {
-    const double h = 1e-6, keep = md.opacity_logits[k];
-    md.opacity_logits[k] = keep + h;
-    const double lp = loss(md, bg_d);
-    md.opacity_logits[k] = keep - h;
-    const double lm = loss(md, bg_d);
-    md.opacity_logits[k] = keep;
-    const double n = (lp - lm) / (2 * h);
+    const double n =
+        testing::CentralDifference([&] { return loss(md, bg_d); }, &md.opacity_logits[k]);
     EXPECT_NEAR(analytic.params.opacity_logits[k], n, 1e-3 * std::abs(n) + 1e-5) << k;
     checked += std::abs(n) > 1e-3;
   }
@@ -243,13 +239,7 @@ TEST(GaussianRendererGradientTest, PerPixelBackgroundMatchesNumericDifferentiati
   GaussianBackgroundGradient(out, grad, &d_background);
   double largest = 0;
   for (size_t i = 0; i < bg_d.size(); i += 7) {
-    const double h = 1e-6, keep = bg_d[i];
-    bg_d[i] = keep + h;
-    const double lp = loss(base, bg_d);
-    bg_d[i] = keep - h;
-    const double lm = loss(base, bg_d);
-    bg_d[i] = keep;
-    const double n = (lp - lm) / (2 * h);
+    const double n = testing::CentralDifference([&] { return loss(base, bg_d); }, &bg_d[i]);
     EXPECT_NEAR(d_background.data()[i], n, 1e-4 * std::abs(n) + 1e-6) << i;
     largest = std::max(largest, std::abs(n));
   }
