@@ -90,13 +90,26 @@ std::string RegionToString(const Eigen::AlignedBox3d& r) {
   return buf;
 }
 
+std::vector<bool> TrianglesOutside(const Eigen::AlignedBox3d& region,
+                                   const std::vector<Eigen::Vector3d>& vertices,
+                                   const std::vector<Eigen::Vector3i>& triangles) {
+  std::vector<bool> inside(vertices.size());
+  for (size_t v = 0; v < vertices.size(); ++v) inside[v] = region.contains(vertices[v]);
+  std::vector<bool> outside(triangles.size());
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    const Eigen::Vector3i& f = triangles[t];
+    outside[t] = !inside[f[0]] || !inside[f[1]] || !inside[f[2]];
+  }
+  return outside;
+}
+
 void CropMeshToRegion(const Eigen::AlignedBox3d& region, TriangleMesh* mesh) {
+  const std::vector<bool> outside = TrianglesOutside(region, mesh->vertices, mesh->triangles);
   std::vector<int> remap(mesh->vertices.size(), -1);
-  std::vector<bool> inside(mesh->vertices.size());
-  for (size_t v = 0; v < mesh->vertices.size(); ++v) inside[v] = region.contains(mesh->vertices[v]);
   TriangleMesh out;
-  for (const Eigen::Vector3i& f : mesh->triangles) {
-    if (!inside[f[0]] || !inside[f[1]] || !inside[f[2]]) continue;
+  for (size_t t = 0; t < mesh->triangles.size(); ++t) {
+    if (outside[t]) continue;
+    const Eigen::Vector3i& f = mesh->triangles[t];
     Eigen::Vector3i g;
     for (int k = 0; k < 3; ++k) {
       int& r = remap[f[k]];

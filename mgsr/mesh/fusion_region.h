@@ -28,6 +28,11 @@ Status ParseRegion(const std::string& text, Eigen::AlignedBox3d* region);
 // "[x0, y0, z0] .. [x1, y1, z1]" for logs.
 std::string RegionToString(const Eigen::AlignedBox3d& region);
 
+// Per triangle: whether one of its vertices lies outside `region`.
+std::vector<bool> TrianglesOutside(const Eigen::AlignedBox3d& region,
+                                   const std::vector<Eigen::Vector3d>& vertices,
+                                   const std::vector<Eigen::Vector3i>& triangles);
+
 // Removes the triangles with a vertex outside `region` and the vertices no triangle uses.
 void CropMeshToRegion(const Eigen::AlignedBox3d& region, TriangleMesh* mesh);
 

@@ -14,6 +14,8 @@
 #include <utility>
 #include <vector>
 
+#include "mgsr/mesh/fusion_region.h"
+
 namespace mgsr {
 
 double AutoVoxelSize(const std::vector<Camera>& cameras, const Eigen::Vector3d& center) {
@@ -174,14 +176,8 @@ Status TsdfIntegrator::Extract(TriangleMesh* mesh) {
   auto result = volume_->tsdf.ExtractTriangleMesh();
   omp_set_num_threads(threads);
   if (!options_.region.isEmpty()) {
-    std::vector<bool> outside(result->triangles_.size());
-    for (size_t t = 0; t < outside.size(); ++t) {
-      for (int k = 0; k < 3; ++k) {
-        outside[t] =
-            outside[t] || !options_.region.contains(result->vertices_[result->triangles_[t][k]]);
-      }
-    }
-    result->RemoveTrianglesByMask(outside);
+    result->RemoveTrianglesByMask(
+        TrianglesOutside(options_.region, result->vertices_, result->triangles_));
     result->RemoveUnreferencedVertices();
   }
   if (options_.keep_largest_component && !result->triangles_.empty()) {
