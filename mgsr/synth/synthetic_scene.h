@@ -81,7 +81,8 @@ struct SyntheticScene {
 Status MakeSyntheticScene(const SynthOptions& options, SyntheticScene* scene);
 
 // Renders views of a scene: ray casters over everything (primary and reflection rays) and over the
-// object alone (shadows: the light of a room is inside it).
+// object alone (shadows: the light of a room is inside it). Keeps a reference to `scene`, which
+// must outlive it.
 class SyntheticRenderer {
  public:
   SyntheticRenderer(const SyntheticScene& scene, const SynthOptions& options);
