@@ -103,6 +103,19 @@ Eigen::Vector3d ShadeObject(const RayCaster& shadow_caster, const Eigen::Vector3
   return c;
 }
 
+// The diffuse albedo (linear) of a surface point by what it is made of.
+Eigen::Vector3d MaterialAlbedo(SurfaceMaterial material, const Eigen::Vector3d& p, SceneType type) {
+  switch (material) {
+    case SurfaceMaterial::kObject:
+      return Albedo(p);
+    case SurfaceMaterial::kGround:
+      return GroundAlbedo(p, type);
+    case SurfaceMaterial::kWall:
+      break;
+  }
+  return WallAlbedo(p);
+}
+
 ViewLight FixedLight() {
   ViewLight l;
   l.direction = Eigen::Vector3d(0.5, -0.4, 0.8).normalized();
@@ -240,9 +253,8 @@ Eigen::Vector3d SyntheticRenderer::ShadeHit(const RayHit& hit, const Eigen::Vect
   }
   Eigen::Vector3d n = caster_->ShadingNormal(hit);
   if (n.dot(view_dir) > 0) n = -n;
-  const Eigen::Vector3d albedo =
-      material == SurfaceMaterial::kGround ? GroundAlbedo(p, scene_.type) : WallAlbedo(p);
-  return DirectLight(shadows, albedo, p, n, view_dir, light, 0.0, 1.0);
+  return DirectLight(shadows, MaterialAlbedo(material, p, scene_.type), p, n, view_dir, light, 0.0,
+                     1.0);
 }
 
 void SyntheticRenderer::Render(const Camera& cam, const ViewLight& light, Image* rgba, Image* depth,
@@ -451,10 +463,7 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
       }
       continue;
     }
-    const SurfaceMaterial material = s.layout.materials[picked];
-    const Eigen::Vector3d albedo = material == SurfaceMaterial::kObject   ? Albedo(X)
-                                   : material == SurfaceMaterial::kGround ? GroundAlbedo(X, s.type)
-                                                                          : WallAlbedo(X);
+    const Eigen::Vector3d albedo = MaterialAlbedo(s.layout.materials[picked], X, s.type);
     for (int k = 0; k < 3; ++k)
       p.rgb[k] = static_cast<uint8_t>(std::lround(255 * LinearToSrgb(albedo[k])));
     p.error = 0;
