@@ -14,8 +14,12 @@ nlohmann::json RenderConfig(const char* target, double lambda) {
   return {{"buffer", "color"}, {"target", target}, {"lambda", lambda}};
 }
 
-nlohmann::json TvConfig(const char* buffer, const char* guide) {
-  return {{"buffer", buffer}, {"guide", guide}};
+nlohmann::json TvConfig(const char* buffer, const char* guide, bool on_geometry = false,
+                        double disparity_scale = 0) {
+  nlohmann::json c = {{"buffer", buffer}, {"guide", guide}};
+  if (on_geometry) c["on_geometry"] = true;
+  if (disparity_scale > 0) c["disparity_scale"] = disparity_scale;
+  return c;
 }
 
 LossSpec Row(Branch branch, Stage stage, const char* name, const char* term, nlohmann::json config,
@@ -137,16 +141,19 @@ std::vector<LossSpec> PaperLossTable(const SolverOptions& o) {
   const Branch b2 = Branch::kSurfels2D, b3 = Branch::kGaussians3D;
   const Stage warm = Stage::kWarmup, mutual = Stage::kMutual;
   const double w = o.w_2d;
+  const bool geo = o.tv_on_geometry;
+  const double disp_s = o.tv_disparity_scale;
   // Row order is the order the gradients are summed in: keep it when editing (results are
   // reproducible bit for bit only in the same order).
   return {
       // 2DGS warm-up (reference 1.3): render loss, edge-aware depth TV, normal consistency and
       // normal TV (from normal_from_iteration), depth distortion (from distortion_from_iteration).
       Row(b2, warm, "photo", "render", RenderConfig("image", o.lambda_l1), 1.0, 0, true),
-      Row(b2, warm, "depth_tv", "tv", TvConfig("depth", "image"), o.depth_tv_warmup_2d),
+      Row(b2, warm, "depth_tv", "tv", TvConfig("depth", "image", geo, disp_s),
+          o.depth_tv_warmup_2d),
       Row(b2, warm, "normal_consistency", "normal_consistency", nlohmann::json::object(),
           o.lambda_normal, o.normal_from_iteration + 1),
-      Row(b2, warm, "normal_tv", "tv", TvConfig("normal", "image"), o.lambda_normal,
+      Row(b2, warm, "normal_tv", "tv", TvConfig("normal", "image", geo), o.lambda_normal,
           o.normal_from_iteration + 1),
       Row(b2, warm, "distortion", "distortion", nlohmann::json::object(), o.lambda_distortion,
           o.distortion_from_iteration + 1),
@@ -158,15 +165,17 @@ std::vector<LossSpec> PaperLossTable(const SolverOptions& o) {
           w * o.mutual_image_weight, 0, true),
       Row(b2, mutual, "normal_consistency", "normal_consistency", nlohmann::json::object(),
           w * o.lambda_normal),
-      Row(b2, mutual, "normal_tv", "tv", TvConfig("normal", "transmitted"), w * o.lambda_normal),
-      Row(b2, mutual, "depth_tv", "tv", TvConfig("depth", "transmitted"), w * o.depth_tv_mutual_2d),
+      Row(b2, mutual, "normal_tv", "tv", TvConfig("normal", "transmitted", geo),
+          w * o.lambda_normal),
+      Row(b2, mutual, "depth_tv", "tv", TvConfig("depth", "transmitted", geo, disp_s),
+          w * o.depth_tv_mutual_2d),
       Row(b2, mutual, "distortion", "distortion", nlohmann::json::object(),
           w * o.lambda_distortion),
       // 3DGS warm-up (reference 1.4): render loss, edge-aware TV of the transmitted image and of
       // the depth.
       Row(b3, warm, "photo", "render", RenderConfig("image", o.lambda_l1), 1.0, 0, true),
       Row(b3, warm, "transmitted_tv", "tv", TvConfig("transmitted", "image"), o.transmitted_tv_3d),
-      Row(b3, warm, "depth_tv", "tv", TvConfig("depth", "image"), o.depth_tv_3d),
+      Row(b3, warm, "depth_tv", "tv", TvConfig("depth", "image", geo, disp_s), o.depth_tv_3d),
       // 3DGS mutual (reference 1.5): render loss and the depth loss against the 2DGS depth.
       Row(b3, mutual, "photo", "render", RenderConfig("image", o.lambda_l1), o.w_3d, 0, true),
       Row(b3, mutual, "mutual_depth", "mutual_depth", {{"masked", false}}, o.w_depth),

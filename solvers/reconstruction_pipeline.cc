@@ -423,6 +423,14 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
                            : "the reference's: no masks or alpha to tell the object from its "
                              "backdrop");
   }
+  if (o.depth_tv_disparity) {
+    options.tv_disparity_scale = ObjectDistance(scene);
+    std::printf(
+        "depth TV: on the disparity s^2 / D, s = %.4g (the cameras' median distance to what they "
+        "look "
+        "at)\n",
+        options.tv_disparity_scale);
+  }
   // The budget: --budget for both branches unless --max_gaussians / --max_surfels give one.
   const std::string budget_mode =
       !o.budget.empty() ? o.budget : (options.density == "mcmc" ? "auto" : "scene");
@@ -559,6 +567,14 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
     if (format == "ply") s = WriteGaussianPly(out.Path(name), solver.gaussians());
     if (format == "splat") s = WriteSplatFile(out.Path(name), solver.gaussians());
     if (format == "spz") s = WriteSpzFile(out.Path(name), solver.gaussians());
+    if (s.ok()) s = out.Record(name);
+  }
+  // Learnt backgrounds (mgsr_render draws them behind new views).
+  for (const Branch b : {Branch::kSurfels2D, Branch::kGaussians3D}) {
+    const EnvironmentBackground* env = solver.environment(b);
+    if (!s.ok() || env == nullptr) continue;
+    const std::string name = EnvironmentFileName(BranchName(b));
+    s = WritePfm(out.Path(name), env->map().ToImage());
     if (s.ok()) s = out.Record(name);
   }
   if (!s.ok()) return fail(s.message());
@@ -732,6 +748,10 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
                        {"density_config", options.density_config}};
   metrics["background"] = {
       {"2d", options.background_2d}, {"3d", options.background_3d}, {"choice", background_note}};
+  for (const Branch b : {Branch::kSurfels2D, Branch::kGaussians3D}) {
+    if (solver.environment(b) != nullptr)
+      metrics["background"]["environment"][BranchName(b)] = EnvironmentFileName(BranchName(b));
+  }
   metrics["exposure"] = {{"mode", ExposureModeName(options.exposure)},
                          {"per_branch", options.exposure_per_branch},
                          {"fit_seconds", summary.exposure_fit_seconds}};

@@ -55,6 +55,9 @@ struct ReconstructionOptions {
   // and a strong normal term then grows them into a sheet in front of the object (harness
   // no_masks scene: NC 65.6 at 2.0, 94.3 at 0.05). Off: solver.lambda_normal as given.
   bool normal_weight_from_scene = false;
+  // The depth TVs on the disparity s^2 / D, s = ObjectDistance(scene) (SolverOptions::
+  // tv_disparity_scale).
+  bool depth_tv_disparity = false;
   std::string budget;
   int64_t max_gaussians = -1, max_surfels = -1;
 

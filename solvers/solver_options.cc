@@ -143,6 +143,8 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"depth_tv_mutual_2d", Text(depth_tv_mutual_2d)},
           {"transmitted_tv_3d", Text(transmitted_tv_3d)},
           {"depth_tv_3d", Text(depth_tv_3d)},
+          {"tv_on_geometry", Text(tv_on_geometry)},
+          {"tv_disparity_scale", Text(tv_disparity_scale)},
           {"w_2d", Text(w_2d)},
           {"w_3d", Text(w_3d)},
           {"w_depth", Text(w_depth)},

@@ -60,6 +60,10 @@ struct SolverOptions {
   double depth_tv_mutual_2d = 0.05;
   double transmitted_tv_3d = 0.1;
   double depth_tv_3d = 0.05;
+  // The depth and normal TVs only between pixels the branch covers (EdgeAwareTvLoss on_geometry).
+  bool tv_on_geometry = false;
+  // > 0: the depth TVs on s^2 / D (EdgeAwareTvLoss disparity_scale), s the object's distance.
+  double tv_disparity_scale = 0;
   double w_2d = 0.5, w_3d = 0.5, w_depth = 0.01;
   double mutual_transmitted_weight = 0.2, mutual_image_weight = 0.8;
   // The loss table (solvers/loss_table.h). Empty: the paper's, built from the weights above when

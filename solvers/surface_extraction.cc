@@ -46,6 +46,16 @@ double TrainingFootprint(const Scene& scene) {
   return AutoVoxelSize(cameras, LookAtCenter(cameras));
 }
 
+double ObjectDistance(const Scene& scene) {
+  const std::vector<Camera> cameras = TrainingCameras(scene);
+  const Eigen::Vector3d center = LookAtCenter(cameras);
+  std::vector<double> d;
+  for (const Camera& c : cameras) d.push_back((c.Center() - center).norm());
+  if (d.empty()) return 1.0;
+  std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
+  return d[d.size() / 2];
+}
+
 std::vector<Camera> FusionCameras(const Scene& scene, int resolution_scale) {
   std::vector<Camera> cameras = TrainingCameras(scene);
   for (Camera& c : cameras) c = c.Resized(c.width * resolution_scale, c.height * resolution_scale);

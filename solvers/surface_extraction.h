@@ -49,6 +49,9 @@ double TrainingFootprint(const Scene& scene);
 // truncation band kept at truncation_voxels training footprints.
 TsdfOptions SurfaceTsdfOptions(const Scene& scene, const SurfaceOptions& options);
 
+// The median distance of the training cameras from the point their optical axes meet.
+double ObjectDistance(const Scene& scene);
+
 // The training cameras at the fusion resolution.
 std::vector<Camera> FusionCameras(const Scene& scene, int resolution_scale);
 

@@ -51,6 +51,10 @@ DEFINE_int32(downscale, 1, "Divide the input resolution by this factor.");
 DEFINE_int32(max_width, 1600, "Cap the image width after downscaling (0: no cap).");
 DEFINE_int32(test_every, 8,
              "Without a split file, every Nth image (by name) is held out (0: none).");
+DEFINE_int32(far_points, 0,
+             "Unbounded captures: add this many initial points on a sphere far around the "
+             "cameras (far background and sky beyond the SfM points).");
+DEFINE_double(far_radius, 10, "Radius of the --far_points sphere in scene extents.");
 DEFINE_uint64(seed, 0, "Seed for every random choice.");
 DEFINE_string(mutual_mode, "alternate", "alternate (the paper) | joint (the authors' code).");
 DEFINE_string(surfel_low_pass, "area",
@@ -97,6 +101,12 @@ DEFINE_double(depth_tv_warmup_2d, 1.0,
               "Weight of the 2DGS branch's edge-aware depth TV in its warm-up.");
 DEFINE_double(depth_tv_mutual_2d, 0.05,
               "Weight of the 2DGS branch's edge-aware depth TV in the mutual stage.");
+DEFINE_bool(tv_on_geometry, false,
+            "The depth and normal TVs only between pixels a branch covers (rendered alpha), not "
+            "across a silhouette or a horizon to the backdrop or sky.");
+DEFINE_bool(depth_tv_disparity, false,
+            "The depth TVs on the disparity s^2 / D (s: the cameras' distance to the object) "
+            "instead of D: no pull on planes seen in perspective (a receding ground).");
 DEFINE_string(loss_config, "",
               "JSON file that changes rows of the loss table or adds rows (solvers/loss_table.h; "
               "--list_losses prints the terms and the table).");
@@ -212,7 +222,8 @@ int main(int argc, char** argv) {
       "mgsr_solve (--workspace DIR | --images DIR [--masks DIR]) --output DIR [--preset "
       "fast|paper] [options]",
       {{"Input",
-        {"workspace", "images", "masks", "downscale", "max_width", "test_every", "background"}},
+        {"workspace", "images", "masks", "downscale", "max_width", "test_every", "background",
+         "far_points", "far_radius"}},
        {"Photos to cameras (with --images)",
         {"colmap", "per_image_cameras", "camera_model", "exhaustive_max_images", "max_image_size"}},
        {"Output and run control",
@@ -224,8 +235,8 @@ int main(int argc, char** argv) {
          "seed"}},
        {"Losses",
         {"loss_config", "list_losses", "lambda_l1", "lambda_normal", "lambda_distortion",
-         "depth_tv_warmup_2d", "depth_tv_mutual_2d", "w_2d", "w_3d", "w_depth",
-         "mutual_transmitted_weight"}},
+         "depth_tv_warmup_2d", "depth_tv_mutual_2d", "tv_on_geometry", "depth_tv_disparity", "w_2d",
+         "w_3d", "w_depth", "mutual_transmitted_weight"}},
        {"Exposure compensation",
         {"exposure", "exposure_lr", "exposure_prior", "exposure_offset_prior",
          "exposure_mean_prior", "exposure_per_branch", "exposure_fit"}},
@@ -293,6 +304,8 @@ int main(int argc, char** argv) {
   }
   options.depth_tv_warmup_2d = FLAGS_depth_tv_warmup_2d;
   options.depth_tv_mutual_2d = FLAGS_depth_tv_mutual_2d;
+  options.tv_on_geometry = FLAGS_tv_on_geometry;
+  ro.depth_tv_disparity = FLAGS_depth_tv_disparity;
   if (FLAGS_lambda_distortion >= 0) {
     options.lambda_distortion = FLAGS_lambda_distortion;
   } else if (FLAGS_lambda_distortion != -1) {
@@ -334,6 +347,8 @@ int main(int argc, char** argv) {
   ro.scene.max_width = FLAGS_max_width;
   ro.scene.test_every = FLAGS_test_every;
   ro.scene.seed = FLAGS_seed;
+  ro.scene.far_points = FLAGS_far_points;
+  ro.scene.far_radius = FLAGS_far_radius;
   ro.colmap = mgsr_tools::ColmapOptionsFromFlags();
   ro.on_colmap_summary = mgsr_tools::PrintColmapSummary;
   ro.preset = FLAGS_preset;

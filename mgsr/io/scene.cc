@@ -140,8 +140,12 @@ Status LoadScene(const std::string& path, const SceneOptions& options, Scene* sc
   if (options.downscale < 1) return Status::Error("--downscale must be >= 1");
   if (options.max_width < 0) return Status::Error("--max_width must be >= 0");
   if (!DirectoryExists(path)) return Status::Error(path + ": scene folder does not exist");
+  if (options.far_points < 0) return Status::Error("--far_points must be >= 0");
+  if (!(options.far_radius > 1)) return Status::Error("--far_radius must be > 1");
   MGSR_RETURN_IF_ERROR(LoadByLayout(path, options, scene));
-  return ValidateViews(*scene);
+  MGSR_RETURN_IF_ERROR(ValidateViews(*scene));
+  AddFarPoints(options.far_points, options.far_radius, options.seed, scene);
+  return Status::Ok();
 }
 
 Status LoadViewImages(const std::string& image_path, const std::string& mask_path,
@@ -252,6 +256,20 @@ void SampleRandomPoints(int count, uint64_t seed, Scene* scene) {
     if (static_cast<int>(scene->points.size()) >= count) break;
   }
   scene->random_points = true;
+}
+
+void AddFarPoints(int count, double radius_scale, uint64_t seed, Scene* scene) {
+  Rng rng(seed ^ 0xFA12u);
+  const double radius = radius_scale * scene->extent;
+  for (int i = 0; i < count; ++i) {
+    // Uniform on the sphere: z uniform in [-1, 1], azimuth uniform (Archimedes).
+    const double z = rng.Uniform(-1, 1), phi = rng.Uniform(0, 2 * M_PI);
+    const double r = std::sqrt(std::max(0.0, 1 - z * z));
+    const Eigen::Vector3d X =
+        scene->center + radius * Eigen::Vector3d(r * std::cos(phi), r * std::sin(phi), z);
+    scene->points.push_back(X.cast<float>());
+    scene->point_colors.emplace_back(0.5f, 0.5f, 0.5f);
+  }
 }
 
 }  // namespace mgsr

@@ -35,6 +35,10 @@ struct SceneOptions {
   int test_every = 8;    // without a split file, every Nth image (by name) is a test view; 0 = none
   bool load_images = true;     // false: cameras and points only
   int random_points = 100000;  // points drawn when the model has none
+  // Unbounded captures: this many more points on a sphere far around the cameras (AddFarPoints),
+  // for what lies beyond the SfM points (far background, sky).
+  int far_points = 0;
+  double far_radius = 10;  // the sphere's radius in scene extents
   uint64_t seed = 0;
 };
 
@@ -75,5 +79,8 @@ void ComputeSceneExtent(Scene* scene);
 // Uniform points inside the volume that all training cameras see (relaxed to most cameras if
 // that volume is too small to sample); used when the model has no points.
 void SampleRandomPoints(int count, uint64_t seed, Scene* scene);
+// Adds `count` grey points uniformly on the sphere of `radius_scale` x scene->extent around
+// scene->center (an initialisation of the far background that SfM points leave out).
+void AddFarPoints(int count, double radius_scale, uint64_t seed, Scene* scene);
 
 }  // namespace mgsr

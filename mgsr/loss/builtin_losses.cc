@@ -65,7 +65,16 @@ void RegisterBuiltinLosses(LossRegistry* r) {
     *s = ParseBuffer(c, "buffer", Buffer::kDepth, &b);
     if (s->ok()) *s = ParseTarget(c, "guide", &g);
     if (!s->ok()) return nullptr;
-    return std::make_unique<EdgeAwareTvLoss>(b, g);
+    if (c.contains("on_geometry") && !c["on_geometry"].is_boolean()) {
+      *s = Status::Error("'on_geometry' must be true or false");
+      return nullptr;
+    }
+    const double disparity_scale = Number(c, "disparity_scale", 0);
+    if (!(disparity_scale >= 0)) {
+      *s = Status::Error("'disparity_scale' must be >= 0");
+      return nullptr;
+    }
+    return std::make_unique<EdgeAwareTvLoss>(b, g, c.value("on_geometry", false), disparity_scale);
   });
   r->Register("normal_consistency",
               [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {

@@ -32,8 +32,8 @@ inline void ExpInPlace(double* a, int n) {
 }
 
 template <typename T>
-void SumsT(const T* P, int channels, const T* I, int guide_channels, int w, int h, T scale_v,
-           T scale_h, T* grad, double* vertical, double* horizontal) {
+void SumsT(const T* P, int channels, const T* I, int guide_channels, const T* gamma, int w, int h,
+           T scale_v, T scale_h, T* grad, double* vertical, double* horizontal) {
   const size_t n = static_cast<size_t>(w) * h;
   static thread_local std::vector<T> weights;
   static thread_local std::vector<double> row_sums;
@@ -75,6 +75,15 @@ void SumsT(const T* P, int channels, const T* I, int guide_channels, int w, int 
       ExpInPlace(hr, w);
       if (y + 1 == h) std::fill(v, v + w, T(0));
       hr[w - 1] = 0;
+      if (gamma != nullptr) {
+        const T* g = gamma + o;
+        if (y + 1 < h) {
+#pragma omp simd
+          for (int x = 0; x < w; ++x) v[x] *= g[x] * g[x + w];
+        }
+#pragma omp simd
+        for (int x = 0; x < w - 1; ++x) hr[x] *= g[x] * g[x + 1];
+      }
     }
 
     // 2. Sums and the gradient, row by row: pixel (y, x) gathers -2 w d from its own differences
@@ -129,17 +138,17 @@ void SumsT(const T* P, int channels, const T* I, int guide_channels, int w, int 
 
 }  // namespace
 
-void EdgeAwareTvSums(const float* P, int channels, const float* I, int guide_channels, int width,
-                     int height, float scale_v, float scale_h, float* grad, double* vertical,
-                     double* horizontal) {
-  SumsT(P, channels, I, guide_channels, width, height, scale_v, scale_h, grad, vertical,
+void EdgeAwareTvSums(const float* P, int channels, const float* I, int guide_channels,
+                     const float* gamma, int width, int height, float scale_v, float scale_h,
+                     float* grad, double* vertical, double* horizontal) {
+  SumsT(P, channels, I, guide_channels, gamma, width, height, scale_v, scale_h, grad, vertical,
         horizontal);
 }
 
-void EdgeAwareTvSums(const double* P, int channels, const double* I, int guide_channels, int width,
-                     int height, double scale_v, double scale_h, double* grad, double* vertical,
-                     double* horizontal) {
-  SumsT(P, channels, I, guide_channels, width, height, scale_v, scale_h, grad, vertical,
+void EdgeAwareTvSums(const double* P, int channels, const double* I, int guide_channels,
+                     const double* gamma, int width, int height, double scale_v, double scale_h,
+                     double* grad, double* vertical, double* horizontal) {
+  SumsT(P, channels, I, guide_channels, gamma, width, height, scale_v, scale_h, grad, vertical,
         horizontal);
 }
 

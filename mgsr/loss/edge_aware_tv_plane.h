@@ -11,13 +11,14 @@ namespace mgsr {
 
 // P: `channels` planes of width x height; I: `guide_channels` planes of the same size. Sets
 // *vertical = sum_{c, y < H-1, x} w_v (P(y+1,x) - P(y,x))^2 and *horizontal likewise along x,
-// with w = exp(-mean over the guide's channels of |I difference|). When `grad` is not null, adds
-// scale_v x d(*vertical)/dP + scale_h x d(*horizontal)/dP to it.
-void EdgeAwareTvSums(const float* P, int channels, const float* I, int guide_channels, int width,
-                     int height, float scale_v, float scale_h, float* grad, double* vertical,
-                     double* horizontal);
-void EdgeAwareTvSums(const double* P, int channels, const double* I, int guide_channels, int width,
-                     int height, double scale_v, double scale_h, double* grad, double* vertical,
-                     double* horizontal);
+// with w = exp(-mean over the guide's channels of |I difference|), times gamma(a) gamma(b) of the
+// pair's two pixels when `gamma` (one plane, held constant) is not null. When `grad` is not null,
+// adds scale_v x d(*vertical)/dP + scale_h x d(*horizontal)/dP to it.
+void EdgeAwareTvSums(const float* P, int channels, const float* I, int guide_channels,
+                     const float* gamma, int width, int height, float scale_v, float scale_h,
+                     float* grad, double* vertical, double* horizontal);
+void EdgeAwareTvSums(const double* P, int channels, const double* I, int guide_channels,
+                     const double* gamma, int width, int height, double scale_v, double scale_h,
+                     double* grad, double* vertical, double* horizontal);
 
 }  // namespace mgsr

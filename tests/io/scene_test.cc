@@ -178,6 +178,29 @@ TEST_F(SceneTest, EmptyPoints3DInitialisesRandomlyInsideTheCommonView) {
   }
 }
 
+TEST_F(SceneTest, FarPointsLieOnTheFarSphereAfterTheModelsPoints) {
+  Scene plain, far;
+  ASSERT_TRUE(Load(&plain, SceneOptions()).ok());
+  SceneOptions o;
+  o.far_points = 2000;
+  o.far_radius = 8;
+  ASSERT_TRUE(Load(&far, o).ok());
+  const size_t n = plain.points.size();
+  ASSERT_EQ(far.points.size(), n + 2000);
+  ASSERT_EQ(far.point_colors.size(), far.points.size());
+  for (size_t i = 0; i < n; ++i) ASSERT_EQ(far.points[i], plain.points[i]);
+  // On the sphere, and spread over it: every octant holds about an eighth.
+  int octant[8] = {};
+  for (size_t i = n; i < far.points.size(); ++i) {
+    const Eigen::Vector3d d = far.points[i].cast<double>() - far.center;
+    ASSERT_NEAR(d.norm(), 8 * far.extent, 1e-5 * far.extent);
+    ++octant[(d.x() > 0) + 2 * (d.y() > 0) + 4 * (d.z() > 0)];
+  }
+  for (int k = 0; k < 8; ++k) EXPECT_NEAR(octant[k], 250, 60) << "octant " << k;
+  o.far_radius = 0.5;
+  EXPECT_NE(Load(&far, o).message().find("--far_radius"), std::string::npos);
+}
+
 TEST_F(SceneTest, UndistorterLayoutFromTheWorkspaceOrTheDenseFolder) {
   // dense/images + dense/sparse/ (no 0/), as `colmap image_undistorter` writes them.
   fs::create_directories(dir_ + "/ws/dense/sparse");

@@ -110,6 +110,10 @@ TEST(LossGradientTest, EveryTermMatchesNumericDifferentiation) {
   ExpectGradientMatchesNumeric(EdgeAwareTvLoss(Buffer::kTransmitted, TargetKind::kImage));
   ExpectGradientMatchesNumeric(EdgeAwareTvLoss(Buffer::kDepth, TargetKind::kTransmitted));
   ExpectGradientMatchesNumeric(EdgeAwareTvLoss(Buffer::kNormal, TargetKind::kImage));
+  ExpectGradientMatchesNumeric(EdgeAwareTvLoss(Buffer::kDepth, TargetKind::kImage, true));
+  ExpectGradientMatchesNumeric(
+      EdgeAwareTvLoss(Buffer::kDepth, TargetKind::kTransmitted, false, 2.5));
+  ExpectGradientMatchesNumeric(EdgeAwareTvLoss(Buffer::kDepth, TargetKind::kImage, true, 4.0));
   ExpectGradientMatchesNumeric(NormalConsistencyLoss());
   ExpectGradientMatchesNumeric(NormalConsistencyLoss(), 5);
   ExpectGradientMatchesNumeric(MutualDepthLoss(false));
@@ -317,6 +321,63 @@ TEST(LossValueTest, HandComputedCases) {
   f.in.Set(Buffer::kDepth, &ramp);
   f.targets.image = &flat;
   EXPECT_NEAR(EdgeAwareTvLoss(Buffer::kDepth).Evaluate(f.in, f.targets, 1, nullptr), 0.09, 1e-12);
+  // On geometry: the same ramp with sky (alpha 0, depth 0) in its right half. The plain TV sees
+  // the step down to the sky; on geometry only the ramp's own steps count (5 of 13 columns of
+  // pairs), and the sky pixels get no gradient.
+  ImageD with_sky = ramp, alpha(14, 11, 1, 1.0);
+  for (int y = 0; y < 11; ++y) {
+    for (int x = 6; x < 14; ++x) with_sky.at(0, y, x) = alpha.at(0, y, x) = 0;
+  }
+  f.in.Set(Buffer::kDepth, &with_sky);
+  f.in.Set(Buffer::kAlpha, &alpha);
+  const EdgeAwareTvLoss on_geometry(Buffer::kDepth, TargetKind::kImage, true);
+  EXPECT_GT(EdgeAwareTvLoss(Buffer::kDepth).Evaluate(f.in, f.targets, 1, nullptr), 0.2);
+  RenderGradientsD tv_grad;
+  EXPECT_NEAR(on_geometry.Evaluate(f.in, f.targets, 1, &tv_grad), 0.09 * 5 / 13, 1e-12);
+  const ImageD& g_depth = tv_grad.Get(Buffer::kDepth);
+  for (int y = 0; y < 11; ++y) {
+    EXPECT_NE(g_depth.at(0, y, 5), 0.0);
+    for (int x = 6; x < 14; ++x) EXPECT_EQ(g_depth.at(0, y, x), 0.0);
+  }
+  // Disparity TV: the plain TV of s^2 / D (written out); zero on a plane seen in perspective
+  // (whose plain depth TV is not); close to the plain TV of D where D ~ s; pixels without depth
+  // drop out.
+  ImageD ramp_far(14, 11, 1), disparity(14, 11, 1), plane(14, 11, 1);
+  for (int y = 0; y < 11; ++y) {
+    for (int x = 0; x < 14; ++x) {
+      ramp_far.at(0, y, x) = 3 + ramp.at(0, y, x);
+      disparity.at(0, y, x) = 4 / ramp_far.at(0, y, x);
+      plane.at(0, y, x) = 1 / (0.05 + 0.01 * x + 0.02 * y);  // a plane's depth: 1 / affine
+    }
+  }
+  const EdgeAwareTvLoss disparity_tv(Buffer::kDepth, TargetKind::kImage, false, 2.0);
+  f.in.Set(Buffer::kDepth, &disparity);
+  const double plain_of_disparity =
+      EdgeAwareTvLoss(Buffer::kDepth).Evaluate(f.in, f.targets, 1, nullptr);
+  f.in.Set(Buffer::kDepth, &ramp_far);
+  EXPECT_NEAR(disparity_tv.Evaluate(f.in, f.targets, 1, nullptr), plain_of_disparity,
+              1e-12 * plain_of_disparity);
+  f.in.Set(Buffer::kDepth, &plane);
+  EXPECT_GT(EdgeAwareTvLoss(Buffer::kDepth).Evaluate(f.in, f.targets, 1, nullptr), 1.0);
+  RenderGradientsD plane_grad;
+  disparity_tv.Evaluate(f.in, f.targets, 1, &plane_grad);
+  for (int y = 1; y < 10; ++y)  // interior: the second differences of an affine map vanish
+    for (int x = 1; x < 13; ++x) EXPECT_NEAR(plane_grad.Get(Buffer::kDepth).at(0, y, x), 0, 1e-9);
+  ImageD ramp_at_30 = ramp;  // 30 .. 33.9: within 7% of its middle
+  for (size_t i = 0; i < ramp.size(); ++i) ramp_at_30.data()[i] += 30;
+  f.in.Set(Buffer::kDepth, &ramp_at_30);
+  EXPECT_NEAR(EdgeAwareTvLoss(Buffer::kDepth, TargetKind::kImage, false, 31.95)
+                  .Evaluate(f.in, f.targets, 1, nullptr),
+              0.09, 0.01);
+  ImageD with_hole = ramp_far;
+  for (int y = 0; y < 11; ++y) with_hole.at(0, y, 13) = 0;  // the last column has no depth
+  f.in.Set(Buffer::kDepth, &with_hole);
+  RenderGradientsD hole_grad;
+  double without_last = 0;  // the mean over all 13 columns of pairs, of the 12 that remain
+  for (int x = 0; x < 12; ++x)
+    without_last += std::pow(4 / (3 + 0.3 * (x + 1)) - 4 / (3 + 0.3 * x), 2) / 13;
+  EXPECT_NEAR(disparity_tv.Evaluate(f.in, f.targets, 1, &hole_grad), without_last, 1e-12);
+  for (int y = 0; y < 11; ++y) EXPECT_EQ(hole_grad.Get(Buffer::kDepth).at(0, y, 13), 0.0);
   // Mutual depth of proportional depths is 0 (max normalisation).
   ImageD twice = ramp;
   for (size_t i = 0; i < twice.size(); ++i) twice.data()[i] = 2 * ramp.data()[i] + 2;
@@ -381,17 +442,29 @@ TEST(DssimPlaneTest, MatchesTheDirectWindowAndCentralDifferencesOnAnyThreadCount
 }
 
 // The edge-aware TV kernel: its sums against the definition written out directly, float against
-// double, and the same bits with one thread as with several (300 x 230 takes the threaded path).
-// Its double gradient is checked by EveryTermMatchesNumericDifferentiation.
+// double, and the same bits with one thread as with several (300 x 230 takes the threaded path),
+// with and without per-pixel weights gamma. Its double gradient is checked here and by
+// EveryTermMatchesNumericDifferentiation.
 TEST(EdgeAwareTvPlaneTest, MatchesTheDefinitionOnAnyThreadCount) {
-  for (const auto& [w, h, channels] :
-       std::vector<std::tuple<int, int, int>>{{300, 230, 3}, {300, 230, 1}, {17, 2, 3}}) {
-    SCOPED_TRACE(std::to_string(w) + " x " + std::to_string(h) + " x " + std::to_string(channels));
+  for (const auto& [w, h, channels, weighted] :
+       std::vector<std::tuple<int, int, int, bool>>{{300, 230, 3, false},
+                                                    {300, 230, 1, false},
+                                                    {17, 2, 3, false},
+                                                    {300, 230, 1, true},
+                                                    {17, 2, 3, true}}) {
+    SCOPED_TRACE(std::to_string(w) + " x " + std::to_string(h) + " x " + std::to_string(channels) +
+                 (weighted ? " weighted" : ""));
     Rng rng(w + h + channels);
     const size_t n = static_cast<size_t>(w) * h;
-    std::vector<double> P(channels * n), I(3 * n);
+    std::vector<double> P(channels * n), I(3 * n), gamma(n, 1.0);
     for (double& v : P) v = rng.Uniform(-1, 2);
     for (double& v : I) v = rng.Uniform();
+    // Zero, one and values between, as alpha is over sky, surface and edges.
+    if (weighted)
+      for (double& v : gamma) v = std::clamp(rng.Uniform(-0.3, 1.3), 0.0, 1.0);
+    const double* G = weighted ? gamma.data() : nullptr;
+    const std::vector<float> gammaf(gamma.begin(), gamma.end());
+    const float* Gf = weighted ? gammaf.data() : nullptr;
     double direct_v = 0, direct_h = 0;
     for (int c = 0; c < channels; ++c) {
       for (int y = 0; y < h; ++y) {
@@ -402,7 +475,8 @@ TEST(EdgeAwareTvPlaneTest, MatchesTheDefinitionOnAnyThreadCount) {
           auto weight = [&](int y1, int x1) {
             double d = 0;
             for (int k = 0; k < 3; ++k) d += std::abs(at(I, k, y1, x1) - at(I, k, y, x));
-            return std::exp(-d / 3);
+            return std::exp(-d / 3) * gamma[static_cast<size_t>(y1) * w + x1] *
+                   gamma[static_cast<size_t>(y) * w + x];
           };
           if (y + 1 < h)
             direct_v += weight(y + 1, x) * std::pow(at(P, c, y + 1, x) - at(P, c, y, x), 2);
@@ -413,7 +487,7 @@ TEST(EdgeAwareTvPlaneTest, MatchesTheDefinitionOnAnyThreadCount) {
     }
     double v = 0, hz = 0;
     std::vector<double> g(P.size(), 0.0);
-    EdgeAwareTvSums(P.data(), channels, I.data(), 3, w, h, 0.3, 0.7, g.data(), &v, &hz);
+    EdgeAwareTvSums(P.data(), channels, I.data(), 3, G, w, h, 0.3, 0.7, g.data(), &v, &hz);
     EXPECT_NEAR(v, direct_v, 1e-10 * direct_v);
     EXPECT_NEAR(hz, direct_h, 1e-10 * direct_h);
     // The gradient at corners, edges and random pixels, against central differences.
@@ -424,9 +498,9 @@ TEST(EdgeAwareTvPlaneTest, MatchesTheDefinitionOnAnyThreadCount) {
       const double keep = P[i], step = 1e-4;
       double vp, hp, vm, hm;
       P[i] = keep + step;
-      EdgeAwareTvSums(P.data(), channels, I.data(), 3, w, h, 0.0, 0.0, nullptr, &vp, &hp);
+      EdgeAwareTvSums(P.data(), channels, I.data(), 3, G, w, h, 0.0, 0.0, nullptr, &vp, &hp);
       P[i] = keep - step;
-      EdgeAwareTvSums(P.data(), channels, I.data(), 3, w, h, 0.0, 0.0, nullptr, &vm, &hm);
+      EdgeAwareTvSums(P.data(), channels, I.data(), 3, G, w, h, 0.0, 0.0, nullptr, &vm, &hm);
       P[i] = keep;
       const double numeric = (0.3 * (vp - vm) + 0.7 * (hp - hm)) / (2 * step);
       EXPECT_NEAR(g[i], numeric, 1e-7 + 1e-6 * std::abs(numeric)) << "element " << i;
@@ -434,7 +508,7 @@ TEST(EdgeAwareTvPlaneTest, MatchesTheDefinitionOnAnyThreadCount) {
     const std::vector<float> Pf(P.begin(), P.end()), If(I.begin(), I.end());
     std::vector<float> gf(P.size(), 0.0f), gf1(P.size(), 0.0f);
     double vf = 0, hf = 0, vf1 = 0, hf1 = 0;
-    EdgeAwareTvSums(Pf.data(), channels, If.data(), 3, w, h, 0.3f, 0.7f, gf.data(), &vf, &hf);
+    EdgeAwareTvSums(Pf.data(), channels, If.data(), 3, Gf, w, h, 0.3f, 0.7f, gf.data(), &vf, &hf);
     EXPECT_NEAR(vf, v, 1e-5 * v);
     EXPECT_NEAR(hf, hz, 1e-5 * hz);
     double max_g = 0, max_diff = 0;
@@ -445,7 +519,8 @@ TEST(EdgeAwareTvPlaneTest, MatchesTheDefinitionOnAnyThreadCount) {
     EXPECT_LT(max_diff, 1e-5 * max_g);
     const int threads = omp_get_max_threads();
     omp_set_num_threads(1);
-    EdgeAwareTvSums(Pf.data(), channels, If.data(), 3, w, h, 0.3f, 0.7f, gf1.data(), &vf1, &hf1);
+    EdgeAwareTvSums(Pf.data(), channels, If.data(), 3, Gf, w, h, 0.3f, 0.7f, gf1.data(), &vf1,
+                    &hf1);
     omp_set_num_threads(threads);
     EXPECT_EQ(vf1, vf);
     EXPECT_EQ(hf1, hf);
