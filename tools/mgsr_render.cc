@@ -22,6 +22,7 @@
 #include "mgsr/io/scene.h"
 #include "mgsr/loss/normal_consistency_loss.h"
 #include "mgsr/mesh/tsdf_fusion.h"
+#include "mgsr/model/environment_map.h"
 #include "mgsr/render/gaussian_renderer.h"
 #include "mgsr/render/surfel_renderer.h"
 #include "mgsr/render/visualize.h"
@@ -158,6 +159,19 @@ int main(int argc, char** argv) {
     if (mgsr::Status s = mgsr::ReadSurfelPly(p2, &surfels); !s.ok()) return Fail(s.message());
   }
 
+  // Learnt backgrounds of a scene-level run (--background env): drawn behind every frame.
+  mgsr::EnvironmentMap environment[2];  // 2DGS, 3DGS
+  for (int b = 0; b < 2; ++b) {
+    const std::string path =
+        mgsr::JoinPath(FLAGS_run, mgsr::EnvironmentFileName(b == 0 ? "2d" : "3d"));
+    if (!mgsr::FileExists(path)) continue;
+    mgsr::Image image;
+    if (mgsr::Status s = mgsr::ReadPfm(path, &image); !s.ok()) return Fail(s.message());
+    if (!environment[b].FromImage(image)) return Fail(path + ": not a 3-channel environment map");
+  }
+  mgsr::EnvironmentRenderer environment_renderer;
+  mgsr::Image environment_image;
+
   // The cameras.
   mgsr::Scene scene;
   if (mgsr::Status s = mgsr::LoadScene(workspace, mgsr::SceneOptions(), &scene); !s.ok())
@@ -205,6 +219,10 @@ int main(int argc, char** argv) {
       o.sh_degree = gaussians.max_sh_degree;
       o.reflection = reflection;
       std::fill(o.background, o.background + 3, bg3);
+      if (!environment[1].texels.empty()) {
+        environment_renderer.Render(environment[1], f.camera, &environment_image);
+        o.background_image = &environment_image;
+      }
       mgsr::GaussianRender g;
       gaussian_renderer.Forward(gaussians, o, &g);
       s = write("composite", g.color);
@@ -222,6 +240,11 @@ int main(int argc, char** argv) {
       o.camera = f.camera;
       o.sh_degree = surfels.max_sh_degree;
       std::fill(o.background, o.background + 3, bg2);
+      mgsr::Image environment_2d;
+      if (!environment[0].texels.empty()) {
+        environment_renderer.Render(environment[0], f.camera, &environment_2d);
+        o.background_image = &environment_2d;
+      }
       o.low_pass = m.value("surfel_low_pass", std::string("area")) == "reference"
                        ? mgsr::SurfelLowPass::kReference
                        : mgsr::SurfelLowPass::kAreaPreserving;

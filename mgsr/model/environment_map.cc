@@ -82,4 +82,23 @@ void EnvironmentRenderer::Backward(const EnvironmentMap& map, const Camera& came
   }
 }
 
+Image EnvironmentMap::ToImage() const {
+  Image image(width, height, 3);
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x)
+      for (int c = 0; c < 3; ++c)
+        image.at(c, y, x) = texels[3 * (static_cast<size_t>(y) * width + x) + c];
+  return image;
+}
+
+bool EnvironmentMap::FromImage(const Image& image) {
+  if (image.channels() != 3 || image.width() < 2 || image.height() < 2) return false;
+  Reset(image.width(), image.height(), 0.0f);
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x)
+      for (int c = 0; c < 3; ++c)
+        texels[3 * (static_cast<size_t>(y) * width + x) + c] = image.at(c, y, x);
+  return true;
+}
+
 }  // namespace mgsr

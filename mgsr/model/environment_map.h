@@ -5,6 +5,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <string>
 #include <vector>
 
 #include "mgsr/core/camera.h"
@@ -37,7 +38,17 @@ struct EnvironmentMap {
     }
   }
   std::vector<ParamBlock> Blocks() { return {{"environment", &texels, 3}}; }
+
+  // As an image (width x height, 3 planes; row 0 at the +z pole), e.g. environment_3d.pfm of a
+  // run, and back (false if the image is not a 3-channel map).
+  Image ToImage() const;
+  bool FromImage(const Image& image);
 };
+
+// The file a run keeps a branch's map in ("2d" or "3d"): environment_2d.pfm, environment_3d.pfm.
+inline std::string EnvironmentFileName(const std::string& branch) {
+  return "environment_" + branch + ".pfm";
+}
 
 // The taps of every pixel centre of a camera, kept while the camera stays the same (a step renders
 // and back-propagates one view; a held render is the same view again).

@@ -177,6 +177,51 @@ TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
   EXPECT_EQ(std::count(rr.output.begin(), rr.output.end(), '\n'), 1) << rr.output;
 }
 
+// #23: a scene-level run learns its background; the run keeps the map (environment_*.pfm, listed
+// in metrics.json) and mgsr_render draws it behind new views as mgsr_solve did.
+TEST_F(CliTest, LearntBackgroundIsWrittenAndRenderedAgain) {
+  const std::string dir = testing::ScratchDir();
+  fs::remove_all(dir);
+  auto r = testing::RunCommand(kTools + "/mgsr_synth --output " + dir +
+                               "/scene --scene_type outdoor --num_views 10 --width 40 --height 30 "
+                               "--num_points 300");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + "/scene --output " + dir +
+                          "/out --warmup_max_iterations 30 --warmup_min_iterations 0 "
+                          "--mutual_iterations 10 --log_every 100 --eval_every 0");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("background: learnt per viewing direction"), std::string::npos)
+      << r.output;
+  std::string text;
+  ASSERT_TRUE(ReadFileToString(dir + "/out/metrics.json", &text).ok());
+  const nlohmann::json metrics = nlohmann::json::parse(text);
+  EXPECT_TRUE(VerifyOutputManifest(dir + "/out", metrics).ok());
+  for (const char* branch : {"2d", "3d"}) {
+    const std::string name = std::string("environment_") + branch + ".pfm";
+    EXPECT_EQ(metrics["background"]["environment"][branch], name);
+    Image map;
+    ASSERT_TRUE(ReadPfm(dir + "/out/" + name, &map).ok()) << name;
+    EXPECT_EQ(map.width(), 64);
+    EXPECT_EQ(map.height(), 32);
+    EXPECT_EQ(map.channels(), 3);
+  }
+  r = testing::RunCommand(kTools + "/mgsr_render --run " + dir + "/out --output " + dir +
+                          "/again --views test");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  Image ours, solved, on_grey;
+  ASSERT_TRUE(ReadImage(dir + "/again/v000_composite.png", &ours).ok()) << r.output;
+  ASSERT_TRUE(ReadImage(dir + "/out/renders/v000_composite.png", &solved).ok());
+  EXPECT_GT(Psnr(ours, solved), 45);
+  // Without the maps the sky is the flat background: clearly another image.
+  fs::remove(dir + "/out/environment_2d.pfm");
+  fs::remove(dir + "/out/environment_3d.pfm");
+  r = testing::RunCommand(kTools + "/mgsr_render --run " + dir + "/out --output " + dir +
+                          "/grey --views test");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_TRUE(ReadImage(dir + "/grey/v000_composite.png", &on_grey).ok());
+  EXPECT_LT(Psnr(on_grey, solved), 35);
+}
+
 // #18: one run's results are never mixed with another's, and metrics.json vouches for each file.
 TEST_F(CliTest, SolveRefusesAStaleFolderAndListsWhatItWrote) {
   const std::string dir = Copy();
