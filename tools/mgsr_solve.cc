@@ -10,6 +10,8 @@
 #include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <tuple>
 
 #include "mgsr/core/timer.h"
 #include "mgsr/eval/exposure_alignment.h"
@@ -97,10 +99,12 @@ DEFINE_double(lambda_l1, 0.8, "Render loss: lambda L1 + (1 - lambda) D-SSIM.");
 DEFINE_double(lambda_normal, -1,
               "Weight of the normal consistency and normal TV terms; -1: 2.0 where the views have "
               "masks or alpha, the reference's 0.05 where they have neither.");
-DEFINE_double(depth_tv_warmup_2d, 1.0,
-              "Weight of the 2DGS branch's edge-aware depth TV in its warm-up.");
-DEFINE_double(depth_tv_mutual_2d, 0.05,
-              "Weight of the 2DGS branch's edge-aware depth TV in the mutual stage.");
+DEFINE_double(depth_tv_warmup_2d, -1,
+              "Weight of the 2DGS branch's edge-aware depth TV in its warm-up; -1: the "
+              "reference's 1.0, or 0 for a scene in the world (learnt background).");
+DEFINE_double(depth_tv_mutual_2d, -1,
+              "Weight of the 2DGS branch's edge-aware depth TV in the mutual stage; -1: the "
+              "reference's 0.05, or 0 for a scene in the world (learnt background).");
 DEFINE_bool(tv_on_geometry, false,
             "The depth and normal TVs only between pixels a branch covers (rendered alpha), not "
             "across a silhouette or a horizon to the backdrop or sky.");
@@ -302,8 +306,17 @@ int main(int argc, char** argv) {
   } else if (FLAGS_lambda_normal != -1) {
     return Fail("--lambda_normal must be >= 0 (or -1 for the default)");
   }
-  options.depth_tv_warmup_2d = FLAGS_depth_tv_warmup_2d;
-  options.depth_tv_mutual_2d = FLAGS_depth_tv_mutual_2d;
+  ro.depth_tv_from_scene = FLAGS_depth_tv_warmup_2d == -1 && FLAGS_depth_tv_mutual_2d == -1;
+  for (auto [flag, value, name] :
+       {std::tuple{FLAGS_depth_tv_warmup_2d, &options.depth_tv_warmup_2d, "--depth_tv_warmup_2d"},
+        std::tuple{FLAGS_depth_tv_mutual_2d, &options.depth_tv_mutual_2d,
+                   "--depth_tv_mutual_2d"}}) {
+    if (flag >= 0) {
+      *value = flag;
+    } else if (flag != -1) {
+      return Fail(std::string(name) + " must be >= 0 (or -1 for the default)");
+    }
+  }
   options.tv_on_geometry = FLAGS_tv_on_geometry;
   ro.depth_tv_disparity = FLAGS_depth_tv_disparity;
   if (FLAGS_lambda_distortion >= 0) {

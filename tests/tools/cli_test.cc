@@ -195,6 +195,18 @@ TEST_F(CliTest, LearntBackgroundIsWrittenAndRenderedAgain) {
   std::string text;
   ASSERT_TRUE(ReadFileToString(dir + "/out/metrics.json", &text).ok());
   const nlohmann::json metrics = nlohmann::json::parse(text);
+  // A scene in the world trains without the 2DGS depth TVs (ReconstructionOptions::
+  // depth_tv_from_scene); the 3DGS branch keeps its own.
+  EXPECT_NE(r.output.find("2DGS depth TV: off (a scene in the world"), std::string::npos)
+      << r.output;
+  int depth_tv_rows = 0;
+  for (const auto& row : metrics["losses"]) {
+    if (row.value("name", std::string()) != "depth_tv") continue;
+    ++depth_tv_rows;
+    EXPECT_EQ(row.value("weight", -1.0) == 0.0, row.value("branch", std::string()) == "2d")
+        << row.dump();
+  }
+  EXPECT_EQ(depth_tv_rows, 3);
   EXPECT_TRUE(VerifyOutputManifest(dir + "/out", metrics).ok());
   for (const char* branch : {"2d", "3d"}) {
     const std::string name = std::string("environment_") + branch + ".pfm";
@@ -531,6 +543,8 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
     return -1.0;
   };
   EXPECT_DOUBLE_EQ(normal_row_weight(metrics), 0.05) << metrics;
+  // An object before a uniform backdrop keeps the reference's depth TVs.
+  EXPECT_EQ(r.output.find("2DGS depth TV"), std::string::npos) << r.output;
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
                           "/out_masked" + few);
   ASSERT_EQ(r.exit_code, 0) << r.output;
