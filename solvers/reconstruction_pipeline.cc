@@ -426,16 +426,20 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   if (o.depth_tv_from_scene && options.environment) {
     options.depth_tv_warmup_2d = options.depth_tv_mutual_2d = 0;
     std::printf(
-        "2DGS depth TV: off (a scene in the world, learnt background: the TV would pull "
-        "on its grounds and walls)\n");
+        "2DGS depth TV: off (a scene in the world, learnt background: the TV would "
+        "pull on its grounds and walls)\n");
   }
   if (o.depth_tv_disparity) {
     options.tv_disparity_scale = ObjectDistance(scene);
-    std::printf(
-        "depth TV: on the disparity s^2 / D, s = %.4g (the cameras' median distance to what they "
-        "look "
-        "at)\n",
-        options.tv_disparity_scale);
+    std::printf("depth TV: on the disparity s^2 / D, s = %.4g (the cameras' distance)\n",
+                options.tv_disparity_scale);
+  }
+  // A loss configuration edits the table these weights give, the scene's choices included.
+  if (!o.loss_config.empty()) {
+    options.losses.clear();
+    options.losses = options.LossTable();
+    const Status l = ApplyLossConfigFile(o.loss_config, &options.losses);
+    if (!l.ok()) return fail(l.message());
   }
   // The budget: --budget for both branches unless --max_gaussians / --max_surfels give one.
   const std::string budget_mode =

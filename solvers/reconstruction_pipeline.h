@@ -64,6 +64,9 @@ struct ReconstructionOptions {
   // 87.7, 79.9 -> 86.1 with it off). On an object before a uniform backdrop (no masks) it is
   // needed: off there, the harness's no_masks scene drops from NC 93.8 to 80.3.
   bool depth_tv_from_scene = false;
+  // A JSON file of loss-table edits (ApplyLossConfigFile), applied to solver's table once the
+  // weights chosen from the scene (above) are set, so its rows change those, not the defaults.
+  std::string loss_config;
   // The depth TVs on the disparity s^2 / D, s = ObjectDistance(scene) (SolverOptions::
   // tv_disparity_scale).
   bool depth_tv_disparity = false;

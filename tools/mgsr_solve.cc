@@ -369,9 +369,12 @@ int main(int argc, char** argv) {
   ro.surfel_low_pass = FLAGS_surfel_low_pass;
   ro.surfel_init = FLAGS_surfel_init;
   if (!FLAGS_loss_config.empty()) {
+    // Here for the listing and to refuse a bad file before the scene is read; the pipeline
+    // applies it again once the scene has chosen its weights.
     options.losses = options.LossTable();
     const mgsr::Status l = mgsr::ApplyLossConfigFile(FLAGS_loss_config, &options.losses);
     if (!l.ok()) return Fail(l.message());
+    ro.loss_config = FLAGS_loss_config;
   }
   if (listing) {
     // The budgets come from the scene, which a listing does not read: stand-ins for them.

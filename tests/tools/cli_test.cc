@@ -545,6 +545,18 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
   EXPECT_DOUBLE_EQ(normal_row_weight(metrics), 0.05) << metrics;
   // An object before a uniform backdrop keeps the reference's depth TVs.
   EXPECT_EQ(r.output.find("2DGS depth TV"), std::string::npos) << r.output;
+  // A loss configuration edits the table the scene chose: its row changes, the scene's normal
+  // weight stays (it was once applied to the defaults' table, 2.0, before the scene was read).
+  ASSERT_TRUE(WriteStringToFileAtomic(dir + "/l1.json",
+                                      R"({"losses": [{"branch": "3d", "stage": "warmup", )"
+                                      R"("name": "depth_tv", "weight": 0.125}]})")
+                  .ok());
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
+                          "/out_config --loss_config " + dir + "/l1.json" + few);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_TRUE(ReadFileToString(dir + "/out_config/metrics.json", &metrics).ok());
+  EXPECT_DOUBLE_EQ(normal_row_weight(metrics), 0.05) << metrics;
+  EXPECT_NE(metrics.find("0.125"), std::string::npos);
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
                           "/out_masked" + few);
   ASSERT_EQ(r.exit_code, 0) << r.output;
