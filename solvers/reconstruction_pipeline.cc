@@ -424,10 +424,10 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
                              "backdrop");
   }
   if (o.depth_tv_from_scene && options.environment) {
-    options.depth_tv_warmup_2d = options.depth_tv_mutual_2d = 0;
+    options.depth_tv_warmup_2d = options.depth_tv_mutual_2d = options.depth_tv_3d = 0;
     std::printf(
-        "2DGS depth TV: off (a scene in the world, learnt background: the TV would "
-        "pull on its grounds and walls)\n");
+        "depth TVs: off (a scene in the world, learnt background: they would pull on its "
+        "grounds and walls)\n");
   }
   if (o.depth_tv_disparity) {
     options.tv_disparity_scale = ObjectDistance(scene);

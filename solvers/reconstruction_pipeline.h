@@ -55,14 +55,15 @@ struct ReconstructionOptions {
   // and a strong normal term then grows them into a sheet in front of the object (harness
   // no_masks scene: NC 65.6 at 2.0, 94.3 at 0.05). Off: solver.lambda_normal as given.
   bool normal_weight_from_scene = false;
-  // Sets the 2DGS depth TVs from the scene: off where the background is learnt (a scene in the
-  // world: no masks, photos whose borders vary), the reference's weights (solver.depth_tv_*_2d as
-  // given) otherwise. In a scene-level capture every silhouette, horizon and receding ground and
-  // wall is a depth step the TV pulls on in scene units; from the first iterations, where it
-  // outweighs the photometric loss, it draws the ground and walls towards the cameras (harness
-  // outdoor NC 75.4 -> 88.0, indoor_mirror 84.3 -> 90.1, fresh outdoor / indoor captures 80.8 ->
-  // 87.7, 79.9 -> 86.1 with it off). On an object before a uniform backdrop (no masks) it is
-  // needed: off there, the harness's no_masks scene drops from NC 93.8 to 80.3.
+  // Sets the depth TVs (both branches') from the scene: off where the background is learnt (a
+  // scene in the world: no masks, photos whose borders vary), the reference's weights (solver's
+  // depth_tv_* as given) otherwise. In a scene-level capture every silhouette, horizon and
+  // receding ground and wall is a depth step a TV pulls on in scene units; from the first
+  // iterations, where the 2DGS one outweighs the photometric loss, it draws the ground and walls
+  // towards the cameras. MGSR NC, both TVs on -> 2DGS ones off -> all off: harness outdoor 75.4
+  // -> 88.0 -> 89.8, indoor_mirror 84.3 -> 90.1 -> 89.6, fresh outdoor / indoor captures 80.8 ->
+  // 87.7 -> 88.7 and 79.9 -> 86.1 -> 85.9. On an object before a uniform backdrop (no masks) the
+  // 2DGS one is needed: off there, the harness's no_masks scene drops from NC 93.8 to 80.3.
   bool depth_tv_from_scene = false;
   // A JSON file of loss-table edits (ApplyLossConfigFile), applied to solver's table once the
   // weights chosen from the scene (above) are set, so its rows change those, not the defaults.

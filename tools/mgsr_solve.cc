@@ -101,7 +101,8 @@ DEFINE_double(lambda_normal, -1,
               "masks or alpha, the reference's 0.05 where they have neither.");
 DEFINE_double(depth_tv_warmup_2d, -1,
               "Weight of the 2DGS branch's edge-aware depth TV in its warm-up; -1: the "
-              "reference's 1.0, or 0 for a scene in the world (learnt background).");
+              "reference's 1.0, or 0 for a scene in the world (learnt background; then the 3DGS "
+              "depth TV is off too).");
 DEFINE_double(depth_tv_mutual_2d, -1,
               "Weight of the 2DGS branch's edge-aware depth TV in the mutual stage; -1: the "
               "reference's 0.05, or 0 for a scene in the world (learnt background).");

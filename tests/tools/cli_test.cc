@@ -195,16 +195,13 @@ TEST_F(CliTest, LearntBackgroundIsWrittenAndRenderedAgain) {
   std::string text;
   ASSERT_TRUE(ReadFileToString(dir + "/out/metrics.json", &text).ok());
   const nlohmann::json metrics = nlohmann::json::parse(text);
-  // A scene in the world trains without the 2DGS depth TVs (ReconstructionOptions::
-  // depth_tv_from_scene); the 3DGS branch keeps its own.
-  EXPECT_NE(r.output.find("2DGS depth TV: off (a scene in the world"), std::string::npos)
-      << r.output;
+  // A scene in the world trains without depth TVs (ReconstructionOptions::depth_tv_from_scene).
+  EXPECT_NE(r.output.find("depth TVs: off (a scene in the world"), std::string::npos) << r.output;
   int depth_tv_rows = 0;
   for (const auto& row : metrics["losses"]) {
     if (row.value("name", std::string()) != "depth_tv") continue;
     ++depth_tv_rows;
-    EXPECT_EQ(row.value("weight", -1.0) == 0.0, row.value("branch", std::string()) == "2d")
-        << row.dump();
+    EXPECT_EQ(row.value("weight", -1.0), 0.0) << row.dump();
   }
   EXPECT_EQ(depth_tv_rows, 3);
   EXPECT_TRUE(VerifyOutputManifest(dir + "/out", metrics).ok());
@@ -544,7 +541,7 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
   };
   EXPECT_DOUBLE_EQ(normal_row_weight(metrics), 0.05) << metrics;
   // An object before a uniform backdrop keeps the reference's depth TVs.
-  EXPECT_EQ(r.output.find("2DGS depth TV"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("depth TVs: off"), std::string::npos) << r.output;
   // A loss configuration edits the table the scene chose: its row changes, the scene's normal
   // weight stays (it was once applied to the defaults' table, 2.0, before the scene was read).
   ASSERT_TRUE(WriteStringToFileAtomic(dir + "/l1.json",
