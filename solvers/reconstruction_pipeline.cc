@@ -436,8 +436,7 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   }
   // A loss configuration edits the table these weights give, the scene's choices included.
   if (!o.loss_config.empty()) {
-    options.losses.clear();
-    options.losses = options.LossTable();
+    options.losses = PaperLossTable(options);
     const Status l = ApplyLossConfigFile(o.loss_config, &options.losses);
     if (!l.ok()) return fail(l.message());
   }
