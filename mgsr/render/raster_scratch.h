@@ -29,11 +29,21 @@ namespace raster_internal {
 
 constexpr int kTilePixels = kTileSize * kTileSize;
 
-inline void EnsureScratch(RasterScratch* s, int threads) {
+// Sizes every thread's tile buffer for the largest tile of `bins` (`fields` floats per entry)
+// before the parallel loop. Which thread draws which tile depends on scheduling, so buffers grown
+// inside the loop allocated at times that varied from run to run (a steady iteration now and
+// then allocated once); sized here, they grow only when the largest tile does, with headroom.
+inline void EnsureScratch(RasterScratch* s, int threads, const TileBins& bins, int fields) {
   if (static_cast<int>(s->tile_data.size()) < threads) {
     s->tile_data.resize(threads);
     s->pixel_state.resize(threads);
   }
+  uint32_t largest = 0;
+  for (int t = 0; t < bins.num_tiles(); ++t)
+    largest = std::max(largest, bins.tile_start[t + 1] - bins.tile_start[t]);
+  const size_t need = static_cast<size_t>(largest) * fields;
+  for (std::vector<float>& buffer : s->tile_data)
+    if (buffer.capacity() < need) buffer.reserve(need + need / 2);
 }
 
 inline void EnsureImage(Image* im, int w, int h, int c) {

@@ -388,7 +388,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
   out->last_t.resize(npix);
   out->last_r.resize(npix);
   const int threads = omp_get_max_threads();
-  EnsureScratch(scratch, threads);
+  EnsureScratch(scratch, threads, bins, kNumFields);
   const bool refl = o.reflection;
   const Image* bg_image = o.background_image;
   PackGaussians(p, refl, &scratch->packed);
@@ -479,7 +479,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
   const int W = o.camera.width, H = o.camera.height;
   const size_t num = p.size();
   const int threads = omp_get_max_threads();
-  EnsureScratch(scratch, threads);
+  EnsureScratch(scratch, threads, bins, kNumFields);
   const bool refl = o.reflection;
   const Image* bg_image = o.background_image;
   PackGaussians(p, refl, &scratch->packed);

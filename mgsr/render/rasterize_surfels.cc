@@ -447,7 +447,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   out->last.resize(npix);
   out->median_index.resize(npix);
   const int threads = omp_get_max_threads();
-  EnsureScratch(scratch, threads);
+  EnsureScratch(scratch, threads, bins, kNumFields);
   const Image* bg_image = o.background_image;
   const Eigen::Matrix3f Rt = o.camera.R.transpose().cast<float>();
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
@@ -542,7 +542,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
   const int W = o.camera.width, H = o.camera.height;
   const size_t num = p.size();
   const int threads = omp_get_max_threads();
-  EnsureScratch(scratch, threads);
+  EnsureScratch(scratch, threads, bins, kNumFields);
   const Image* bg_image = o.background_image;
   const Eigen::Matrix3f Rc = o.camera.R.cast<float>();
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
