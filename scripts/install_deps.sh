@@ -12,6 +12,8 @@ PACKAGES=(
   libopen3d-dev libnanoflann-dev nlohmann-json3-dev
   # .spz export (gzip)
   zlib1g-dev
+  # data-parallel training under mpirun (-DMGSR_WITH_MPI=ON, scripts/build.sh)
+  libopenmpi-dev openmpi-bin
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # real COLMAP, for interoperability tests and the photo pipeline

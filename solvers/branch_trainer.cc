@@ -71,16 +71,65 @@ double BranchTrainer::EvaluateLoss(Stage stage, int view, int iteration, const R
   // LastTerms() is set once the density strategy's regulariser is known (OptimizeAndControlDensity,
   // or Step when the step ends at the loss), so its size stays the same from step to step.
   const double loss = sp.problem.Evaluate(branch_, in, targets, gradient, &loss_terms_);
-  if (!sp.exposure_terms.empty()) {
-    ProfileScope exposure_scope("exposure");
-    ColorTransform g{};
-    for (const ExposureCompensatedLoss* e : sp.exposure_terms) {
-      for (int k = 0; k < kColorTransformSize; ++k) g[k] += e->parameter_gradient()[k];
-    }
-    exposure_->Step(view, g, options_.exposure_lr, options_.exposure_prior,
-                    options_.exposure_offset_prior, options_.exposure_mean_prior);
+  exposure_gradient_.fill(0.0);
+  for (const ExposureCompensatedLoss* e : sp.exposure_terms) {
+    for (int k = 0; k < kColorTransformSize; ++k)
+      exposure_gradient_[k] += e->parameter_gradient()[k];
   }
   return loss;
+}
+
+double BranchTrainer::Step(Stage stage, int view, const Camera& camera, int iteration,
+                           const Targets& targets) {
+  struct Fixed : BatchTargets {
+    explicit Fixed(const Targets& t) : targets(t) {}
+    Targets For(int) override { return targets; }
+    Targets targets;
+  } fixed(targets);
+  const BatchView one{view, &camera};
+  LocalViewGroup local;
+  return StepBatch(stage, &one, 1, &fixed, iteration, &local);
+}
+
+void BranchTrainer::BeginBatch(Stage stage, int count) {
+  position_stride_ = 1 + kColorTransformSize + ProblemFor(stage).rows.size();
+  position_values_.assign(position_stride_ * count, 0.0);
+}
+
+void BranchTrainer::RecordView(int position, double loss) {
+  double* v = position_values_.data() + position_stride_ * position;
+  v[0] = loss;
+  for (int k = 0; k < kColorTransformSize; ++k) v[1 + k] = exposure_gradient_[k];
+  for (size_t i = 0; i < loss_terms_.size() && 1 + kColorTransformSize + i < position_stride_; ++i)
+    v[1 + kColorTransformSize + i] = loss_terms_[i].value;
+}
+
+double BranchTrainer::FinishViews(Stage stage, const BatchView* views, int count,
+                                  ViewGroup* group) {
+  if (group->size() > 1) {
+    const Status s = group->SumDisjoint(position_values_.data(), position_values_.size());
+    if (!s.ok()) step_error_ = s;
+  }
+  double loss = 0;
+  for (int p = 0; p < count; ++p) loss += position_values_[position_stride_ * p];
+  for (size_t i = 0; i < loss_terms_.size(); ++i) {
+    double sum = 0;
+    for (int p = 0; p < count; ++p)
+      sum += position_values_[position_stride_ * p + 1 + kColorTransformSize + i];
+    loss_terms_[i].value = sum / count;
+  }
+  // Each view's colour transform, in batch order, from its own rows' gradient.
+  if (!ProblemFor(stage).exposure_terms.empty()) {
+    ProfileScope exposure_scope("exposure");
+    for (int p = 0; p < count; ++p) {
+      ColorTransform g;
+      for (int k = 0; k < kColorTransformSize; ++k)
+        g[k] = position_values_[position_stride_ * p + 1 + k];
+      exposure_->Step(views[p].view, g, options_.exposure_lr, options_.exposure_prior,
+                      options_.exposure_offset_prior, options_.exposure_mean_prior);
+    }
+  }
+  return loss / count;
 }
 
 void BranchTrainer::TargetGradient(Stage stage, const RenderBuffers& at, const Targets& targets,
@@ -88,9 +137,8 @@ void BranchTrainer::TargetGradient(Stage stage, const RenderBuffers& at, const T
   ProblemFor(stage).problem.EvaluateTargetGradient(branch_, at, targets, gradient);
 }
 
-std::string BranchTrainer::OptimizeAndControlDensity(const Camera& camera,
-                                                     const std::vector<float>& mean2d,
-                                                     const std::vector<float>& radii,
+std::string BranchTrainer::OptimizeAndControlDensity(const std::vector<float>* statistics,
+                                                     int views,
                                                      const std::vector<ParamBlock>& gradients,
                                                      int it) {
   // The strategy's statistics and regulariser gradient (reference 1.10: view-averaged screen
@@ -98,9 +146,8 @@ std::string BranchTrainer::OptimizeAndControlDensity(const Camera& camera,
   const Adam::LearningRates rates = RatesAt(it);
   DensityStep step;
   step.iteration = it;
-  step.camera = &camera;
-  step.mean2d = &mean2d;
-  step.radii = &radii;
+  step.views = views;
+  step.statistics = statistics;
   // Sized first: a rate function fills the list it is given (as Adam hands it one per block).
   position_rates_.assign(3, 0.0f);
   rates("means", 3, &position_rates_);

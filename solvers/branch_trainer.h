@@ -19,8 +19,10 @@
 // sh_degree, background[3].
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -42,6 +44,7 @@
 #include "solvers/exposure_model.h"
 #include "solvers/loss_table.h"
 #include "solvers/solver_options.h"
+#include "solvers/view_group.h"
 
 namespace mgsr {
 
@@ -91,6 +94,20 @@ template <typename P>
 struct HasLearntBackground<P, std::void_t<decltype(P::kLearntBackground)>>
     : std::integral_constant<bool, P::kLearntBackground> {};
 
+// One view of a step's batch.
+struct BatchView {
+  int view = 0;
+  const Camera* camera = nullptr;
+};
+
+// The loss targets of each view of a batch, asked for just before the view is rendered (the
+// mutual stage renders the supervising branch's target then, into storage it reuses).
+class BatchTargets {
+ public:
+  virtual ~BatchTargets() = default;
+  virtual Targets For(int position) = 0;
+};
+
 class BranchTrainer {
  public:
   // `exposure`: the per-view colour transforms the branch's exposure rows are behind (owned by the
@@ -116,12 +133,20 @@ class BranchTrainer {
   void AddLossRow(const LossSpec& row, std::unique_ptr<LossTerm> term, bool behind_exposure);
 
   // --- Training.
-  // One step on a view: renders it, evaluates the stage's loss (rows switched on by `iteration`,
-  // the view's colour transform set, then stepped with its rows' gradient), back-propagates, steps
-  // Adam and runs density control and opacity resets on the branch's schedule at `iteration`.
-  // Returns the loss; StepStatus() says whether the step was sound.
-  virtual double Step(Stage stage, int view, const Camera& camera, int iteration,
-                      const Targets& targets) = 0;
+  // One step on a batch of `count` views (--batch_views): this process renders its part of the
+  // batch (the group's rank's, solvers/view_group.h) view by view, evaluates the stage's loss on
+  // each (rows switched on by `iteration`, the view's colour transform in front) and
+  // back-propagates it; the view gradients, the density strategy's per-view statistics and the
+  // learnt background's gradient are summed over the batch in the batch tree's order (across the
+  // group's processes too); then the views' colour transforms step with their rows' gradients,
+  // Adam steps once, and density control and opacity resets run on the branch's schedule at
+  // `iteration`. Returns the mean loss over the batch (LastTerms: the mean term values);
+  // StepStatus() says whether the step was sound. Every process of the group must call it with
+  // the same batch.
+  virtual double StepBatch(Stage stage, const BatchView* views, int count, BatchTargets* targets,
+                           int iteration, ViewGroup* group) = 0;
+  // One view, one process: StepBatch with a batch of one.
+  double Step(Stage stage, int view, const Camera& camera, int iteration, const Targets& targets);
   // OK, or why the last step must stop the run: a loss row the branch cannot feed (checked on the
   // stage's first step); NonfiniteBlock() names a parameter block whose gradient was not finite.
   const Status& StepStatus() const { return step_error_; }
@@ -164,14 +189,21 @@ class BranchTrainer {
   void CommitRead();
 
  protected:
-  // The stage's loss on one render; fills `gradient` and LastTerms(); sets step_error_ when a row
+  // The stage's loss on one render; fills `gradient`, the term values and the gradient of the
+  // view's colour transform (RecordView keeps them for the batch); sets step_error_ when a row
   // cannot be fed.
   double EvaluateLoss(Stage stage, int view, int iteration, const RenderBuffers& in,
                       const Targets& targets, RenderGradients* gradient);
-  // After the backward pass: the density strategy's statistics and regulariser, Adam, then its
-  // row operations on the model's rows (BindRows).
-  std::string OptimizeAndControlDensity(const Camera& camera, const std::vector<float>& mean2d,
-                                        const std::vector<float>& radii,
+  // A batch's per-position values (loss, term values, colour-transform gradient): BeginBatch
+  // clears them for `count` positions, RecordView keeps those of the last EvaluateLoss at
+  // `position`, FinishViews sums them over the group, steps each view's colour transform in batch
+  // order and returns the mean loss (the mean term values into LastTerms' rows).
+  void BeginBatch(Stage stage, int count);
+  void RecordView(int position, double loss);
+  double FinishViews(Stage stage, const BatchView* views, int count, ViewGroup* group);
+  // After the backward passes: the density strategy's statistics (the batch's sum, or null) and
+  // regulariser, Adam, then its row operations on the model's rows (BindRows).
+  std::string OptimizeAndControlDensity(const std::vector<float>* statistics, int views,
                                         const std::vector<ParamBlock>& gradients, int iteration);
   // Adam's learning rates at `iteration` (a callable that allocates nothing).
   Adam::LearningRates RatesAt(int iteration) const {
@@ -231,7 +263,11 @@ class BranchTrainer {
 
  private:
   std::vector<Problem::TermValue> loss_terms_, last_terms_;
-  std::vector<float> position_rates_;  // scratch of OptimizeAndControlDensity
+  std::vector<float> position_rates_;   // scratch of OptimizeAndControlDensity
+  ColorTransform exposure_gradient_{};  // of the last EvaluateLoss
+  // Per batch position: loss, the colour transform's gradient, the term values.
+  std::vector<double> position_values_;
+  size_t position_stride_ = 0;
   // Read, not yet committed.
   struct Pending {
     Adam adam;
@@ -280,33 +316,41 @@ class PrimitiveTrainer : public BranchTrainer {
     held_current_ = held_is_current_model_ = false;
   }
 
-  double Step(Stage stage, int view, const Camera& camera, int iteration,
-              const Targets& targets) override {
+  double StepBatch(Stage stage, const BatchView* views, int count, BatchTargets* targets,
+                   int iteration, ViewGroup* group) override {
     ProfileContext context(name());
-    // The render, its gradients and the parameter gradients are members: after the first steps
-    // have sized them, a step allocates nothing.
-    step_options_ = OptionsFor(camera, &step_background_);
-    // A mutual iteration's teacher render is often this very render: the branch supervised the
-    // other one on this view and has not changed since (joint mode, 3DGS). Then the renderer
-    // still holds its forward state and the step reuses it (the same bytes a new forward gives).
-    const bool reuse = held_current_ && held_is_current_model_ &&
-                       held_options_.sh_degree == step_options_.sh_degree &&
-                       held_options_.camera == camera;
-    if (!reuse) renderer_.Forward(model_, step_options_, &step_render_);
-    const typename P::Render& render = reuse ? held_ : step_render_;
-    held_current_ = held_is_current_model_ = false;
-    const double loss = EvaluateLoss(stage, view, iteration, P::Buffers(camera, render), targets,
-                                     &step_buffer_grad_);
+    // Renders, gradients and the batch tree's slots are members: after the first steps have
+    // sized them, a step allocates nothing.
+    int begin = 0, end = count;
+    BatchPart(count, group->rank(), group->size(), &begin, &end);
+    BeginBatch(stage, count);
+    const int statistics_width = density_->ViewStatisticsWidth(iteration);
+    while (static_cast<int>(slots_.size()) < BatchTreeSlots(end - begin))
+      slots_.push_back(std::make_unique<Slot>());
+    BatchTreeSum(
+        begin, end, 0,
+        [&](int position, int slot) {
+          ViewGradient(stage, views[position], position, targets->For(position), iteration,
+                       statistics_width, slots_[slot].get());
+        },
+        [&](int dst, int src) { AddSlot(*slots_[src], slots_[dst].get()); });
     if (!step_error_.ok()) {
       SetLastTerms(0.0);
-      return loss;
+      return std::numeric_limits<double>::quiet_NaN();
     }
-    P::TakeGradients(&step_buffer_grad_, &step_render_grad_);
-    renderer_.Backward(model_, step_options_, render, step_render_grad_, &grads_);
-    nonfinite_block_ = OptimizeAndControlDensity(camera, grads_.mean2d, P::Radii(renderer_),
-                                                 GradientBlocks(), iteration);
-    const std::string background = StepBackground(camera, render);
-    if (nonfinite_block_.empty()) nonfinite_block_ = background;
+    Slot& sum = *slots_[0];
+    if (group->size() > 1) SumOverGroup(group, &sum);
+    const double loss = FinishViews(stage, views, count, group);
+    if (!step_error_.ok()) return loss;
+    nonfinite_block_ = OptimizeAndControlDensity(statistics_width > 0 ? &sum.statistics : nullptr,
+                                                 count, sum.blocks, iteration);
+    if constexpr (HasLearntBackground<P>::value) {
+      if (environment_ != nullptr) {
+        ProfileScope scope("environment");
+        const std::string bad = environment_->ApplyGradient(&sum.environment);
+        if (nonfinite_block_.empty()) nonfinite_block_ = bad;
+      }
+    }
     return loss;
   }
 
@@ -326,11 +370,20 @@ class PrimitiveTrainer : public BranchTrainer {
                            "rendered again since Hold)");
     }
     P::TakeGradients(gradient, &step_render_grad_);
-    renderer_.Backward(model_, held_options_, held_, step_render_grad_, &grads_);
+    Slot& slot = FirstSlot();
+    renderer_.Backward(model_, held_options_, held_, step_render_grad_, &slot.grads);
+    Bind(&slot);
     held_is_current_model_ = false;  // the step below changes the model
     ProfileScope scope("adam");
-    adam_.Step(rows_->blocks(), GradientBlocks(), RatesAt(iteration));
-    StepBackground(held_options_.camera, held_);
+    adam_.Step(rows_->blocks(), slot.blocks, RatesAt(iteration));
+    if constexpr (HasLearntBackground<P>::value) {
+      if (environment_ != nullptr) {
+        P::BackgroundGradient(held_, step_render_grad_, &background_grad_);
+        slot.environment.assign(environment_->map().texels.size(), 0.0f);
+        environment_->AddGradient(held_options_.camera, background_grad_, &slot.environment);
+        environment_->ApplyGradient(&slot.environment);
+      }
+    }
     return Status::Ok();
   }
 
@@ -377,7 +430,7 @@ class PrimitiveTrainer : public BranchTrainer {
     pending_model_ = Model();
     held_current_ = held_is_current_model_ = false;
     BindRows(model_.Blocks());
-    gradient_blocks_.clear();
+    for (std::unique_ptr<Slot>& slot : slots_) slot->blocks.clear();
   }
   const PrimitiveLayout& Layout() const override {
     static const PrimitiveLayout layout = P::Layout();
@@ -397,25 +450,90 @@ class PrimitiveTrainer : public BranchTrainer {
     }
     return o;
   }
-  // One step of the learnt background from the gradient the last backward pass left in
-  // step_render_grad_; the name of a non-finite block or "".
-  std::string StepBackground(const Camera& camera, const typename P::Render& render) {
+  // A slot of the batch tree: one view's (or a subtree's summed) parameter gradients, density
+  // statistics and background gradient. Behind pointers: `blocks` point into `grads`.
+  struct Slot {
+    typename P::Gradients grads;
+    std::vector<ParamBlock> blocks;  // grads.params' blocks, bound after its first backward pass
+    std::vector<float> statistics, environment;
+  };
+  Slot& FirstSlot() {
+    if (slots_.empty()) slots_.push_back(std::make_unique<Slot>());
+    return *slots_[0];
+  }
+  // Blocks are bound once the gradients have the model's layout (its SH width).
+  static void Bind(Slot* slot) {
+    if (slot->blocks.empty()) slot->blocks = slot->grads.params.Blocks();
+  }
+
+  // One leaf of the batch tree: view `v` at `position`, rendered, its loss evaluated and recorded
+  // and differentiated into `slot`.
+  void ViewGradient(Stage stage, const BatchView& v, int position, const Targets& targets,
+                    int iteration, int statistics_width, Slot* slot) {
+    if (!step_error_.ok()) return;  // an earlier view found a row the branch cannot feed
+    const Camera& camera = *v.camera;
+    step_options_ = OptionsFor(camera, &step_background_);
+    // A mutual iteration's teacher render is often this very render: the branch supervised the
+    // other one on this view and has not changed since (joint mode, 3DGS). Then the renderer
+    // still holds its forward state and the step reuses it (the same bytes a new forward gives).
+    const bool reuse = held_current_ && held_is_current_model_ &&
+                       held_options_.sh_degree == step_options_.sh_degree &&
+                       held_options_.camera == camera;
+    if (!reuse) renderer_.Forward(model_, step_options_, &step_render_);
+    const typename P::Render& render = reuse ? held_ : step_render_;
+    held_current_ = held_is_current_model_ = false;
+    const double loss = EvaluateLoss(stage, v.view, iteration, P::Buffers(camera, render), targets,
+                                     &step_buffer_grad_);
+    if (!step_error_.ok()) return;
+    RecordView(position, loss);
+    P::TakeGradients(&step_buffer_grad_, &step_render_grad_);
+    renderer_.Backward(model_, step_options_, render, step_render_grad_, &slot->grads);
+    Bind(slot);
+    if (statistics_width > 0) {
+      ProfileScope scope("density control");
+      slot->statistics.resize(static_cast<size_t>(statistics_width) * model_.size());
+      DensityView view;
+      view.iteration = iteration;
+      view.camera = &camera;
+      view.mean2d = &slot->grads.mean2d;
+      view.radii = &P::Radii(renderer_);
+      density_->ViewStatistics(view, slot->statistics.data());
+    }
     if constexpr (HasLearntBackground<P>::value) {
       if (environment_ != nullptr) {
         ProfileScope scope("environment");
         P::BackgroundGradient(render, step_render_grad_, &background_grad_);
-        return environment_->Step(camera, background_grad_);
+        slot->environment.assign(environment_->map().texels.size(), 0.0f);
+        environment_->AddGradient(camera, background_grad_, &slot->environment);
       }
     }
-    (void)camera;
-    (void)render;
-    return "";
   }
 
-  // The parameter gradients' blocks, bound once the gradients have the model's layout.
-  const std::vector<ParamBlock>& GradientBlocks() {
-    if (gradient_blocks_.empty()) gradient_blocks_ = grads_.params.Blocks();
-    return gradient_blocks_;
+  // dst += src, every array element by element.
+  static void AddSlot(const Slot& src, Slot* dst) {
+    ProfileScope scope("batch sum");
+    for (size_t b = 0; b < dst->blocks.size(); ++b)
+      AddInto(*src.blocks[b].data, dst->blocks[b].data);
+    AddInto(src.statistics, &dst->statistics);
+    AddInto(src.environment, &dst->environment);
+  }
+  static void AddInto(const std::vector<float>& src, std::vector<float>* dst) {
+    float* d = dst->data();
+    const float* s = src.data();
+    const size_t n = std::min(src.size(), dst->size());
+    for (size_t i = 0; i < n; ++i) d[i] += s[i];
+  }
+  // The processes' parts of the batch, summed (the batch tree's upper levels).
+  void SumOverGroup(ViewGroup* group, Slot* sum) {
+    ProfileScope scope("batch sum");
+    for (const ParamBlock& b : sum->blocks) {
+      const Status s = group->SumTree(b.data->data(), b.data->size());
+      if (!s.ok()) step_error_ = s;
+    }
+    for (std::vector<float>* v : {&sum->statistics, &sum->environment}) {
+      const Status s = group->SumTree(v->data(), v->size());
+      if (!s.ok()) step_error_ = s;
+    }
   }
 
   Model model_, pending_model_;
@@ -424,8 +542,7 @@ class PrimitiveTrainer : public BranchTrainer {
   typename P::Render held_, step_render_;
   RenderGradients step_buffer_grad_;
   typename P::RenderGrad step_render_grad_;
-  typename P::Gradients grads_;
-  std::vector<ParamBlock> gradient_blocks_;
+  std::vector<std::unique_ptr<Slot>> slots_;  // the batch tree's; slot 0 holds the sum
   // The learnt background of the step's, the held and other renders, and its gradient.
   Image step_background_, held_background_, render_background_, background_grad_;
   // held_current_: the renderer still holds the forward state of held_ (BackpropHeld may run);

@@ -33,12 +33,13 @@ struct DensityStats {
     grad_sum.assign(n, 0.0f);
     count.assign(n, 0.0f);
   }
-  // Adds one view: the NDC screen-gradient norm of every primitive drawn in it (radius > 0).
-  void Accumulate(const std::vector<float>& grad_norms, const std::vector<float>& radii) {
-    for (size_t i = 0; i < grad_sum.size() && i < radii.size(); ++i) {
-      if (radii[i] <= 0) continue;
-      grad_sum[i] += grad_norms[i];
-      count[i] += 1;
+  // Adds the views of a step: per primitive, the sum over the views of its NDC screen-gradient
+  // norm where drawn and the number of views it was drawn in (ReferenceDensity::ViewStatistics).
+  void AccumulateViews(const std::vector<float>& sums) {
+    const size_t n = std::min(grad_sum.size(), sums.size() / 2);
+    for (size_t i = 0; i < n; ++i) {
+      grad_sum[i] += sums[2 * i];
+      count[i] += sums[2 * i + 1];
     }
   }
 };

@@ -126,10 +126,12 @@ Status McmcDensity::Read(BinaryReader* r) {
   return Status::Ok();
 }
 
-double McmcDensity::BeforeStep(const DensityStep& /*step*/, const PrimitiveRows& rows,
+double McmcDensity::BeforeStep(const DensityStep& step, const PrimitiveRows& rows,
                                const std::vector<ParamBlock>& gradients) {
   // opacity_reg x mean(opacity) + scale_reg x mean(scale) / extent, over the primitive's own
-  // opacity and every scale axis.
+  // opacity and every scale axis; once per view of the step (the gradients it is added to are
+  // the sum of the step's views' gradients, so its weight relative to them stays the same).
+  const float views = static_cast<float>(step.views);
   const size_t n = rows.size();
   if (n == 0) return 0;
   float* d_opacity = nullptr;
@@ -141,27 +143,27 @@ double McmcDensity::BeforeStep(const DensityStep& /*step*/, const PrimitiveRows&
   double value = 0;
   const float* logits = rows.Block("opacity_logits");
   if (options_.opacity_reg > 0 && logits != nullptr && d_opacity != nullptr) {
-    const float w = options_.opacity_reg / static_cast<float>(n);
+    const float w = options_.opacity_reg / static_cast<float>(n) * views;
     double sum = 0;
     for (size_t i = 0; i < n; ++i) {
       const float s = Sigmoid(logits[i]);
       sum += s;
       d_opacity[i] += w * SigmoidGradFromValue(s);
     }
-    value += options_.opacity_reg * sum / n;
+    value += options_.opacity_reg * sum / n * views;
   }
   const float* log_scales = rows.Block("log_scales");
   const int axes = rows.layout().scale_axes;
   if (options_.scale_reg > 0 && log_scales != nullptr && d_scale != nullptr && axes > 0) {
     const size_t count = n * axes;
-    const float w = options_.scale_reg / static_cast<float>(count * context_.extent);
+    const float w = options_.scale_reg / static_cast<float>(count * context_.extent) * views;
     double sum = 0;
     for (size_t j = 0; j < count; ++j) {
       const float s = std::exp(log_scales[j]);
       sum += s;
       d_scale[j] += w * s;
     }
-    value += options_.scale_reg * sum / (count * context_.extent);
+    value += options_.scale_reg * sum / (count * context_.extent) * views;
   }
   return value;
 }

@@ -9,10 +9,19 @@ double ReferenceDensity::BeforeStep(const DensityStep& step, const PrimitiveRows
                                     const std::vector<ParamBlock>& /*gradients*/) {
   // Statistics start afresh whenever the rows changed under them (a stage's pruning, a resume).
   if (stats_.grad_sum.size() != rows.size()) stats_.Reset(rows.size());
-  if (step.iteration >= context_.schedule.densify_until) return 0;
-  ScreenGradientNorms(*step.mean2d, step.camera->width, step.camera->height, &norms_);
-  stats_.Accumulate(norms_, *step.radii);
+  if (step.statistics == nullptr) return 0;  // not densifying any more
+  stats_.AccumulateViews(*step.statistics);
   return 0;
+}
+
+void ReferenceDensity::ViewStatistics(const DensityView& view, float* out) {
+  ScreenGradientNorms(*view.mean2d, view.camera->width, view.camera->height, &norms_);
+  const std::vector<float>& radii = *view.radii;
+  for (size_t i = 0; i < radii.size(); ++i) {
+    const bool drawn = radii[i] > 0;
+    out[2 * i] = drawn ? norms_[i] : 0.0f;
+    out[2 * i + 1] = drawn ? 1.0f : 0.0f;
+  }
 }
 
 DensifyResult ReferenceDensity::AfterStep(const DensityStep& step, PrimitiveRows* rows, Rng* rng) {

@@ -12,6 +12,12 @@ class ReferenceDensity : public DensityStrategy {
  public:
   explicit ReferenceDensity(const DensityContext& context) : context_(context) {}
 
+  // Per view: the NDC screen-gradient norm of every primitive drawn (radius > 0) and 1 for it
+  // being drawn, while densifying.
+  int ViewStatisticsWidth(int iteration) const override {
+    return iteration < context_.schedule.densify_until ? 2 : 0;
+  }
+  void ViewStatistics(const DensityView& view, float* out) override;
   double BeforeStep(const DensityStep& step, const PrimitiveRows& rows,
                     const std::vector<ParamBlock>& gradients) override;
   DensifyResult AfterStep(const DensityStep& step, PrimitiveRows* rows, Rng* rng) override;
@@ -22,7 +28,7 @@ class ReferenceDensity : public DensityStrategy {
   const DensityStats& stats() const { return stats_; }
 
  private:
-  std::vector<float> norms_;  // BeforeStep's scratch
+  std::vector<float> norms_;  // ViewStatistics' scratch
   const DensityContext context_;
   DensityStats stats_, pending_;
 };

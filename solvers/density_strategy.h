@@ -36,13 +36,23 @@ struct DensityContext {
   double extent = 1;        // the scene's extent
 };
 
-// One training step as density control sees it.
-struct DensityStep {
+// One view of a training step, as a strategy's per-view statistics see it.
+struct DensityView {
   int iteration = 0;
   const Camera* camera = nullptr;
   const std::vector<float>* mean2d = nullptr;  // d loss / d screen mean, 2 per primitive
   const std::vector<float>* radii = nullptr;   // > 0 where the primitive was drawn
-  float position_lr = 0;                       // the means' learning rate at this step
+};
+
+// One training step as density control sees it: a step trains on a batch of `views` views
+// (--batch_views; 1 by default), whose per-view statistics arrive summed.
+struct DensityStep {
+  int iteration = 0;
+  int views = 1;
+  // The sum over the batch's views of ViewStatistics (ViewStatisticsWidth floats per primitive,
+  // primitive-major), or null when the width is 0 at this iteration.
+  const std::vector<float>* statistics = nullptr;
+  float position_lr = 0;  // the means' learning rate at this step
 };
 
 class DensityStrategy {
@@ -52,9 +62,18 @@ class DensityStrategy {
   // Once, on the initial model (before the first step; not on a resume).
   virtual void Begin(PrimitiveRows* /*rows*/, Rng* /*rng*/) {}
 
-  // After the backward pass, before the optimiser step: statistics of the step, and the gradient
+  // Statistics a strategy gathers per view (e.g. screen-gradient norms): ViewStatistics fills
+  // `width` floats per primitive for one view, and the trainer sums them over the views of a batch
+  // (in a fixed order, also across processes: solvers/view_group.h) before BeforeStep sees them.
+  // Statistics that are sums over views therefore come out the same however a batch is split.
+  // The width may depend on the iteration only (every process must agree on it); 0: none.
+  virtual int ViewStatisticsWidth(int /*iteration*/) const { return 0; }
+  virtual void ViewStatistics(const DensityView& /*view*/, float* /*out*/) {}
+
+  // After the backward pass, before the optimiser step: the step's statistics, and the gradient
   // of the strategy's own regulariser added into `gradients` (blocks of the same names as the
-  // model's). Returns that regulariser's value (0 when it has none).
+  // model's; the sum of the batch's view gradients). Returns that regulariser's value (0 when it
+  // has none).
   virtual double BeforeStep(const DensityStep& step, const PrimitiveRows& rows,
                             const std::vector<ParamBlock>& gradients) = 0;
   // After the optimiser step: row operations on the strategy's schedule.

@@ -17,11 +17,20 @@ void EnvironmentBackground::Render(const Camera& camera, Image* out) {
 
 std::string EnvironmentBackground::Step(const Camera& camera, const Image& d_background) {
   gradient_.assign(map_.texels.size(), 0.0f);
-  renderer_.Backward(map_, camera, d_background, &gradient_);
-  if (!AllFinite(gradient_)) return "environment";  // the caller stops; the map stays as it was
+  AddGradient(camera, d_background, &gradient_);
+  return ApplyGradient(&gradient_);
+}
+
+void EnvironmentBackground::AddGradient(const Camera& camera, const Image& d_background,
+                                        std::vector<float>* d_texels) {
+  renderer_.Backward(map_, camera, d_background, d_texels);
+}
+
+std::string EnvironmentBackground::ApplyGradient(std::vector<float>* d_texels) {
+  if (!AllFinite(*d_texels)) return "environment";  // the caller stops; the map stays as it was
   const float rate = options_.learning_rate;
   const std::string bad =
-      adam_.Step(map_.Blocks(), {{"environment", &gradient_, 3}},
+      adam_.Step(map_.Blocks(), {{"environment", d_texels, 3}},
                  [rate](const std::string&, int width, std::vector<float>* rates) {
                    rates->assign(width, rate);
                  });

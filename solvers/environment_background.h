@@ -30,6 +30,11 @@ class EnvironmentBackground {
   // One Adam step from d loss / d (the background of `camera`'s render). Returns "environment"
   // when that gradient is not finite (the map is then left as it was), else "".
   std::string Step(const Camera& camera, const Image& d_background);
+  // The same in two halves, for a step over a batch of views: AddGradient adds d loss / d texels
+  // of one view's render into `d_texels` (sized to the map on first use); ApplyGradient steps
+  // with the batch's sum.
+  void AddGradient(const Camera& camera, const Image& d_background, std::vector<float>* d_texels);
+  std::string ApplyGradient(std::vector<float>* d_texels);
   const EnvironmentMap& map() const { return map_; }
 
   // Checkpoints: the map and its Adam moments; Read checks and keeps them aside until CommitRead.

@@ -51,6 +51,15 @@ void Rates(const SolverOptions& o, int step, double extent, const std::string& n
   std::fill(rates->begin(), rates->end(), r);
 }
 
+// The rates of a step over a batch of views: the sqrt(batch) rule (SolverOptions::batch_sqrt_lr).
+void BatchRates(const SolverOptions& o, int step, double extent, const std::string& name, int width,
+                std::vector<float>* rates) {
+  Rates(o, step, extent, name, width, rates);
+  if (o.batch_views <= 1 || !o.batch_sqrt_lr) return;
+  const float f = static_cast<float>(std::sqrt(static_cast<double>(o.batch_views)));
+  for (float& r : *rates) r *= f;
+}
+
 // What the mutual stage hands a learning branch from the supervising one (reference 1.5): the
 // buffer, the target it fills, and whether pixels outside the mask are forced to the learner's
 // background (the transmitted colour is; the depth is not).
@@ -182,7 +191,7 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   const double extent = scene.extent;
   common.learning_rates = [o, extent](int it, const std::string& name, int width,
                                       std::vector<float>* rates) {
-    Rates(*o, it, extent, name, width, rates);
+    BatchRates(*o, it, extent, name, width, rates);
   };
   common.auto_stop_min_iteration = options.warmup_min_iterations;
   common.auto_stop_window = options.auto_stop_window;
@@ -253,6 +262,14 @@ void MutualBoostedSolver::FitExposures() {
   }
 }
 
+void MutualBoostedSolver::NextBatch() {
+  batch_.resize(static_cast<size_t>(std::max(1, options_.batch_views)));
+  for (BatchView& b : batch_) {
+    b.view = NextView();
+    b.camera = &scene_.views[b.view].camera;
+  }
+}
+
 int MutualBoostedSolver::NextView() {
   // A shuffled stack of the training views, refilled when empty (reference 1.3).
   if (view_stack_.empty()) {
@@ -297,42 +314,66 @@ Targets MutualBoostedSolver::LossTargets(Branch branch, int view, const Image* o
   return t;
 }
 
-Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* teacher, int view,
-                                       int it, int schedule_it) {
-  const View& v = scene_.views[view];
-  const MutualSupervision sup = SupervisionFor(learner->branch());
-  const float background =
-      learner->branch() == Branch::kSurfels2D ? options_.background_2d : options_.background_3d;
-  // The teacher's render, a constant target (reference 1.5), copied into storage kept between
-  // iterations.
-  Image& target = mutual_target_;
-  {
-    ProfileScope scope("mutual targets");
-    target = *teacher->Hold(v.camera).Get(sup.buffer);
-    if (sup.background_outside_mask && !v.mask.empty())
-      FillOutsideMask(v.mask, background, &target);
-  }
-  const Targets targets = LossTargets(learner->branch(), view, &target);
-  // Bidirectional: the learner's render the loss compares, before its step.
-  RenderBuffers before;
-  if (options_.bidirectional) before = learner->Hold(v.camera);
-  BranchSummary& sum = learner->summary();
-  sum.final_loss = learner->Step(Stage::kMutual, view, v.camera, schedule_it, targets);
-  MGSR_RETURN_IF_ERROR(CheckFinite(*learner, it, sum.final_loss));
-  if (options_.bidirectional) {
-    // d L_learner / d target from the rows that differentiate it, at the render the loss
-    // compared; pixels forced to the background are constants. The teacher's renderer still
-    // holds the target's forward state (the learner's step does not use it).
-    TargetGradients d;
-    learner->TargetGradient(Stage::kMutual, before, targets, &d);
-    Image g =
-        std::move(sup.target == OtherBranchTarget::kTransmitted ? d.transmitted : d.other_depth);
-    if (!g.empty()) {
-      if (sup.background_outside_mask && !v.mask.empty()) FillOutsideMask(v.mask, 0.0f, &g);
-      RenderGradients into;
-      into.images[static_cast<int>(sup.buffer)] = std::move(g);
-      MGSR_RETURN_IF_ERROR(teacher->BackpropHeld(&into, it));
+Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* teacher, int it,
+                                       int schedule_it) {
+  // The teacher's render of each view of the batch, a constant target (reference 1.5), rendered
+  // just before the learner renders that view, into storage kept between iterations.
+  struct TeacherTargets : BatchTargets {
+    MutualBoostedSolver* solver;
+    BranchTrainer* learner;
+    BranchTrainer* teacher;
+    Targets For(int position) override {
+      const int view = solver->batch_[position].view;
+      const View& v = solver->scene_.views[view];
+      const MutualSupervision sup = SupervisionFor(learner->branch());
+      const float background = learner->branch() == Branch::kSurfels2D
+                                   ? solver->options_.background_2d
+                                   : solver->options_.background_3d;
+      Image& target = solver->mutual_target_;
+      {
+        // The solver's work, not the learner's (this runs inside the learner's step).
+        ProfileContext solver_context("");
+        ProfileScope scope("mutual targets");
+        target = *teacher->Hold(v.camera).Get(sup.buffer);
+        if (sup.background_outside_mask && !v.mask.empty())
+          FillOutsideMask(v.mask, background, &target);
+      }
+      return solver->LossTargets(learner->branch(), view, &target);
     }
+  } targets;
+  targets.solver = this;
+  targets.learner = learner;
+  targets.teacher = teacher;
+  const int count = static_cast<int>(batch_.size());
+  BranchSummary& sum = learner->summary();
+  if (!options_.bidirectional) {
+    sum.final_loss =
+        learner->StepBatch(Stage::kMutual, batch_.data(), count, &targets, schedule_it, group_);
+    MGSR_RETURN_IF_ERROR(CheckFinite(*learner, it, sum.final_loss));
+    Notify(Stage::kMutual, it, *learner, sum.final_loss);
+    return Status::Ok();
+  }
+  // Bidirectional (one view per step, one process: SolverOptions::Validate): the learner's render
+  // the loss compares, before its step.
+  const View& v = scene_.views[batch_[0].view];
+  const MutualSupervision sup = SupervisionFor(learner->branch());
+  const RenderBuffers before = learner->Hold(v.camera);
+  sum.final_loss =
+      learner->StepBatch(Stage::kMutual, batch_.data(), 1, &targets, schedule_it, group_);
+  MGSR_RETURN_IF_ERROR(CheckFinite(*learner, it, sum.final_loss));
+  // d L_learner / d target from the rows that differentiate it, at the render the loss compared;
+  // pixels forced to the background are constants. The teacher's renderer still holds the
+  // target's forward state (the learner's step does not use it).
+  const Targets t = LossTargets(learner->branch(), batch_[0].view, &mutual_target_);
+  TargetGradients d;
+  learner->TargetGradient(Stage::kMutual, before, t, &d);
+  Image g =
+      std::move(sup.target == OtherBranchTarget::kTransmitted ? d.transmitted : d.other_depth);
+  if (!g.empty()) {
+    if (sup.background_outside_mask && !v.mask.empty()) FillOutsideMask(v.mask, 0.0f, &g);
+    RenderGradients into;
+    into.images[static_cast<int>(sup.buffer)] = std::move(g);
+    MGSR_RETURN_IF_ERROR(teacher->BackpropHeld(&into, it));
   }
   Notify(Stage::kMutual, it, *learner, sum.final_loss);
   return Status::Ok();
@@ -399,8 +440,26 @@ bool MutualBoostedSolver::EndIteration(Stage stage, int iteration, bool last, St
     return std::string(stage == Stage::kWarmup ? "warm-up" : "mutual") + " iteration " +
            std::to_string(iteration);
   };
-  const CallbackReturnType request = callback_request_;
+  CallbackReturnType request = callback_request_;
   callback_request_ = CallbackReturnType::kContinue;
+  if (group_->size() > 1) {
+    // Every process ends where one ends: the strongest request of any process (its callbacks or
+    // a stop request), agreed on.
+    int code = request == CallbackReturnType::kAbort                   ? 3
+               : request == CallbackReturnType::kTerminateSuccessfully ? 2
+               : stop_requested_                                       ? 1
+                                                                       : 0;
+    const Status agreed = group_->Max(&code);
+    if (!agreed.ok()) {
+      summary_.termination_type = TerminationType::kFailure;
+      *status = agreed;
+      return true;
+    }
+    request = code == 3   ? CallbackReturnType::kAbort
+              : code == 2 ? CallbackReturnType::kTerminateSuccessfully
+                          : CallbackReturnType::kContinue;
+    if (code == 1) stop_requested_ = 1;
+  }
   if (request == CallbackReturnType::kAbort) {
     summary_.termination_type = TerminationType::kUserAbort;
     *status = Status::Error("aborted by an iteration callback after " + where());
@@ -468,12 +527,22 @@ Status MutualBoostedSolver::Run() {
     }
     const int it = next_iteration_;
     SetShDegree(std::min(o.sh_degree, it / o.sh_interval));
-    const int view = NextView();
+    NextBatch();
     for (BranchTrainer* t : trainers_) {
       if (done[BranchIndex(t->branch())]) continue;
+      // The photos of the batch's views.
+      struct PhotoTargets : BatchTargets {
+        const MutualBoostedSolver* solver;
+        Branch branch;
+        Targets For(int position) override {
+          return solver->LossTargets(branch, solver->batch_[position].view, nullptr);
+        }
+      } targets;
+      targets.solver = this;
+      targets.branch = t->branch();
       BranchSummary& b = t->summary();
-      b.final_loss = t->Step(Stage::kWarmup, view, scene_.views[view].camera, it,
-                             LossTargets(t->branch(), view, nullptr));
+      b.final_loss = t->StepBatch(Stage::kWarmup, batch_.data(), static_cast<int>(batch_.size()),
+                                  &targets, it, group_);
       MGSR_RETURN_IF_ERROR(CheckFinite(*t, it, b.final_loss));
       b.warmup_iterations = it;
       Notify(Stage::kWarmup, it, *t, b.final_loss);
@@ -491,16 +560,16 @@ Status MutualBoostedSolver::Run() {
   const bool both = o.train_2d && o.train_3d;
   while (both && next_iteration_ <= o.mutual_iterations) {
     const int it = next_iteration_;
-    const int view = NextView();
+    NextBatch();
     const bool joint = o.mutual_mode == "joint";
     // The count the branch schedules (density control, opacity reset, learning rates) see. In
     // alternate mode the 2DGS branch steps on odd counts only, so it takes the count of the round
     // it opens: events on even counts then reach both branches, in the same round.
     const int schedule_it = joint ? it : it + it % 2;
     if (joint || it % 2 == 1)
-      MGSR_RETURN_IF_ERROR(MutualStep(surfels_.get(), gaussians_.get(), view, it, schedule_it));
+      MGSR_RETURN_IF_ERROR(MutualStep(surfels_.get(), gaussians_.get(), it, schedule_it));
     if (joint || it % 2 == 0)
-      MGSR_RETURN_IF_ERROR(MutualStep(gaussians_.get(), surfels_.get(), view, it, schedule_it));
+      MGSR_RETURN_IF_ERROR(MutualStep(gaussians_.get(), surfels_.get(), it, schedule_it));
     sum.mutual_iterations = it;
     ++next_iteration_;
     sum.mutual_seconds = mutual_before + mutual.ElapsedSeconds();

@@ -118,6 +118,12 @@ class MutualBoostedSolver {
   Status Solve(SolveSummary* summary);
   // Asks Solve to return after the current iteration (safe from a signal handler or a callback).
   void RequestStop() { stop_requested_ = 1; }
+  // The processes that share each batch of views (SolverOptions::batch_views); by default this
+  // process alone. Every process of an MPI group runs the same solver on the same scene and
+  // options and ends with the same models; the callbacks' requests (stop, abort) and
+  // RequestStop() are agreed on at each iteration's end, so one process alone can end the run.
+  // Set before Solve; the group must outlive the solver.
+  void SetViewGroup(ViewGroup* group) { group_ = group; }
 
   // Everything needed to continue exactly: models, optimiser states, density statistics, the
   // random generator, the view order, the stage and iteration, the auto-stop windows.
@@ -160,13 +166,15 @@ class MutualBoostedSolver {
   Targets LossTargets(Branch branch, int view, const Image* other) const;
   // One mutual step of `learner`, supervised by `teacher`'s render of the view (held constant; with
   // bidirectional supervision it then steps with the gradient of the learner's loss).
-  Status MutualStep(BranchTrainer* learner, BranchTrainer* teacher, int view, int iteration,
+  Status MutualStep(BranchTrainer* learner, BranchTrainer* teacher, int iteration,
                     int schedule_iteration);
   // An error naming the branch, iteration and block when the last step's loss or gradient was not
   // finite (NaN or inf): the run stops before a bad state can reach a checkpoint.
   Status CheckFinite(const BranchTrainer& trainer, int iteration, double loss) const;
   void SetShDegree(int degree);
   int NextView();
+  // The next batch of views (batch_views of them, from NextView) into batch_.
+  void NextBatch();
   // The loss table's rows, each added to its branch's trainer once, when Solve first runs.
   Status BuildProblems();
   // Ceres fit of every training view's transform against the current renders.
@@ -202,10 +210,13 @@ class MutualBoostedSolver {
   std::unique_ptr<GaussianTrainer> gaussians_;
   std::array<BranchTrainer*, 2> trainers_{};  // indexed by BranchIndex
   std::vector<int> view_stack_;
+  std::vector<BatchView> batch_;  // the current iteration's views
+  LocalViewGroup local_group_;
+  ViewGroup* group_ = &local_group_;
   int sh_degree_ = 0;
   std::vector<IterationCallback*> callbacks_;
   IterationInfo iteration_info_[2];  // what Notify hands the callbacks, per branch
-  Image mutual_target_;              // MutualStep's copy of the teacher's render
+  Image mutual_target_;              // MutualStep's copy of the teacher's render of one view
   double start_time_ = 0;
   // Loop state (checkpointed).
   Stage stage_ = Stage::kWarmup;

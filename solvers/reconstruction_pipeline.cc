@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "mgsr/core/progress.h"
+#include "mgsr/core/sha256.h"
 #include "mgsr/core/timer.h"
 #include "mgsr/eval/depth_error.h"
 #include "mgsr/eval/exposure_alignment.h"
@@ -32,9 +33,16 @@
 #include "solvers/mutual_boosted_solver.h"
 #include "solvers/profile_report.h"
 #include "solvers/trained_views.h"
+#include "solvers/view_group.h"
 
 namespace mgsr {
 namespace {
+
+// The SHA-256 of a file's bytes ("" when it cannot be read).
+std::string FileSha256(const std::string& path) {
+  std::string bytes;
+  return ReadFileToString(path, &bytes).ok() ? Sha256Hex(bytes) : "";
+}
 
 // The signed depth-error render (renders/<view>_depth2d_error.png) saturates at this many pixel
 // footprints: the surface biases it shows are fractions of a pixel to a few pixels.
@@ -347,6 +355,26 @@ void ReconstructionPipeline::RequestStop() {
   if (solver != nullptr) solver->RequestStop();
 }
 
+Status ReconstructionPipeline::TrainAlongside(MutualBoostedSolver* solver, ReconstructionEnd* end) {
+  if (options_.check_only) {
+    *end = ReconstructionEnd::kChecked;
+    return Status::Ok();
+  }
+  solver_ = solver;
+  struct Forget {
+    MutualBoostedSolver* volatile* solver;
+    ~Forget() { *solver = nullptr; }
+  } forget{&solver_};
+  SolveSummary summary;
+  Profiler::SetEnabled(options_.profile);
+  const Status s = solver->Solve(&summary);
+  Profiler::SetEnabled(false);
+  if (!s.ok()) return s;
+  *end = summary.termination_type == TerminationType::kInterrupted ? ReconstructionEnd::kInterrupted
+                                                                   : ReconstructionEnd::kFinished;
+  return Status::Ok();
+}
+
 Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   *end = ReconstructionEnd::kFinished;
   MGSR_RETURN_IF_ERROR(options_.Validate());
@@ -358,8 +386,19 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   const std::string ckpt_dir = JoinPath(o.output, "checkpoints");
   const std::string ckpt = JoinPath(ckpt_dir, "latest.ckpt");
   if (o.resume && !FileExists(ckpt)) return Status::Error(ckpt + ": no checkpoint to resume from");
+  // In a group of processes, process 0 writes; the others train alongside it (Worker below).
+  const bool writer = o.group == nullptr || o.group->rank() == 0;
+  if (o.group != nullptr && o.group->size() > 1) {
+    if (!o.images.empty()) {
+      return Status::Error(
+          "--images with " + std::to_string(o.group->size()) +
+          " MPI processes: run the photo pipeline in one process first (mgsr_solve --images ... "
+          "--check, or mgsr_colmap), then mpirun on its workspace (OUTPUT/colmap/dense)");
+    }
+    MGSR_RETURN_IF_ERROR(CheckBatchSplit(options.batch_views, o.group->size()));
+  }
   OutputFolder out;
-  if (!o.check_only) {
+  if (!o.check_only && writer) {
     const Status opened = OutputFolder::Open(o.output,
                                              o.resume      ? OutputMode::kResume
                                              : o.overwrite ? OutputMode::kOverwrite
@@ -474,15 +513,47 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   s = ResolveMeshRegion(o.mesh_region, scene, &surface, &region_note);
   if (!s.ok()) return fail(s.message());
   std::printf("mesh region: %s\n", region_note.c_str());
+  if (options.batch_views > 1) {
+    if (o.batch_scale_iterations) {
+      if (options.losses.empty()) options.losses = PaperLossTable(options);
+      options.ScaleIterationsForBatch(options.batch_views);
+    }
+    std::printf("batches: %d views per step%s%s, %d process%s\n", options.batch_views,
+                options.batch_sqrt_lr ? ", learning rates x sqrt(batch)" : "",
+                o.batch_scale_iterations ? ", iteration counts / batch" : "",
+                o.group != nullptr ? o.group->size() : 1,
+                o.group != nullptr && o.group->size() > 1 ? "es" : "");
+  }
   s = options.Validate();
   if (!s.ok()) return fail(s.message());
 
   MutualBoostedSolver solver(options, scene);
+  if (o.group != nullptr) {
+    // Processes that would not train the same model must not start: the same options (with the
+    // scene's choices), the same views and cameras, the same checkpoint.
+    std::string settings;
+    for (const auto& [name, value] : options.Settings()) settings += name + "=" + value + "\n";
+    std::string views;
+    for (const View& v : scene.views) {
+      char line[160];
+      std::snprintf(line, sizeof(line), "%s %dx%d %.9g %.9g %.9g\n", v.name.c_str(), v.camera.width,
+                    v.camera.height, v.camera.t.x(), v.camera.t.y(), v.camera.t.z());
+      views += line;
+    }
+    for (const auto& [what, value] : {std::pair<std::string, std::string>{"options", settings},
+                                      {"scene", views},
+                                      {"--resume", o.resume ? FileSha256(ckpt) : ""}}) {
+      s = o.group->CheckSame(what, value);
+      if (!s.ok()) return fail(s.message());
+    }
+    solver.SetViewGroup(o.group);
+  }
   if (o.resume) {
     s = solver.LoadCheckpoint(ckpt);
     if (!s.ok()) return fail(s.message());
     std::printf("resuming from %s\n", ckpt.c_str());
   }
+  if (!writer) return TrainAlongside(&solver, end);
   if (o.check_only) {
     std::printf("check: the scene%s can be trained\n", o.resume ? " and the checkpoint" : "");
     *end = ReconstructionEnd::kChecked;

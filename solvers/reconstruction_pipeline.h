@@ -19,6 +19,7 @@
 namespace mgsr {
 
 class MutualBoostedSolver;
+class ViewGroup;
 
 struct ReconstructionOptions {
   // Input: a workspace (COLMAP, Blender/NeRF or mgsr_synth), or photos (and optional masks) that
@@ -82,6 +83,16 @@ struct ReconstructionOptions {
   // "splat", "spz" (splat_formats.h); ParseExportFormats checks the list.
   std::vector<std::string> export_formats = {"ply"};
 
+  // The processes that share each batch of views (solver.batch_views; an MPI job's, from
+  // mgsr_solve under mpirun), or null for this process alone. Process 0 writes everything (log,
+  // checkpoints, models, renders, mesh, metrics); the others load the same scene and checkpoint,
+  // train the same models alongside it and write nothing. Photos (`images`) are refused: run the
+  // photo pipeline once, then the job on its workspace.
+  ViewGroup* group = nullptr;
+  // With solver.batch_views > 1: divide the solver's iteration counts by it once the scene's
+  // choices and the loss config are applied (SolverOptions::ScaleIterationsForBatch), so the run
+  // sees as many views as one view per step would.
+  bool batch_scale_iterations = false;
   // How `solver` was chosen, recorded in metrics.json.
   std::string preset = "fast", method = "mgsr", surfel_low_pass = "area",
               surfel_init = "neighbours";
@@ -114,6 +125,8 @@ class ReconstructionPipeline {
   void RequestStop();
 
  private:
+  // A process of a group other than process 0: trains alongside it and writes nothing.
+  Status TrainAlongside(MutualBoostedSolver* solver, ReconstructionEnd* end);
   ReconstructionOptions options_;
   MutualBoostedSolver* volatile solver_ = nullptr;  // while training
   volatile std::sig_atomic_t stop_requested_ = 0;

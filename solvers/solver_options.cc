@@ -39,6 +39,26 @@ bool SolverOptions::FromPreset(const std::string& name, SolverOptions* o) {
   return true;
 }
 
+void SolverOptions::ScaleIterationsForBatch(int views) {
+  if (views <= 1) return;
+  const double f = 1.0 / views;
+  // 0 stays 0 ("from the start"); anything else stays >= 1.
+  const auto scale = [f](int* v) {
+    if (*v != 0) *v = Scaled(*v, f);
+  };
+  for (int* v :
+       {&warmup_min_iterations, &warmup_max_iterations, &mutual_iterations, &normal_from_iteration,
+        &distortion_from_iteration, &position_lr_max_steps, &sh_interval})
+    scale(v);
+  auto_stop_window = std::max(2, Scaled(auto_stop_window, f));
+  for (BranchSchedule* b : {&schedule_2d, &schedule_3d}) {
+    for (int* v :
+         {&b->densify_from, &b->densify_until, &b->densify_interval, &b->opacity_reset_interval})
+      scale(v);
+  }
+  for (LossSpec& row : losses) scale(&row.first_iteration);
+}
+
 bool SolverOptions::ApplyMethod(const std::string& method, SolverOptions* o) {
   if (method == "mgsr") return true;
   if (method == "2dgs") {
@@ -104,6 +124,9 @@ Status SolverOptions::Validate() const {
   }
   if (!(background_2d >= 0 && background_2d <= 1) || !(background_3d >= 0 && background_3d <= 1))
     return Status::Error("background levels must be in [0, 1]");
+  if (batch_views < 1) return Status::Error("--batch_views must be >= 1");
+  if (batch_views > 1 && bidirectional)
+    return Status::Error("--bidirectional steps one view at a time: use --batch_views 1 with it");
   return Status::Ok();
 }
 
@@ -183,7 +206,9 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"exposure_fit_at_mutual", Text(exposure_fit_at_mutual)},
           {"max_init_points", Text(static_cast<double>(max_init_points))},
           {"losses", LossTableToJson(LossTable()).dump()},
-          {"seed", std::to_string(seed)}};
+          {"seed", std::to_string(seed)},
+          {"batch_views", Text(batch_views)},
+          {"batch_sqrt_lr", Text(batch_sqrt_lr)}};
 }
 
 }  // namespace mgsr

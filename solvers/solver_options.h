@@ -130,6 +130,17 @@ struct SolverOptions {
   bool exposure_fit_at_mutual = true;
   size_t max_init_points = 100000;
   uint64_t seed = 0;
+  // Batches of views (--batch_views): each step renders this many training views, sums their
+  // gradients (in a fixed order, also when MPI processes share the batch: solvers/view_group.h)
+  // and steps once; density statistics sum over the batch. 1: one view per step. With
+  // batch_sqrt_lr the parameters' learning rates grow by sqrt(batch_views) (Grendel-GS's rule:
+  // fewer, better-informed steps take longer strides).
+  int batch_views = 1;
+  bool batch_sqrt_lr = true;
+  // Divides every iteration count (stage lengths, auto-stop window, density and SH schedules,
+  // the position rate's decay, loss rows' first iterations) by `views`, so that a run with
+  // batches of that many views sees as many views as a run without.
+  void ScaleIterationsForBatch(int views);
 
   // "paper": the reference counts; "fast": every iteration count scaled to minutes on a laptop CPU.
   static bool FromPreset(const std::string& name, SolverOptions* options);

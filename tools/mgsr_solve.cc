@@ -35,8 +35,12 @@
 #include "solvers/reconstruction_pipeline.h"
 #include "solvers/surface_extraction.h"
 #include "solvers/trained_views.h"
+#include "solvers/view_group.h"
 #include "tools/colmap_flags.h"
 #include "tools/tool_flags.h"
+#ifdef MGSR_WITH_MPI
+#include "solvers/mpi_view_group.h"
+#endif
 
 DEFINE_string(workspace, "",
               "COLMAP workspace (images/, sparse/0/) or Blender folder (transforms_*.json).");
@@ -74,6 +78,14 @@ DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");
 DEFINE_bool(auto_stop, true, "Stop each warm-up when its loss window flattens.");
 DEFINE_bool(bidirectional, false,
             "Ablation K: the supervising branch also learns from the supervision.");
+DEFINE_int32(batch_views, 1,
+             "Training views per step: their gradients are summed and the step taken once. Under "
+             "mpirun (a build with -DMGSR_WITH_MPI=ON) the processes share each batch: a power "
+             "of two that divides it.");
+DEFINE_bool(batch_sqrt_lr, true, "With --batch_views B > 1: the learning rates grow by sqrt(B).");
+DEFINE_bool(batch_keep_iterations, false,
+            "With --batch_views B > 1: keep the iteration counts (each step then sees B views); "
+            "by default they are divided by B, so the run sees as many views as with B = 1.");
 DEFINE_string(budget, "",
               "Primitive budget of each branch: auto (from the object's size in pixels: 180 "
               "Gaussians and 135 surfels x sqrt(foreground pixels of the median view)) | scene (4 "
@@ -189,8 +201,12 @@ void OnSigint(int) {
   if (g_pipeline != nullptr) g_pipeline->RequestStop();
 }
 
+// "MPI process N: " on the processes of an MPI job other than process 0 (whose errors, often
+// the same as process 0's, would otherwise read like a repeat of it).
+std::string g_error_prefix;
+
 int Fail(const std::string& message) {
-  std::fprintf(stderr, "error: %s\n", message.c_str());
+  std::fprintf(stderr, "%serror: %s\n", g_error_prefix.c_str(), message.c_str());
   return 1;
 }
 
@@ -222,7 +238,7 @@ void PrintLosses(const mgsr::SolverOptions& options) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   mgsr_tools::ParseToolFlags(
       "mgsr_solve (--workspace DIR | --images DIR [--masks DIR]) --output DIR [--preset "
       "fast|paper] [options]",
@@ -238,6 +254,7 @@ int main(int argc, char** argv) {
         {"preset", "method", "mutual_mode", "warmup_max_iterations", "warmup_min_iterations",
          "mutual_iterations", "auto_stop", "auto_stop_window", "auto_stop_range", "bidirectional",
          "seed"}},
+       {"Batches and MPI", {"batch_views", "batch_sqrt_lr", "batch_keep_iterations"}},
        {"Losses",
         {"loss_config", "list_losses", "lambda_l1", "lambda_normal", "lambda_distortion",
          "depth_tv_warmup_2d", "depth_tv_mutual_2d", "tv_on_geometry", "depth_tv_disparity", "w_2d",
@@ -386,6 +403,10 @@ int main(int argc, char** argv) {
     PrintLosses(options);
     return 0;
   }
+  options.batch_views = FLAGS_batch_views;
+  options.batch_sqrt_lr = FLAGS_batch_sqrt_lr;
+  ro.batch_scale_iterations = !FLAGS_batch_keep_iterations;
+  ro.group = group;
   const mgsr::Status valid = ro.Validate();
   if (!valid.ok()) return Fail(valid.message());
 
@@ -394,8 +415,33 @@ int main(int argc, char** argv) {
   std::signal(SIGINT, OnSigint);
   mgsr::ReconstructionEnd end = mgsr::ReconstructionEnd::kFinished;
   const mgsr::Status s = pipeline.Run(&end);
-  std::signal(SIGINT, SIG_DFL);
+  // The handler stays (it does nothing without a pipeline): a Ctrl-C after the outputs are
+  // complete must not turn a finished run into a killed one (exit 130) while the process exits.
   g_pipeline = nullptr;
   if (!s.ok()) return Fail(s.message());
   return end == mgsr::ReconstructionEnd::kInterrupted ? 130 : 0;
+}
+
+int main(int argc, char** argv) {
+  std::unique_ptr<mgsr::ViewGroup> group;
+#ifdef MGSR_WITH_MPI
+  // Under mpirun: one process of the job (the others run the same command); process 0 prints and
+  // writes, the others train alongside it silently.
+  mgsr::MpiViewGroup* mpi = nullptr;
+  if (mgsr::MpiViewGroup::Launched()) {
+    std::unique_ptr<mgsr::MpiViewGroup> g = mgsr::MpiViewGroup::Init(&argc, &argv);
+    mpi = g.get();
+    group = std::move(g);
+    if (group->rank() != 0) {
+      if (std::freopen("/dev/null", "w", stdout) == nullptr) return 1;
+      g_error_prefix = "MPI process " + std::to_string(group->rank()) + ": ";
+    }
+  }
+#endif
+  const int code = Main(argc, argv, group.get());
+#ifdef MGSR_WITH_MPI
+  // A process that fails alone ends the job (the others may be waiting for it in a collective).
+  if (code != 0 && code != 130 && mpi != nullptr && mpi->size() > 1) mpi->Abort(code);
+#endif
+  return code;
 }

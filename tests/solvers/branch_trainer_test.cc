@@ -122,11 +122,19 @@ struct CountingDensity : DensityStrategy {
     ++begin_calls;
     rows_seen = rows->size();
   }
+  // One statistic per primitive: 1 where drawn; the step sees it summed over its views.
+  int ViewStatisticsWidth(int) const override { return 1; }
+  void ViewStatistics(const DensityView& view, float* out) override {
+    EXPECT_EQ(view.mean2d->size(), 2 * view.radii->size());
+    for (size_t i = 0; i < view.radii->size(); ++i) out[i] = (*view.radii)[i] > 0 ? 1.0f : 0.0f;
+  }
   double BeforeStep(const DensityStep& step, const PrimitiveRows& rows,
                     const std::vector<ParamBlock>& gradients) override {
     ++before_calls;
     rows_seen = rows.size();
-    EXPECT_EQ(step.mean2d->size(), 2 * rows.size());
+    EXPECT_EQ(step.views, 1);
+    EXPECT_EQ(step.statistics->size(), rows.size());
+    for (float drawn : *step.statistics) EXPECT_TRUE(drawn == 0.0f || drawn == 1.0f);
     EXPECT_EQ(gradients.size(), rows.blocks().size());
     return 0;
   }

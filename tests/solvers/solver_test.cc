@@ -119,7 +119,7 @@ TEST(DensityControlTest, ClonesSplitsPrunesAndKeepsTheBudget) {
             [](const std::string&, int, std::vector<float>* r) { r->assign(r->size(), 0.1f); });
   DensityStats stats;
   stats.Reset(4);
-  stats.Accumulate({1e-3f, 1e-3f, 1e-6f, 1e-6f}, {1, 1, 1, 1});
+  stats.AccumulateViews({1e-3f, 1, 1e-3f, 1, 1e-6f, 1, 1e-6f, 1});  // (norm, drawn) per primitive
   DensityOptions o;
   Rng rng(1);
   const PrimitiveLayout layout = GaussianPrimitive::Layout();
@@ -134,8 +134,9 @@ TEST(DensityControlTest, ClonesSplitsPrunesAndKeepsTheBudget) {
   EXPECT_NEAR(std::exp(m.log_scales[3 * (m.size() - 1)]), 0.5f / 1.6f, 1e-5f);
   // A budget caps the growth.
   stats.Reset(m.size());
-  std::vector<float> high(m.size(), 1e-3f), radii(m.size(), 1.0f);
-  stats.Accumulate(high, radii);
+  std::vector<float> high(2 * m.size(), 1.0f);
+  for (size_t i = 0; i < m.size(); ++i) high[2 * i] = 1e-3f;
+  stats.AccumulateViews(high);
   o.max_primitives = m.size() + 1;
   DensifyAndPrune(&rows, &stats, o, 1.0, false, &rng);
   EXPECT_LE(m.size(), o.max_primitives);
