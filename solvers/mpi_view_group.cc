@@ -86,6 +86,25 @@ Status MpiViewGroup::Max(int* value) {
   return code == MPI_SUCCESS ? Status::Ok() : MpiError("MPI_Allreduce", code);
 }
 
+Status MpiViewGroup::Send(int peer, const float* data, size_t n) {
+  for (size_t begin = 0; begin < n; begin += kMaxCount) {
+    const int count = static_cast<int>(std::min(kMaxCount, n - begin));
+    const int code = MPI_Send(data + begin, count, MPI_FLOAT, peer, 0, MPI_COMM_WORLD);
+    if (code != MPI_SUCCESS) return MpiError("MPI_Send", code);
+  }
+  return Status::Ok();
+}
+
+Status MpiViewGroup::Receive(int peer, float* data, size_t n) {
+  for (size_t begin = 0; begin < n; begin += kMaxCount) {
+    const int count = static_cast<int>(std::min(kMaxCount, n - begin));
+    const int code =
+        MPI_Recv(data + begin, count, MPI_FLOAT, peer, 0, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    if (code != MPI_SUCCESS) return MpiError("MPI_Recv", code);
+  }
+  return Status::Ok();
+}
+
 Status MpiViewGroup::CheckSame(const std::string& what, const std::string& value) {
   // Every process compares the digests of all (64 hex characters each).
   const std::string mine = Sha256Hex(value);

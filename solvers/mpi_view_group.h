@@ -39,6 +39,8 @@ class MpiViewGroup : public ViewGroup {
   Status SumTree(float* data, size_t n) override;
   Status SumDisjoint(double* data, size_t n) override;
   Status Max(int* value) override;
+  Status Send(int peer, const float* data, size_t n) override;
+  Status Receive(int peer, float* data, size_t n) override;
   Status CheckSame(const std::string& what, const std::string& value) override;
 
  private:

@@ -355,7 +355,10 @@ void ReconstructionPipeline::RequestStop() {
   if (solver != nullptr) solver->RequestStop();
 }
 
-Status ReconstructionPipeline::TrainAlongside(MutualBoostedSolver* solver, ReconstructionEnd* end) {
+Status ReconstructionPipeline::TrainAlongside(MutualBoostedSolver* solver,
+                                              const SolverOptions& options, const Scene& scene,
+                                              const SurfaceOptions& surface,
+                                              ReconstructionEnd* end) {
   if (options_.check_only) {
     *end = ReconstructionEnd::kChecked;
     return Status::Ok();
@@ -370,9 +373,13 @@ Status ReconstructionPipeline::TrainAlongside(MutualBoostedSolver* solver, Recon
   const Status s = solver->Solve(&summary);
   Profiler::SetEnabled(false);
   if (!s.ok()) return s;
-  *end = summary.termination_type == TerminationType::kInterrupted ? ReconstructionEnd::kInterrupted
-                                                                   : ReconstructionEnd::kFinished;
-  return Status::Ok();
+  if (summary.termination_type == TerminationType::kInterrupted) {
+    *end = ReconstructionEnd::kInterrupted;
+    return Status::Ok();
+  }
+  // Process 0 writes the models and test views, then fuses the mesh with these frames.
+  TriangleMesh none;
+  return ExtractSurface(solver, options, scene, surface, &none, {}, options_.group);
 }
 
 Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
@@ -553,7 +560,7 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
     if (!s.ok()) return fail(s.message());
     std::printf("resuming from %s\n", ckpt.c_str());
   }
-  if (!writer) return TrainAlongside(&solver, end);
+  if (!writer) return TrainAlongside(&solver, options, scene, surface, end);
   if (o.check_only) {
     std::printf("check: the scene%s can be trained\n", o.resume ? " and the checkpoint" : "");
     *end = ReconstructionEnd::kChecked;
@@ -755,8 +762,9 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
     std::printf("%s\n", line.c_str());
     std::fflush(stdout);
   });
-  s = ExtractSurface(&solver, options, scene, surface, &mesh,
-                     [&](int done, int total) { mesh_progress.Update(done, total); });
+  s = ExtractSurface(
+      &solver, options, scene, surface, &mesh,
+      [&](int done, int total) { mesh_progress.Update(done, total); }, o.group);
   const std::string mesh_path = out.Path("mesh.ply");
   if (s.ok() && mesh.triangles.empty()) {
     s = Status::Error(mesh_path +

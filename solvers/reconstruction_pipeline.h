@@ -86,7 +86,8 @@ struct ReconstructionOptions {
   // The processes that share each batch of views (solver.batch_views; an MPI job's, from
   // mgsr_solve under mpirun), or null for this process alone. Process 0 writes everything (log,
   // checkpoints, models, renders, mesh, metrics); the others load the same scene and checkpoint,
-  // train the same models alongside it and write nothing. Photos (`images`) are refused: run the
+  // train the same models alongside it, render their share of the mesh's depth frames for it
+  // (ExtractSurface) and write nothing. Photos (`images`) are refused: run the
   // photo pipeline once, then the job on its workspace.
   ViewGroup* group = nullptr;
   // With solver.batch_views > 1: divide the solver's iteration counts by it once the scene's
@@ -125,8 +126,10 @@ class ReconstructionPipeline {
   void RequestStop();
 
  private:
-  // A process of a group other than process 0: trains alongside it and writes nothing.
-  Status TrainAlongside(MutualBoostedSolver* solver, ReconstructionEnd* end);
+  // A process of a group other than process 0: trains alongside it, renders its share of the
+  // mesh's depth frames for it, and writes nothing.
+  Status TrainAlongside(MutualBoostedSolver* solver, const SolverOptions& options,
+                        const Scene& scene, const SurfaceOptions& surface, ReconstructionEnd* end);
   ReconstructionOptions options_;
   MutualBoostedSolver* volatile solver_ = nullptr;  // while training
   volatile std::sig_atomic_t stop_requested_ = 0;

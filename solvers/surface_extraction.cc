@@ -7,6 +7,7 @@
 #include "mgsr/mesh/fusion_region.h"
 #include "mgsr/synth/ray_caster.h"
 #include "solvers/trained_views.h"
+#include "solvers/view_group.h"
 
 namespace mgsr {
 namespace {
@@ -100,32 +101,81 @@ Status ResolveMeshRegion(const std::string& spec, const Scene& scene, SurfaceOpt
   return Status::Ok();
 }
 
+namespace {
+
+// The fusion frame of training view `v` rendered with `camera`: depth where the render's alpha
+// times the view's mask (if any) is at least 0.5.
+DepthFrame RenderFrame(MutualBoostedSolver* solver, const SolverOptions& solver_options,
+                       const View& v, const Camera& camera, const SurfaceOptions& options) {
+  // The mesh takes the transmitted colour only: no reflected chain.
+  ViewRender rendered = RenderView(solver, solver_options, camera, options.surfel_color,
+                                   /*transmitted_only=*/true);
+  Geometry& g = rendered.geometry;
+  DepthFrame f;
+  f.camera = camera;
+  f.depth = std::move(options.median_depth ? g.median_depth : g.depth);
+  f.color = options.surfel_color && solver_options.train_2d ? std::move(rendered.surfel_color)
+                                                            : std::move(rendered.appearance.tran);
+  f.weight = std::move(g.alpha);
+  if (!v.mask.empty()) {
+    const Image mask =
+        options.resolution_scale == 1 ? v.mask : ResampleMask(v.mask, camera.width, camera.height);
+    for (size_t k = 0; k < f.weight.size(); ++k)
+      f.weight.data()[k] *= mask.data()[k] >= 0.5f ? 1.0f : 0.0f;
+  }
+  return f;
+}
+
+// A frame's images between processes: depth, colour (3 channels), weight, each of the camera's
+// size (the renders always give all three).
+Status SendFrame(ViewGroup* group, const DepthFrame& f) {
+  for (const Image* im : {&f.depth, &f.color, &f.weight})
+    MGSR_RETURN_IF_ERROR(group->Send(0, im->data(), im->size()));
+  return Status::Ok();
+}
+
+Status ReceiveFrame(ViewGroup* group, int from, const Camera& camera, DepthFrame* f) {
+  f->camera = camera;
+  f->depth = Image(camera.width, camera.height, 1);
+  f->color = Image(camera.width, camera.height, 3);
+  f->weight = Image(camera.width, camera.height, 1);
+  for (Image* im : {&f->depth, &f->color, &f->weight})
+    MGSR_RETURN_IF_ERROR(group->Receive(from, im->data(), im->size()));
+  return Status::Ok();
+}
+
+}  // namespace
+
 Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_options,
                       const Scene& scene, const SurfaceOptions& options, TriangleMesh* mesh,
-                      const std::function<void(int, int)>& progress) {
+                      const std::function<void(int, int)>& progress, ViewGroup* group) {
   if (options.resolution_scale < 1) return Status::Error("mesh resolution scale must be >= 1");
   const std::vector<int> train = scene.TrainIndices();
   const std::vector<Camera> cameras = FusionCameras(scene, options.resolution_scale);
+  const int ranks = group != nullptr ? group->size() : 1;
+  const int rank = group != nullptr ? group->rank() : 0;
+  if (ranks > 1) {
+    // Every process meets here once process 0 has come to its mesh (the others wait after
+    // training); views go round robin, process 0 fuses them all in order.
+    int go = rank == 0 ? 1 : 0;
+    MGSR_RETURN_IF_ERROR(group->Max(&go));
+  }
+  if (rank != 0) {
+    for (size_t i = rank; i < train.size(); i += ranks) {
+      const DepthFrame f =
+          RenderFrame(solver, solver_options, scene.views[train[i]], cameras[i], options);
+      MGSR_RETURN_IF_ERROR(SendFrame(group, f));
+    }
+    return Status::Ok();
+  }
   TsdfIntegrator integrator(SurfaceTsdfOptions(scene, options));
   for (size_t i = 0; i < train.size(); ++i) {
-    const View& v = scene.views[train[i]];
-    const Camera& camera = cameras[i];
-    // The mesh takes the transmitted colour only: no reflected chain.
-    ViewRender rendered = RenderView(solver, solver_options, camera, options.surfel_color,
-                                     /*transmitted_only=*/true);
-    Geometry& g = rendered.geometry;
+    const int owner = static_cast<int>(i % ranks);
     DepthFrame f;
-    f.camera = camera;
-    f.depth = std::move(options.median_depth ? g.median_depth : g.depth);
-    f.color = options.surfel_color && solver_options.train_2d ? std::move(rendered.surfel_color)
-                                                              : std::move(rendered.appearance.tran);
-    f.weight = std::move(g.alpha);
-    if (!v.mask.empty()) {
-      const Image mask = options.resolution_scale == 1
-                             ? v.mask
-                             : ResampleMask(v.mask, camera.width, camera.height);
-      for (size_t k = 0; k < f.weight.size(); ++k)
-        f.weight.data()[k] *= mask.data()[k] >= 0.5f ? 1.0f : 0.0f;
+    if (owner == 0) {
+      f = RenderFrame(solver, solver_options, scene.views[train[i]], cameras[i], options);
+    } else {
+      MGSR_RETURN_IF_ERROR(ReceiveFrame(group, owner, cameras[i], &f));
     }
     MGSR_RETURN_IF_ERROR(integrator.Integrate(f));
     if (progress) progress(static_cast<int>(i + 1), static_cast<int>(train.size()));

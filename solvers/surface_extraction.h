@@ -57,10 +57,13 @@ std::vector<Camera> FusionCameras(const Scene& scene, int resolution_scale);
 
 // Renders and fuses the trained geometry of every training view; depth is kept where the render's
 // alpha times the view's mask (if any) is at least 0.5. `progress`, when given, is called after
-// each view with (views fused, views in all).
+// each view with (views fused, views in all). With a `group` of several processes (all holding
+// the same trained models, all calling this) the views are rendered round robin and process 0
+// fuses them in order, so its mesh is the one a single process makes; the others return no mesh.
 Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_options,
                       const Scene& scene, const SurfaceOptions& options, TriangleMesh* mesh,
-                      const std::function<void(int, int)>& progress = {});
+                      const std::function<void(int, int)>& progress = {},
+                      ViewGroup* group = nullptr);
 
 // The same fusion of the ground truth's exact depth: what this fusion can achieve at best.
 Status ExactDepthCeiling(const TriangleMesh& ground_truth, const Scene& scene,

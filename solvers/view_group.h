@@ -33,6 +33,10 @@ class ViewGroup {
   // The largest of the processes' values into *value (decisions every process must share: stop,
   // abort).
   virtual Status Max(int* value) = 0;
+  // Point to point, for work that process 0 takes in an order of its own (the mesh's depth
+  // frames): `n` floats to / from process `peer`. Blocking; the sizes must match.
+  virtual Status Send(int peer, const float* data, size_t n) = 0;
+  virtual Status Receive(int peer, float* data, size_t n) = 0;
   // An error naming `what` unless every process passed the same value (options, scene, resume
   // state: processes that would not train the same model must not start).
   virtual Status CheckSame(const std::string& what, const std::string& value) = 0;
@@ -46,7 +50,14 @@ class LocalViewGroup : public ViewGroup {
   Status SumTree(float*, size_t) override { return Status::Ok(); }
   Status SumDisjoint(double*, size_t) override { return Status::Ok(); }
   Status Max(int*) override { return Status::Ok(); }
+  Status Send(int, const float*, size_t) override { return NoPeer(); }
+  Status Receive(int, float*, size_t) override { return NoPeer(); }
   Status CheckSame(const std::string&, const std::string&) override { return Status::Ok(); }
+
+ private:
+  static Status NoPeer() {
+    return Status::Error("one process alone has no other to exchange with");
+  }
 };
 
 // The positions [*begin, *end) of a batch of `batch` views that process `rank` of `ranks` takes.

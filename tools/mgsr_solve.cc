@@ -440,8 +440,9 @@ int main(int argc, char** argv) {
 #endif
   const int code = Main(argc, argv, group.get());
 #ifdef MGSR_WITH_MPI
-  // A process that fails alone ends the job (the others may be waiting for it in a collective).
-  if (code != 0 && code != 130 && mpi != nullptr && mpi->size() > 1) mpi->Abort(code);
+  // A process that fails or stops alone ends the job (the others may be waiting for it in a
+  // collective); what process 0 checkpointed stays.
+  if (code != 0 && mpi != nullptr && mpi->size() > 1) mpi->Abort(code);
 #endif
   return code;
 }

@@ -4,14 +4,18 @@
 // logic is tested in every build; the MPI group itself is tested through mgsr_solve under mpirun
 // (tests/cli/mpi_test.cc, built with -DMGSR_WITH_MPI=ON).
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <condition_variable>
+#include <deque>
+#include <map>
 #include <mutex>
 #include <thread>
 #include <vector>
 
 #include "solvers/density_strategy.h"
 #include "solvers/mutual_boosted_solver.h"
+#include "solvers/surface_extraction.h"
 #include "solvers/view_group.h"
 #include "test_util.h"
 
@@ -78,6 +82,20 @@ class SharedBoard {
       cv_.wait(lock, [&] { return generation != generation_; });
     }
   }
+  // Point-to-point messages, per (from, to), in order.
+  void Post(int from, int to, std::vector<float> message) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    mail_[{from, to}].push_back(std::move(message));
+    cv_.notify_all();
+  }
+  std::vector<float> Take(int from, int to) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    std::deque<std::vector<float>>& box = mail_[{from, to}];
+    cv_.wait(lock, [&] { return !box.empty(); });
+    std::vector<float> message = std::move(box.front());
+    box.pop_front();
+    return message;
+  }
   std::vector<float*> floats_;
   std::vector<double*> doubles_;
   std::vector<int> ints_;
@@ -88,6 +106,7 @@ class SharedBoard {
   std::mutex mutex_;
   std::condition_variable cv_;
   int arrived_ = 0, generation_ = 0;
+  std::map<std::pair<int, int>, std::deque<std::vector<float>>> mail_;
 };
 
 class ThreadViewGroup : public ViewGroup {
@@ -125,6 +144,16 @@ class ThreadViewGroup : public ViewGroup {
     for (int v : board_->ints_) m = std::max(m, v);
     board_->Barrier();
     *value = m;
+    return Status::Ok();
+  }
+  Status Send(int peer, const float* data, size_t n) override {
+    board_->Post(rank_, peer, std::vector<float>(data, data + n));
+    return Status::Ok();
+  }
+  Status Receive(int peer, float* data, size_t n) override {
+    const std::vector<float> message = board_->Take(peer, rank_);
+    if (message.size() != n) return Status::Error("message of another size");
+    std::copy(message.begin(), message.end(), data);
     return Status::Ok();
   }
   Status CheckSame(const std::string& what, const std::string& value) override {
@@ -188,6 +217,7 @@ std::vector<std::unique_ptr<MutualBoostedSolver>> SolveInThreads(const SolverOpt
   std::vector<std::thread> threads;
   for (int r = 0; r < ranks; ++r) {
     threads.emplace_back([&, r] {
+      omp_set_num_threads(1);  // one core per simulated process
       SolveSummary summary;
       status[r] = solvers[r]->Solve(&summary);
     });
@@ -215,6 +245,52 @@ TEST(BatchTest, ABatchSplitOverProcessesGivesTheModelsOfOneProcess) {
   EXPECT_NE(single.gaussians().means, one.gaussians().means);
 }
 
+TEST(BatchTest, TheMeshIsFusedFromFramesTheProcessesRender) {
+  // Process 0 fuses every training view in order; process 1 renders every other one for it.
+  const Scene scene = testing::TinySolverScene(testing::ScratchDir());
+  SolverOptions o = BatchOptions(2);
+  o.warmup_max_iterations = 150;  // long enough for an opaque surface
+  SurfaceOptions surface;
+  std::string note;
+  ASSERT_TRUE(ResolveMeshRegion("auto", scene, &surface, &note).ok());
+  MutualBoostedSolver one(o, scene);
+  SolveSummary summary;
+  ASSERT_TRUE(one.Solve(&summary).ok());
+  TriangleMesh alone;
+  const Status fused = ExtractSurface(&one, o, scene, surface, &alone);
+  ASSERT_TRUE(fused.ok()) << fused.message();
+  ASSERT_FALSE(alone.empty());
+  SharedBoard board(2);
+  std::vector<std::unique_ptr<ThreadViewGroup>> groups;
+  std::vector<std::unique_ptr<MutualBoostedSolver>> solvers;
+  std::vector<TriangleMesh> meshes(2);
+  std::vector<Status> status(2);
+  for (int r = 0; r < 2; ++r) {
+    groups.push_back(std::make_unique<ThreadViewGroup>(&board, r));
+    solvers.push_back(std::make_unique<MutualBoostedSolver>(o, scene));
+    solvers.back()->SetViewGroup(groups.back().get());
+  }
+  std::vector<std::thread> threads;
+  for (int r = 0; r < 2; ++r) {
+    threads.emplace_back([&, r] {
+      omp_set_num_threads(1);  // one core per simulated process
+      SolveSummary s;
+      status[r] = solvers[r]->Solve(&s);
+      if (status[r].ok())
+        status[r] =
+            ExtractSurface(solvers[r].get(), o, scene, surface, &meshes[r], {}, groups[r].get());
+    });
+  }
+  for (std::thread& t : threads) t.join();
+  for (int r = 0; r < 2; ++r) ASSERT_TRUE(status[r].ok()) << r << ": " << status[r].message();
+  EXPECT_TRUE(meshes[1].empty());
+  ASSERT_EQ(meshes[0].vertices.size(), alone.vertices.size());
+  ASSERT_EQ(meshes[0].triangles.size(), alone.triangles.size());
+  EXPECT_TRUE(meshes[0].vertices == alone.vertices);
+  EXPECT_TRUE(meshes[0].triangles == alone.triangles);
+  EXPECT_TRUE(meshes[0].vertex_colors == alone.vertex_colors);
+}
+
 TEST(BatchTest, AProcessThatStopsStopsTheGroup) {
   // Process 1 alone asks to stop after its third iteration; both end there, at the same state.
   const Scene scene = testing::TinySolverScene(testing::ScratchDir());
@@ -237,7 +313,10 @@ TEST(BatchTest, AProcessThatStopsStopsTheGroup) {
   stop.solver = &s1;
   s1.AddCallback(&stop);
   SolveSummary r0, r1;
-  std::thread t([&] { ASSERT_TRUE(s1.Solve(&r1).ok()); });
+  std::thread t([&] {
+    omp_set_num_threads(1);
+    ASSERT_TRUE(s1.Solve(&r1).ok());
+  });
   ASSERT_TRUE(s0.Solve(&r0).ok());
   t.join();
   EXPECT_EQ(r0.termination_type, TerminationType::kInterrupted);
