@@ -355,6 +355,19 @@ void ReconstructionPipeline::RequestStop() {
   if (solver != nullptr) solver->RequestStop();
 }
 
+Status ReconstructionPipeline::Train(MutualBoostedSolver* solver, SolveSummary* summary) {
+  solver_ = solver;
+  // The pointer RequestStop uses goes with the training, however it ends.
+  struct Forget {
+    MutualBoostedSolver* volatile* solver;
+    ~Forget() { *solver = nullptr; }
+  } forget{&solver_};
+  Profiler::SetEnabled(options_.profile);
+  const Status s = solver->Solve(summary);
+  Profiler::SetEnabled(false);
+  return s;
+}
+
 Status ReconstructionPipeline::TrainAlongside(MutualBoostedSolver* solver,
                                               const SolverOptions& options, const Scene& scene,
                                               const SurfaceOptions& surface,
@@ -363,15 +376,8 @@ Status ReconstructionPipeline::TrainAlongside(MutualBoostedSolver* solver,
     *end = ReconstructionEnd::kChecked;
     return Status::Ok();
   }
-  solver_ = solver;
-  struct Forget {
-    MutualBoostedSolver* volatile* solver;
-    ~Forget() { *solver = nullptr; }
-  } forget{&solver_};
   SolveSummary summary;
-  Profiler::SetEnabled(options_.profile);
-  const Status s = solver->Solve(&summary);
-  Profiler::SetEnabled(false);
+  const Status s = Train(solver, &summary);
   if (!s.ok()) return s;
   if (summary.termination_type == TerminationType::kInterrupted) {
     *end = ReconstructionEnd::kInterrupted;
@@ -592,16 +598,8 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   DepthAfterWarmup depth_after_warmup(&solver, options, scene, gt_caster.get(),
                                       JoinPath(ckpt_dir, "depth_after_warmup.json"));
   solver.AddCallback(&depth_after_warmup);
-  solver_ = &solver;
-  // The pointer RequestStop uses goes with the solver, however Run returns.
-  struct Forget {
-    MutualBoostedSolver* volatile* solver;
-    ~Forget() { *solver = nullptr; }
-  } forget{&solver_};
   SolveSummary summary;
-  Profiler::SetEnabled(o.profile);
-  s = solver.Solve(&summary);
-  Profiler::SetEnabled(false);
+  s = Train(&solver, &summary);
   if (!s.ok())
     return fail(checkpointer.status().ok() ? s.message() : checkpointer.status().message());
   if (summary.termination_type == TerminationType::kInterrupted) {

@@ -19,6 +19,7 @@
 namespace mgsr {
 
 class MutualBoostedSolver;
+struct SolveSummary;
 class ViewGroup;
 
 struct ReconstructionOptions {
@@ -126,6 +127,8 @@ class ReconstructionPipeline {
   void RequestStop();
 
  private:
+  // Solve with profiling as asked, RequestStop reaching the solver while it trains.
+  Status Train(MutualBoostedSolver* solver, SolveSummary* summary);
   // A process of a group other than process 0: trains alongside it, renders its share of the
   // mesh's depth frames for it, and writes nothing.
   Status TrainAlongside(MutualBoostedSolver* solver, const SolverOptions& options,

@@ -13,6 +13,7 @@
 #include <thread>
 #include <vector>
 
+#include "same_models.h"
 #include "solvers/density_strategy.h"
 #include "solvers/mutual_boosted_solver.h"
 #include "solvers/surface_extraction.h"
@@ -186,21 +187,7 @@ SolverOptions BatchOptions(int batch) {
   return o;
 }
 
-void ExpectSameModels(const MutualBoostedSolver& a, const MutualBoostedSolver& b) {
-  GaussianModel ga = a.gaussians(), gb = b.gaussians();
-  SurfelModel sa = a.surfels(), sb = b.surfels();
-  ASSERT_EQ(ga.size(), gb.size());
-  ASSERT_EQ(sa.size(), sb.size());
-  const auto ba = ga.Blocks(), bb = gb.Blocks();
-  for (size_t k = 0; k < ba.size(); ++k) EXPECT_EQ(*ba[k].data, *bb[k].data) << ba[k].name;
-  const auto ca = sa.Blocks(), cb = sb.Blocks();
-  for (size_t k = 0; k < ca.size(); ++k) EXPECT_EQ(*ca[k].data, *cb[k].data) << ca[k].name;
-  for (int v = 0; v < a.exposure(Branch::kGaussians3D).num_views(); ++v) {
-    EXPECT_EQ(a.exposure(Branch::kGaussians3D).transform(v),
-              b.exposure(Branch::kGaussians3D).transform(v))
-        << "view " << v;
-  }
-}
+using testing::ExpectSameModels;
 
 // One solve per simulated process, each in its own thread; returns them.
 std::vector<std::unique_ptr<MutualBoostedSolver>> SolveInThreads(const SolverOptions& o,

@@ -14,6 +14,7 @@
 #include "mgsr/loss/loss_registry.h"
 #include "mgsr/loss/loss_util.h"
 #include "mgsr/model/activations.h"
+#include "same_models.h"
 #include "solvers/adam.h"
 #include "solvers/auto_stop.h"
 #include "solvers/checkpoint_callback.h"
@@ -433,22 +434,7 @@ class StopAt : public IterationCallback {
   int iteration_;
 };
 
-void ExpectSameModels(const MutualBoostedSolver& a, const MutualBoostedSolver& b) {
-  GaussianModel ga = a.gaussians(), gb = b.gaussians();
-  SurfelModel sa = a.surfels(), sb = b.surfels();
-  ASSERT_EQ(ga.size(), gb.size());
-  ASSERT_EQ(sa.size(), sb.size());
-  const auto ba = ga.Blocks(), bb = gb.Blocks();
-  for (size_t k = 0; k < ba.size(); ++k) EXPECT_EQ(*ba[k].data, *bb[k].data) << ba[k].name;
-  const auto ca = sa.Blocks(), cb = sb.Blocks();
-  for (size_t k = 0; k < ca.size(); ++k) EXPECT_EQ(*ca[k].data, *cb[k].data) << ca[k].name;
-  for (Branch branch : {Branch::kSurfels2D, Branch::kGaussians3D}) {
-    ASSERT_EQ(a.environment(branch) == nullptr, b.environment(branch) == nullptr);
-    if (a.environment(branch) != nullptr) {
-      EXPECT_EQ(a.environment(branch)->map().texels, b.environment(branch)->map().texels);
-    }
-  }
-}
+using testing::ExpectSameModels;
 
 TEST(CheckpointTest, InterruptedAndResumedRunEqualsAnUninterruptedOne) {
   const std::string dir = testing::ScratchDir();
