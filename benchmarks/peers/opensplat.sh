@@ -1,0 +1,120 @@
+#!/usr/bin/env bash
+# Side by side with OpenSplat (https://github.com/pierotofy/OpenSplat), the nearest CPU peer: its
+# libtorch CPU backend against our plain 3DGS (`mgsr_solve --method 3dgs`) on the same COLMAP
+# workspace, at the same resolution, for the same number of iterations, at fixed Gaussian counts.
+# OpenSplat is AGPL: it is never part of this repository; give a binary you built:
+#
+#   OPENSPLAT=/path/to/opensplat bash benchmarks/peers/opensplat.sh [options]
+#
+# Without OPENSPLAT it prints how to build one and skips (exit 0). --ours_only runs our side alone
+# (what the test suite checks). Options: --size PX (256), --views N (48), --iterations N (300),
+# --counts LIST (3000,30000), --output DIR (build/peers_opensplat).
+#
+# How the runs are made equal: one synthetic object (mgsr_synth, constant light, no exposure
+# changes), one COLMAP workspace whose sparse points are the initial Gaussians (--num_points =
+# the count), the first view withheld from both (OpenSplat --val-image, our split.txt). OpenSplat
+# densifies only after its warm-up (500 iterations by default) and ours holds the count with the
+# MCMC strategy's cap, so both train exactly `count` Gaussians for `iterations` steps. Reported:
+# seconds per iteration (training only: ours from metrics.json, OpenSplat's whole run minus
+# nothing, so its figure includes loading), Gaussians at the end, peak memory (GNU time), PSNR
+# of the withheld view. The table goes to OUTPUT/opensplat.md, for BENCHMARKS.md.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+SIZE=256
+VIEWS=48
+ITERATIONS=300
+COUNTS=3000,30000
+OUT=build/peers_opensplat
+OURS_ONLY=0
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --size) SIZE=$2; shift 2 ;;
+    --views) VIEWS=$2; shift 2 ;;
+    --iterations) ITERATIONS=$2; shift 2 ;;
+    --counts) COUNTS=$2; shift 2 ;;
+    --output) OUT=$2; shift 2 ;;
+    --ours_only) OURS_ONLY=1; shift ;;
+    *) echo "opensplat.sh: unknown option $1" >&2; exit 2 ;;
+  esac
+done
+
+if [ $OURS_ONLY -eq 0 ] && { [ -z "${OPENSPLAT:-}" ] || [ ! -x "${OPENSPLAT}" ]; }; then
+  cat <<'EOF'
+[opensplat] skipped: set OPENSPLAT to an OpenSplat binary to compare with it.
+To build one on Debian 12 (CPU only; OpenSplat is AGPL, keep it outside this repository):
+  sudo apt-get install libtorch-dev libopencv-dev nlohmann-json3-dev libnanoflann-dev libglm-dev
+  git clone https://github.com/pierotofy/OpenSplat && cd OpenSplat && mkdir build && cd build
+  # its CMakeLists fetches nlohmann_json, nanoflann and glm with FetchContent: point each at the
+  # Debian package instead, e.g. -DFETCHCONTENT_TRY_FIND_PACKAGE_MODE=ALWAYS (CMake >= 3.24) or
+  # by replacing the FetchContent_Declare blocks with find_package(... REQUIRED)
+  cmake .. -DCMAKE_BUILD_TYPE=Release -DGPU_RUNTIME=CPU -DCMAKE_PREFIX_PATH=/usr/lib/x86_64-linux-gnu/cmake/Torch
+  make -j"$(nproc)"
+then: OPENSPLAT=$PWD/opensplat bash benchmarks/peers/opensplat.sh
+EOF
+  exit 0
+fi
+command -v python3 >/dev/null || { echo "opensplat.sh: needs python3 (reads metrics.json)" >&2; exit 1; }
+TIME=/usr/bin/time  # OpenSplat's peak memory (ours is in its metrics.json)
+if [ $OURS_ONLY -eq 0 ] && [ ! -x $TIME ]; then
+  echo "opensplat.sh: needs GNU time (/usr/bin/time, Debian package time)" >&2
+  exit 1
+fi
+bash scripts/build.sh >/dev/null
+BIN=${MGSR_BUILD_DIR:-build}/tools
+mkdir -p "$OUT"
+TABLE="$OUT/opensplat.md"
+{
+  echo "| Gaussians | tool | s / iteration | Gaussians at the end | peak memory (MB) | PSNR, withheld view |"
+  echo "| ---: | --- | ---: | ---: | ---: | ---: |"
+} > "$TABLE"
+
+# Peak resident memory (MB) from a GNU time -v log.
+peak_mb() { awk -F': ' '/Maximum resident set size/ {printf "%.0f", $2 / 1024}' "$1"; }
+
+for COUNT in ${COUNTS//,/ }; do
+  SCENE="$OUT/scene_$COUNT"
+  rm -rf "$SCENE"
+  "$BIN/mgsr_synth" --output "$SCENE" --width "$SIZE" --height "$SIZE" --num_views "$VIEWS" \
+    --num_points "$COUNT" --varying_light=false --exposure_stops 0 --test_every "$VIEWS" \
+    --seed 1 >/dev/null
+  VAL=$(head -n 1 "$SCENE/split.txt")
+
+  # Ours: plain 3DGS, the count held at COUNT (the paper preset keeps up to 100,000 initial points).
+  rm -rf "$OUT/ours_$COUNT"
+  "$BIN/mgsr_solve" --workspace "$SCENE" --output "$OUT/ours_$COUNT" --preset paper \
+    --method 3dgs --warmup_min_iterations 0 --warmup_max_iterations "$ITERATIONS" \
+    --mutual_iterations 0 --density mcmc --max_gaussians "$COUNT" \
+    --exposure off --eval_every 0 --checkpoint_every 0 --log_every 100000 \
+    >"$OUT/ours_$COUNT.log" 2>&1
+  python3 - "$OUT/ours_$COUNT/metrics.json" "$COUNT" >>"$TABLE" <<'PY'
+import json, sys
+m = json.load(open(sys.argv[1]))
+it = max(1, m["iterations"]["warmup_3d"])
+print(f"| {int(sys.argv[2]):,} | MGSR-CPU `--method 3dgs` | {m['seconds']['warmup'] / it:.4f} | "
+      f"{m['counts']['gaussians']:,} | {m['peak_memory_mb']:.0f} | {m['test']['psnr']:.2f} dB |")
+PY
+
+  [ $OURS_ONLY -eq 1 ] && continue
+  # OpenSplat on the same workspace, the same view withheld; its render of that view is scored
+  # against the photo with mgsr_eval.
+  rm -rf "$OUT/opensplat_$COUNT" && mkdir -p "$OUT/opensplat_$COUNT/val"
+  START=$(date +%s.%N)
+  $TIME -v "$OPENSPLAT" "$SCENE" -n "$ITERATIONS" --val --val-image "$VAL" \
+    --val-render "$OUT/opensplat_$COUNT/val" -o "$OUT/opensplat_$COUNT/splat.ply" \
+    >"$OUT/opensplat_$COUNT.log" 2>"$OUT/opensplat_$COUNT.time"
+  END=$(date +%s.%N)
+  PSNR="n/a"
+  RENDER=$(ls -t "$OUT/opensplat_$COUNT/val"/*.png 2>/dev/null | head -n 1 || true)
+  if [ -n "$RENDER" ]; then
+    mkdir -p "$OUT/opensplat_$COUNT/score/render" "$OUT/opensplat_$COUNT/score/truth"
+    cp "$RENDER" "$OUT/opensplat_$COUNT/score/render/$VAL"
+    cp "$SCENE/images/$VAL" "$OUT/opensplat_$COUNT/score/truth/$VAL"
+    PSNR=$("$BIN/mgsr_eval" --renders "$OUT/opensplat_$COUNT/score/render" \
+      --gt_images "$OUT/opensplat_$COUNT/score/truth" | awk '$1 == "mean" {print $2 " dB"; exit}')
+  fi
+  python3 -c "import sys; s, e, n = map(float, sys.argv[1:4]); print(f'| {int(n):,} | OpenSplat (CPU) | {(e - s) / float(sys.argv[4]):.4f} | {int(n):,} | {sys.argv[5]} | {sys.argv[6]} |')" \
+    "$START" "$END" "$COUNT" "$ITERATIONS" "$(peak_mb "$OUT/opensplat_$COUNT.time")" "$PSNR" \
+    >>"$TABLE"
+done
+echo "[opensplat] table: $TABLE"
+cat "$TABLE"
