@@ -95,6 +95,32 @@ TEST_F(MpiTest, ARunInterruptedInOneProcessContinuesInTwo) {
   ExpectSameOutputs(dir + "/whole", out);
 }
 
+TEST_F(MpiTest, AProcessThatDiesEndsTheJobAndLeavesTheCheckpoint) {
+  const std::string dir = scene_ + "_dies";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string out = dir + "/run";
+  const std::string flags = "--batch_views 2 --checkpoint_every 5 --warmup_max_iterations 4000";
+  // Once a checkpoint exists, one of the job's two processes is killed outright.
+  const std::string script =
+      kMpirun + "-np 2 " + Solve(out, flags) + " > " + out +
+      ".log 2>&1 & job=\\$!; "
+      "until [ -f " +
+      out +
+      "/checkpoints/latest.ckpt ] || ! kill -0 \\$job 2>/dev/null; do sleep 0.01; done; "
+      "pkill -KILL -n -f 'mgsr_solve --workspace .* --output " +
+      out + " '; wait \\$job; echo exit=\\$?";
+  const auto r = testing::RunCommand("bash -c \"" + script + "\"");
+  EXPECT_EQ(r.output.find("exit=0"), std::string::npos) << "the job did not end: " << r.output;
+  EXPECT_FALSE(fs::exists(out + "/metrics.json"));
+  // The last checkpoint is whole: a new run accepts it.
+  const auto check = testing::RunCommand(Solve(out, flags + " --resume --check"));
+  EXPECT_EQ(check.exit_code, 0) << check.output;
+  EXPECT_NE(check.output.find("check: the scene and the checkpoint can be trained"),
+            std::string::npos)
+      << check.output;
+}
+
 TEST_F(MpiTest, BadSetupsEndTheJobWithOneMessage) {
   const std::string dir = scene_ + "_bad";
   fs::remove_all(dir);
