@@ -206,18 +206,17 @@ inline V BlendChain(const ChainArrays& a, const PixelArrays& st, int k, MaskOf<V
   return w;
 }
 
-// Blends Gaussian j (row `s`) into tile rows [ya, yb] whose bit is set in `rows` (bit y - y0),
-// columns [first, first + lanes of V). Returns the sum of its blend weights there (both chains).
+// Blends Gaussian j (row `s`) into tile rows [ya, yb], columns [first, first + lanes of V).
+// Returns the sum of its blend weights there (both chains).
 template <class V>
-float BlendRows(const Splat& s, int j, int ya, int yb, int y0, uint32_t rows, int first,
-                const TileLanes& tl, bool refl, const PixelArrays& st) {
+float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const TileLanes& tl,
+                bool refl, const PixelArrays& st) {
   using M = MaskOf<V>;
   const float jp1 = static_cast<float>(j + 1);
   const V dx = tl.Px<V>(first) - s.mx;
   const M lanes_ok = tl.Ok<V>(first);
   V weight_sum{};
   for (int y = ya; y <= yb; ++y) {
-    if (((rows >> (y - y0)) & 1u) == 0) continue;  // every pixel of the row is saturated
     const float dy = y + 0.5f - s.my;
     if (std::abs(dy) > s.ey || !RowHitsEllipse(dy, s.ca, s.cb, s.cc, s.min_power)) continue;
     const int k = (y - y0) * kTileSize + first;
@@ -418,35 +417,20 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
       st[aLiveT][k] = 1.0f;
       st[aLiveR][k] = refl ? 1.0f : 0.0f;
     }
-    // Bit r: row r of the tile has a pixel still blending (a saturated pixel takes no part in
-    // any later blend, so skipping a row of them changes nothing).
-    uint32_t live_rows = (1u << kTileSize) - 1;
     for (int j = 0; j < n; ++j) {
-      // Every 32 Gaussians: which rows still blend; stop the tile once none does.
+      // Every 32 Gaussians, stop the tile once all of its pixels are saturated.
       if ((j & 31) == 31) {
-        live_rows = 0;
-        for (int r = 0; r < kTileSize; ++r) {
-          float any = 0;
-          for (int c = 0; c < kTileSize; ++c) {
-            const int k = r * kTileSize + c;
-            any += st[aLiveT][k] + st[aLiveR][k];
-          }
-          if (any != 0) live_rows |= 1u << r;
-        }
-        if (live_rows == 0) break;
+        float any = 0;
+        for (int k = 0; k < kTilePixels; ++k) any += st[aLiveT][k] + st[aLiveR][k];
+        if (any == 0) break;
       }
       const Splat s(f + static_cast<size_t>(j) * kNumFields);
       if (!(s.min_power < 0.0f)) continue;  // too transparent to reach 1/255 anywhere
       int ya, yb;
       BoxRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
-      if (yb < ya) continue;
-      // Its rows that still blend; none: it changes nothing in this tile.
-      const uint32_t span = ((2u << (yb - y0)) - 1) & ~((1u << (ya - y0)) - 1);
-      const uint32_t rows = live_rows & span;
-      if (rows == 0) continue;
       const ColumnWindow w = WindowFor(s.mx, s.ex, x0);
-      const float sum = w.half ? BlendRows<F8>(s, j, ya, yb, y0, rows, w.first, tl, refl, st)
-                               : BlendRows<F16>(s, j, ya, yb, y0, rows, 0, tl, refl, st);
+      const float sum = w.half ? BlendRows<F8>(s, j, ya, yb, y0, w.first, tl, refl, st)
+                               : BlendRows<F16>(s, j, ya, yb, y0, 0, tl, refl, st);
       if (weights != nullptr) weights[j] += sum;
     }
     for (int y = y0; y < y_end; ++y) {
