@@ -376,14 +376,8 @@ class PrimitiveTrainer : public BranchTrainer {
     held_is_current_model_ = false;  // the step below changes the model
     ProfileScope scope("adam");
     adam_.Step(rows_->blocks(), slot.blocks, RatesAt(iteration));
-    if constexpr (HasLearntBackground<P>::value) {
-      if (environment_ != nullptr) {
-        P::BackgroundGradient(held_, step_render_grad_, &background_grad_);
-        slot.environment.assign(environment_->map().texels.size(), 0.0f);
-        environment_->AddGradient(held_options_.camera, background_grad_, &slot.environment);
-        environment_->ApplyGradient(&slot.environment);
-      }
-    }
+    if (BackgroundGradientInto(held_options_.camera, held_, &slot))
+      environment_->ApplyGradient(&slot.environment);
     return Status::Ok();
   }
 
@@ -499,14 +493,25 @@ class PrimitiveTrainer : public BranchTrainer {
       view.radii = &P::Radii(renderer_);
       density_->ViewStatistics(view, slot->statistics.data());
     }
+    BackgroundGradientInto(camera, render, slot);
+  }
+
+  // The learnt background's gradient from the last backward pass (through `render`, seen from
+  // `camera`) into slot->environment; false when the branch learns no background.
+  bool BackgroundGradientInto(const Camera& camera, const typename P::Render& render, Slot* slot) {
     if constexpr (HasLearntBackground<P>::value) {
       if (environment_ != nullptr) {
         ProfileScope scope("environment");
         P::BackgroundGradient(render, step_render_grad_, &background_grad_);
         slot->environment.assign(environment_->map().texels.size(), 0.0f);
         environment_->AddGradient(camera, background_grad_, &slot->environment);
+        return true;
       }
     }
+    (void)camera;
+    (void)render;
+    (void)slot;
+    return false;
   }
 
   // dst += src, every array element by element.
