@@ -24,12 +24,7 @@ Status MpiError(const char* call, int code) {
 
 }  // namespace
 
-bool MpiViewGroup::Launched() {
-  for (const char* name : {"OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK", "MPI_LOCALNRANKS"}) {
-    if (std::getenv(name) != nullptr) return true;
-  }
-  return false;
-}
+bool MpiViewGroup::Launched() { return LaunchedProcesses() > 0; }
 
 std::unique_ptr<MpiViewGroup> MpiViewGroup::Init(int* argc, char*** argv) {
   MPI_Init(argc, argv);

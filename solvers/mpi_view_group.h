@@ -20,8 +20,8 @@ namespace mgsr {
 
 class MpiViewGroup : public ViewGroup {
  public:
-  // Whether this process was started by an MPI launcher (mpirun / mpiexec of Open MPI or MPICH,
-  // or a PMI-based scheduler), read from the environment before MPI_Init.
+  // Whether this process was started by an MPI launcher (LaunchedProcesses() > 0), read from the
+  // environment before MPI_Init.
   static bool Launched();
   // Initialises MPI (MPI_Init) and returns the group of MPI_COMM_WORLD; MPI_Finalize runs when
   // it is destroyed. One per process.

@@ -1,6 +1,16 @@
 #include "solvers/view_group.h"
 
+#include <algorithm>
+#include <cstdlib>
+
 namespace mgsr {
+
+int LaunchedProcesses() {
+  for (const char* name : {"OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "MPI_LOCALNRANKS"}) {
+    if (const char* value = std::getenv(name)) return std::max(1, std::atoi(value));
+  }
+  return std::getenv("PMIX_RANK") != nullptr ? 1 : 0;
+}
 
 Status CheckBatchSplit(int batch, int ranks) {
   if (batch < 1)

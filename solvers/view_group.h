@@ -67,6 +67,10 @@ inline void BatchPart(int batch, int rank, int ranks, int* begin, int* end) {
   *end = *begin + part;
 }
 
+// The number of processes an MPI launcher (mpirun / mpiexec of Open MPI or MPICH, or a PMI-based
+// scheduler) started this one among, read from the environment; 0 when none did.
+int LaunchedProcesses();
+
 // An error unless `ranks` processes can share batches of `batch` views exactly: a power of two
 // that divides the batch.
 Status CheckBatchSplit(int batch, int ranks);

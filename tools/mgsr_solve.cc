@@ -437,6 +437,15 @@ int main(int argc, char** argv) {
       g_error_prefix = "MPI process " + std::to_string(group->rank()) + ": ";
     }
   }
+#else
+  // Several copies started by mpirun would each train alone and write the same folder.
+  if (mgsr::LaunchedProcesses() > 1) {
+    std::fprintf(stderr,
+                 "error: started as one of %d MPI processes, but this mgsr_solve was built "
+                 "without MPI: rebuild with -DMGSR_WITH_MPI=ON (scripts/build.sh does)\n",
+                 mgsr::LaunchedProcesses());
+    return 1;
+  }
 #endif
   const int code = Main(argc, argv, group.get());
 #ifdef MGSR_WITH_MPI

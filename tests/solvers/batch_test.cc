@@ -7,6 +7,7 @@
 #include <omp.h>
 
 #include <condition_variable>
+#include <cstdlib>
 #include <deque>
 #include <map>
 #include <mutex>
@@ -63,6 +64,19 @@ TEST(BatchTreeTest, BatchSplitsAreChecked) {
   ASSERT_FALSE(three.ok());
   EXPECT_NE(three.message().find("power of two"), std::string::npos) << three.message();
   EXPECT_FALSE(CheckBatchSplit(0, 1).ok());
+}
+
+TEST(BatchTreeTest, TheLaunchersProcessCountIsReadFromTheEnvironment) {
+  const char* saved = std::getenv("OMPI_COMM_WORLD_SIZE");
+  const std::string keep = saved != nullptr ? saved : "";
+  setenv("OMPI_COMM_WORLD_SIZE", "3", 1);
+  EXPECT_EQ(LaunchedProcesses(), 3);
+  unsetenv("OMPI_COMM_WORLD_SIZE");
+  if (std::getenv("PMI_SIZE") == nullptr && std::getenv("MPI_LOCALNRANKS") == nullptr &&
+      std::getenv("PMIX_RANK") == nullptr) {
+    EXPECT_EQ(LaunchedProcesses(), 0);
+  }
+  if (saved != nullptr) setenv("OMPI_COMM_WORLD_SIZE", keep.c_str(), 1);
 }
 
 // Processes simulated by threads: each "process" runs its own solver in its own thread; the
