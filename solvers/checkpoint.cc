@@ -54,6 +54,14 @@ std::string ViewFingerprint(const View& v) {
 
 }  // namespace
 
+std::string MutualBoostedSolver::SettingsFingerprint() const { return SettingsText(options_); }
+
+std::string MutualBoostedSolver::SceneFingerprint() const {
+  std::string text;
+  for (const View& v : scene_.views) text += v.name + " " + ViewFingerprint(v) + "\n";
+  return text;
+}
+
 Status MutualBoostedSolver::SaveCheckpoint(const std::string& path) const {
   BinaryWriter w;
   for (char c : kMagic) w.Write<char>(c);

@@ -129,6 +129,10 @@ class MutualBoostedSolver {
   // random generator, the view order, the stage and iteration, the auto-stop windows.
   Status SaveCheckpoint(const std::string& path) const;
   Status LoadCheckpoint(const std::string& path);
+  // What a checkpoint identifies a run by: every option (SolverOptions::Settings), and each view's
+  // name, size, camera and split. Processes sharing batches compare them before training.
+  std::string SettingsFingerprint() const;
+  std::string SceneFingerprint() const;
 
   const GaussianModel& gaussians() const { return gaussians_->model(); }
   const SurfelModel& surfels() const { return surfels_->model(); }

@@ -399,7 +399,7 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   const std::string ckpt_dir = JoinPath(o.output, "checkpoints");
   const std::string ckpt = JoinPath(ckpt_dir, "latest.ckpt");
   if (o.resume && !FileExists(ckpt)) return Status::Error(ckpt + ": no checkpoint to resume from");
-  // In a group of processes, process 0 writes; the others train alongside it (Worker below).
+  // In a group of processes, process 0 writes; the others train alongside it (TrainAlongside).
   const bool writer = o.group == nullptr || o.group->rank() == 0;
   if (o.group != nullptr && o.group->size() > 1) {
     if (!o.images.empty()) {
@@ -544,18 +544,10 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   if (o.group != nullptr) {
     // Processes that would not train the same model must not start: the same options (with the
     // scene's choices), the same views and cameras, the same checkpoint.
-    std::string settings;
-    for (const auto& [name, value] : options.Settings()) settings += name + "=" + value + "\n";
-    std::string views;
-    for (const View& v : scene.views) {
-      char line[160];
-      std::snprintf(line, sizeof(line), "%s %dx%d %.9g %.9g %.9g\n", v.name.c_str(), v.camera.width,
-                    v.camera.height, v.camera.t.x(), v.camera.t.y(), v.camera.t.z());
-      views += line;
-    }
-    for (const auto& [what, value] : {std::pair<std::string, std::string>{"options", settings},
-                                      {"scene", views},
-                                      {"--resume", o.resume ? FileSha256(ckpt) : ""}}) {
+    for (const auto& [what, value] :
+         {std::pair<std::string, std::string>{"options", solver.SettingsFingerprint()},
+          {"scene", solver.SceneFingerprint()},
+          {"--resume", o.resume ? FileSha256(ckpt) : ""}}) {
       s = o.group->CheckSame(what, value);
       if (!s.ok()) return fail(s.message());
     }
