@@ -71,11 +71,14 @@ size_t DefaultPrimitiveBudget(const Scene& scene);
 // its area. Why not the area: flat primitives that follow a surface of curvature radius R to
 // within a fixed part of a pixel footprint f can be at most ~sqrt(R f) across, so a surface of
 // area A needs ~A / (R f) of them, which for one shape (A / R^2 fixed) grows as R / f, i.e. as
-// sqrt(F). Measured (BENCHMARKS.md, quality against model size): suzanne at 256 px (F 12,271)
-// keeps its NC and PSNR from ~15,000 surfels and ~20,000 Gaussians, the 64 px torus (F 1,114)
-// from ~5,000 of each: 2.5x the count for 11x the pixels. At least kMinAutoBudget. `why` says
-// how, for the log and metrics.json.
-constexpr double kAutoGaussiansPerSqrtPixel = 180;
+// sqrt(F). The two branches need different counts: the surfels carry the mesh, and with a quarter
+// to a third of them the exact CD was 6-10% worse on four scenes, while a quarter of the Gaussians
+// (which only render) kept NC, CD and aligned PSNR within the run-to-run spread on five scenes
+// (mean changes -0.07 NC points, -1% CD, +0.02 dB; dented 128 px: 3,056 instead of 12,223
+// Gaussians, NC 97.87 / CD 5.34 / 25.15 dB against 97.81 / 5.38 / 25.14 dB). BENCHMARKS.md,
+// "Quality against model size", has the runs. At least kMinAutoBudget. `why` says how, for the
+// log and metrics.json.
+constexpr double kAutoGaussiansPerSqrtPixel = 45;
 constexpr double kAutoSurfelsPerSqrtPixel = 135;
 constexpr size_t kMinAutoBudget = 1000;
 struct SceneBudget {

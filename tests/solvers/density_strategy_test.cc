@@ -306,8 +306,8 @@ TEST(DensityStrategyTest, AutoBudgetCountsTheForegroundOfTheMedianView) {
   }
   SceneBudget b = AutoPrimitiveBudget(scene);
   EXPECT_EQ(b.foreground_pixels, 4000);
-  // 180 and 135 x sqrt(4000) = 11,384 and 8,538.
-  EXPECT_EQ(b.gaussians, 11384u);
+  // 45 and 135 x sqrt(4000) = 2,846 and 8,538.
+  EXPECT_EQ(b.gaussians, 2846u);
   EXPECT_EQ(b.surfels, 8538u);
   EXPECT_NE(b.why.find("4000 by mask"), std::string::npos) << b.why;
   // Without masks or alpha every pixel counts.
