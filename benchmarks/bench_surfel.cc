@@ -21,6 +21,7 @@ Fixture MakeFixture(int width, int count) {
   f.model = mgsr::bench::ShellSurfels(count, 1);
   f.options.camera = mgsr::bench::ShellCamera(width);
   f.options.sh_degree = 3;
+  f.options.distortion = false;  // as training renders it: no loss row reads the distortion
   mgsr::Rng rng(2);
   // Upstream gradients on the outputs the MGSR losses read: colour, depth and world normals.
   for (mgsr::Image* im : {&f.grad.color, &f.grad.normal_world}) {

@@ -47,26 +47,46 @@ void BranchTrainer::AddLossRow(const LossSpec& row, std::unique_ptr<LossTerm> te
     sp.exposure_terms.push_back(wrapped.get());
     term = std::move(wrapped);
   }
+  BufferSet reads = 0;  // differentiated or read as constants
+  for (const std::vector<Buffer>& list : {term->Inputs(), term->ConstantInputs()})
+    for (Buffer b : list) reads |= BufferBit(b);
   sp.problem.AddTerm(std::move(term), row.weight, branch_, row.name);
   sp.rows.push_back(row);
+  sp.reads.push_back(reads);
+}
+
+BufferSet BranchTrainer::StageReads(Stage stage, int iteration) const {
+  const StageProblem& sp = ProblemFor(stage);
+  BufferSet reads = 0;
+  for (size_t i = 0; i < sp.rows.size(); ++i) {
+    // The weight EvaluateLoss gives the row at this iteration.
+    if ((iteration >= sp.rows[i].first_iteration ? sp.rows[i].weight : 0.0) != 0)
+      reads |= sp.reads[i];
+  }
+  return reads;
 }
 
 double BranchTrainer::EvaluateLoss(Stage stage, int view, int iteration, const RenderBuffers& in,
                                    const Targets& targets, RenderGradients* gradient) {
   ProfileScope scope("losses");
   StageProblem& sp = ProblemFor(stage);
-  for (size_t i = 0; i < sp.rows.size(); ++i)
-    sp.problem.SetWeight(i, iteration >= sp.rows[i].first_iteration ? sp.rows[i].weight : 0.0);
+  size_t active = 0;
+  for (size_t i = 0; i < sp.rows.size(); ++i) {
+    const double weight = iteration >= sp.rows[i].first_iteration ? sp.rows[i].weight : 0.0;
+    sp.problem.SetWeight(i, weight);
+    active += weight != 0;
+  }
   for (ExposureCompensatedLoss* e : sp.exposure_terms) e->set_transform(exposure_->transform(view));
-  if (!sp.checked) {
-    // Once per stage: every row's inputs and targets exist (a custom row may ask for a buffer this
-    // branch does not render, or a target this stage does not have).
+  if (active != sp.checked_active) {
+    // When the set of active rows changes (rows start at their first iteration): every active
+    // row's inputs and targets exist (a custom row may ask for a buffer this branch does not
+    // render, or a target this stage does not have).
     const Status s = sp.problem.Check(branch_, in, targets);
     if (!s.ok()) {
       step_error_ = s.WithContext(std::string(name()) + " " + StageName(stage) + " loss row ");
       return std::numeric_limits<double>::quiet_NaN();
     }
-    sp.checked = true;
+    sp.checked_active = active;
   }
   // LastTerms() is set once the density strategy's regulariser is known (OptimizeAndControlDensity,
   // or Step when the step ends at the loss), so its size stays the same from step to step.

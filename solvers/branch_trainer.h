@@ -94,6 +94,16 @@ template <typename P>
 struct HasLearntBackground<P, std::void_t<decltype(P::kLearntBackground)>>
     : std::integral_constant<bool, P::kLearntBackground> {};
 
+// Whether a primitive type can skip buffers nothing reads: P::SkipUnread(BufferSet read,
+// RenderOptions*) switches outputs off, P::Provides(have, want) says whether a render made with
+// `have` gives every buffer one made with `want` does. A type without them renders everything.
+template <typename P, typename = void>
+struct SkipsUnreadBuffers : std::false_type {};
+template <typename P>
+struct SkipsUnreadBuffers<P, std::void_t<decltype(P::SkipUnread(
+                                 BufferSet{}, static_cast<typename P::RenderOptions*>(nullptr)))>>
+    : std::true_type {};
+
 // One view of a step's batch.
 struct BatchView {
   int view = 0;
@@ -131,6 +141,9 @@ class BranchTrainer {
   // --- The loss: one Problem per stage, built from the loss table's rows of this branch.
   // `behind_exposure`: the row compares through the view's colour transform.
   void AddLossRow(const LossSpec& row, std::unique_ptr<LossTerm> term, bool behind_exposure);
+  // The buffers the stage's rows active at `iteration` read (weight not 0): what a step's render
+  // must produce (a primitive type may skip the rest, e.g. the 2DGS distortion).
+  BufferSet StageReads(Stage stage, int iteration) const;
 
   // --- Training.
   // One step on a batch of `count` views (--batch_views): this process renders its part of the
@@ -164,8 +177,11 @@ class BranchTrainer {
   // --- Supervising the other branch.
   // Renders the view with the current parameters into a render the trainer keeps until its next
   // Hold, and returns its buffers (valid as long). Until the trainer renders again (Step, Hold,
-  // RenderColor), BackpropHeld can send a gradient through this render.
-  virtual RenderBuffers Hold(const Camera& camera) = 0;
+  // RenderColor), BackpropHeld can send a gradient through this render. `needed`: the buffers
+  // the caller reads (a primitive type may skip others; the rest of the returned set may be
+  // empty).
+  virtual RenderBuffers Hold(const Camera& camera, BufferSet needed) = 0;
+  RenderBuffers Hold(const Camera& camera) { return Hold(camera, kAllBuffers); }
   // Bidirectional supervision: back-propagates d loss / d buffers of the held render (the other
   // branch's loss differentiated with respect to its target) and steps Adam at `iteration`. An
   // error when the renderer no longer holds that render's forward state.
@@ -239,8 +255,11 @@ class BranchTrainer {
   struct StageProblem {
     Problem problem;
     std::vector<LossSpec> rows;                            // parallel to problem.entries()
+    std::vector<BufferSet> reads;                          // per row: the buffers it reads
     std::vector<ExposureCompensatedLoss*> exposure_terms;  // the rows behind the colour transform
-    bool checked = false;  // inputs and targets checked against the first render
+    // Active rows when their inputs and targets were last checked against a render (rows only
+    // switch on, so a change of count is a change of set).
+    size_t checked_active = static_cast<size_t>(-1);
   };
   StageProblem& ProblemFor(Stage s) { return problems_[s == Stage::kWarmup ? 0 : 1]; }
   const StageProblem& ProblemFor(Stage s) const { return problems_[s == Stage::kWarmup ? 0 : 1]; }
@@ -354,9 +373,11 @@ class PrimitiveTrainer : public BranchTrainer {
     return loss;
   }
 
-  RenderBuffers Hold(const Camera& camera) override {
+  using BranchTrainer::Hold;
+  RenderBuffers Hold(const Camera& camera, BufferSet needed) override {
     ProfileContext context(name());
     held_options_ = OptionsFor(camera, &held_background_);
+    if constexpr (SkipsUnreadBuffers<P>::value) P::SkipUnread(needed, &held_options_);
     renderer_.Forward(model_, held_options_, &held_);
     held_current_ = held_is_current_model_ = true;
     return P::Buffers(held_options_.camera, held_);
@@ -432,6 +453,15 @@ class PrimitiveTrainer : public BranchTrainer {
   }
 
  private:
+  // Whether the held render gives every buffer the step's options ask for.
+  bool HeldProvidesStep() const {
+    if constexpr (SkipsUnreadBuffers<P>::value) {
+      return P::Provides(held_options_, step_options_);
+    } else {
+      return true;
+    }
+  }
+
   typename P::RenderOptions OptionsFor(const Camera& camera, Image* background) {
     typename P::RenderOptions o = render_options_;
     o.camera = camera;
@@ -467,12 +497,14 @@ class PrimitiveTrainer : public BranchTrainer {
     if (!step_error_.ok()) return;  // an earlier view found a row the branch cannot feed
     const Camera& camera = *v.camera;
     step_options_ = OptionsFor(camera, &step_background_);
+    if constexpr (SkipsUnreadBuffers<P>::value)
+      P::SkipUnread(StageReads(stage, iteration), &step_options_);
     // A mutual iteration's teacher render is often this very render: the branch supervised the
     // other one on this view and has not changed since (joint mode, 3DGS). Then the renderer
     // still holds its forward state and the step reuses it (the same bytes a new forward gives).
     const bool reuse = held_current_ && held_is_current_model_ &&
                        held_options_.sh_degree == step_options_.sh_degree &&
-                       held_options_.camera == camera;
+                       held_options_.camera == camera && HeldProvidesStep();
     if (!reuse) renderer_.Forward(model_, step_options_, &step_render_);
     const typename P::Render& render = reuse ? held_ : step_render_;
     held_current_ = held_is_current_model_ = false;

@@ -334,7 +334,7 @@ Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* te
         // The solver's work, not the learner's (this runs inside the learner's step).
         ProfileContext solver_context("");
         ProfileScope scope("mutual targets");
-        target = *teacher->Hold(v.camera).Get(sup.buffer);
+        target = *teacher->Hold(v.camera, BufferBit(sup.buffer)).Get(sup.buffer);
         if (sup.background_outside_mask && !v.mask.empty())
           FillOutsideMask(v.mask, background, &target);
       }

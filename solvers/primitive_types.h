@@ -39,6 +39,14 @@ struct SurfelPrimitive : ProjectedPrimitive<SurfelModel, SurfelRenderer> {
 
   static RenderBuffers Buffers(const Camera& camera, const Render& r);
   static void TakeGradients(RenderGradients* from, RenderGrad* to);
+  // Renders skip the distortion where nothing reads it (SurfelRenderOptions::distortion).
+  static void SkipUnread(BufferSet read, RenderOptions* o) {
+    o->distortion = (read & BufferBit(Buffer::kDistortion)) != 0;
+  }
+  // Whether a render with options `have` gives every buffer one with `want` gives.
+  static bool Provides(const RenderOptions& have, const RenderOptions& want) {
+    return have.distortion || !want.distortion;
+  }
 };
 
 struct GaussianPrimitive : ProjectedPrimitive<GaussianModel, GaussianRenderer> {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <string>
 #include <utility>
 
@@ -25,6 +26,10 @@ enum class Buffer {
   kCount
 };
 constexpr int kNumBuffers = static_cast<int>(Buffer::kCount);
+// A set of buffers, bit b for Buffer b (e.g. what a render must produce).
+using BufferSet = uint32_t;
+constexpr BufferSet BufferBit(Buffer b) { return 1u << static_cast<int>(b); }
+constexpr BufferSet kAllBuffers = (1u << kNumBuffers) - 1;
 const char* BufferName(Buffer b);
 // Channels of each buffer (3 for colours and normals, else 1).
 int BufferChannels(Buffer b);

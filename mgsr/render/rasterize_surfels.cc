@@ -214,8 +214,8 @@ enum ForwardArray {
 };
 
 // Blends surfel j into tile rows [ya, yb], columns [first, first + lanes of V); returns the sum of
-// its blend weights there.
-template <class V>
+// its blend weights there. kDistortion: also the distortion sums (SurfelRenderOptions::distortion).
+template <class V, bool kDistortion>
 float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0, int first,
                 const TileLanes& tl, const PixelArrays& st) {
   using M = simd::MaskOf<V>;
@@ -251,20 +251,22 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
     const M med = blend & (T > 0.5f);
     simd::Store(st[aZmed] + k, simd::Select(med, h.z, simd::Load<V>(st[aZmed] + k)));
     simd::Store(st[aMed] + k, simd::Select(med, simd::Splat<V>(jp1), simd::Load<V>(st[aMed] + k)));
-    // Distortion: w_i (m_i^2 A_i + M2_i - 2 m_i M1_i), A_i = 1 - T_i, M1/M2 over the surfels in
-    // front. It only depends on differences of m, so m is taken relative to the pixel's first
-    // blended surfel: in float, the absolute NDC depths (all close to 1) would cancel
-    // catastrophically.
-    const V m_abs = NdcDepth(simd::Select(blend, h.z, simd::Splat<V>(1.0f)));
-    const V mref = simd::Select(blend & (simd::Load<V>(st[aLast] + k) == 0.0f), m_abs,
-                                simd::Load<V>(st[aMref] + k));
-    simd::Store(st[aMref] + k, mref);
-    const V m = m_abs - mref;
-    const V M1 = simd::Load<V>(st[aM1] + k), M2 = simd::Load<V>(st[aM2] + k);
-    simd::Store(st[aDist] + k,
-                simd::Load<V>(st[aDist] + k) + w * (m * m * (1.0f - T) + M2 - 2.0f * m * M1));
-    simd::Store(st[aM1] + k, M1 + w * m);
-    simd::Store(st[aM2] + k, M2 + w * m * m);
+    if constexpr (kDistortion) {
+      // Distortion: w_i (m_i^2 A_i + M2_i - 2 m_i M1_i), A_i = 1 - T_i, M1/M2 over the surfels in
+      // front. It only depends on differences of m, so m is taken relative to the pixel's first
+      // blended surfel: in float, the absolute NDC depths (all close to 1) would cancel
+      // catastrophically.
+      const V m_abs = NdcDepth(simd::Select(blend, h.z, simd::Splat<V>(1.0f)));
+      const V mref = simd::Select(blend & (simd::Load<V>(st[aLast] + k) == 0.0f), m_abs,
+                                  simd::Load<V>(st[aMref] + k));
+      simd::Store(st[aMref] + k, mref);
+      const V m = m_abs - mref;
+      const V M1 = simd::Load<V>(st[aM1] + k), M2 = simd::Load<V>(st[aM2] + k);
+      simd::Store(st[aDist] + k,
+                  simd::Load<V>(st[aDist] + k) + w * (m * m * (1.0f - T) + M2 - 2.0f * m * M1));
+      simd::Store(st[aM1] + k, M1 + w * m);
+      simd::Store(st[aM2] + k, M2 + w * m * m);
+    }
     simd::Store(st[aT] + k, simd::Select(blend, test, T));
     simd::Store(st[aLast] + k,
                 simd::Select(blend, simd::Splat<V>(jp1), simd::Load<V>(st[aLast] + k)));
@@ -310,7 +312,8 @@ enum BackwardArray {
 
 // Gradients of surfel j over tile rows [ya, yb], columns [first, first + lanes of V), written to
 // its gradient row `dst` (`dlow`: d c / d M of its low-pass offset); un-blends it from the state.
-template <class V>
+// kDistortion: the distortion output has a gradient (else its terms are zero and skipped).
+template <class V, bool kDistortion>
 void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0, int first,
                   const TileLanes& tl, const PixelArrays& st, const float dlow[9], float* dst) {
   using M = simd::MaskOf<V>;
@@ -340,32 +343,42 @@ void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y
             Gc2 = simd::Load<V>(st[bGc2] + k);
     const V Gn0 = simd::Load<V>(st[bGn0] + k), Gn1 = simd::Load<V>(st[bGn1] + k),
             Gn2 = simd::Load<V>(st[bGn2] + k);
-    const V GDs = simd::Load<V>(st[bGDs] + k), GDist = simd::Load<V>(st[bGDist] + k);
+    const V GDs = simd::Load<V>(st[bGDs] + k);
     gc0 += w * Gc0;
     gc1 += w * Gc1;
     gc2 += w * Gc2;
     gn0 += w * Gn0;
     gn1 += w * Gn1;
     gn2 += w * Gn2;
-    // Distortion: d dist / d w_i and d dist / d m_i at this pixel's totals.
-    const V zz = simd::Select(valid, h.z, simd::Splat<V>(1.0f));
-    const V m = NdcDepth(zz) - simd::Load<V>(st[bMref] + k);  // relative, as in the forward pass
-    const V AN = simd::Load<V>(st[bAN] + k), M1N = simd::Load<V>(st[bM1N] + k),
-            M2N = simd::Load<V>(st[bM2N] + k);
-    const V gw_dist = GDist * (m * m * AN - 2.0f * m * M1N + M2N);
-    const V dm = 2.0f * w * GDist * (m * AN - M1N);
     // d loss / d z of the intersection.
     const M is_median = valid & (jf + 1.0f == simd::Load<V>(st[bMed] + k));
-    const V dz = w * GDs + simd::Masked(is_median, simd::Load<V>(st[bGZmed] + k)) +
-                 dm * (kDmDzScale / (zz * zz));
+    V dz = w * GDs + simd::Masked(is_median, simd::Load<V>(st[bGZmed] + k));
+    // Distortion: d dist / d w_i (its part of d loss / d a) and d dist / d m_i at this pixel's
+    // totals.
+    [[maybe_unused]] V gw_dist{};
+    if constexpr (kDistortion) {
+      const V GDist = simd::Load<V>(st[bGDist] + k);
+      const V zz = simd::Select(valid, h.z, simd::Splat<V>(1.0f));
+      const V m = NdcDepth(zz) - simd::Load<V>(st[bMref] + k);  // relative, as in the forward
+      const V AN = simd::Load<V>(st[bAN] + k), M1N = simd::Load<V>(st[bM1N] + k),
+              M2N = simd::Load<V>(st[bM2N] + k);
+      gw_dist = GDist * (m * m * AN - 2.0f * m * M1N + M2N);
+      const V dm = 2.0f * w * GDist * (m * AN - M1N);
+      dz += dm * (kDmDzScale / (zz * zz));
+    }
     // d loss / d a through every output (the "behind" accumulators S).
     const V Sc0 = simd::Load<V>(st[bSc0] + k), Sc1 = simd::Load<V>(st[bSc1] + k),
             Sc2 = simd::Load<V>(st[bSc2] + k);
     const V Sn0 = simd::Load<V>(st[bSn0] + k), Sn1 = simd::Load<V>(st[bSn1] + k),
             Sn2 = simd::Load<V>(st[bSn2] + k);
-    const V Sz = simd::Load<V>(st[bSz] + k), Sw = simd::Load<V>(st[bSw] + k);
+    const V Sz = simd::Load<V>(st[bSz] + k);
     V da = (s.c[0] - Sc0) * Gc0 + (s.c[1] - Sc1) * Gc1 + (s.c[2] - Sc2) * Gc2 + (h.z - Sz) * GDs +
-           (s.n[0] - Sn0) * Gn0 + (s.n[1] - Sn1) * Gn1 + (s.n[2] - Sn2) * Gn2 + (gw_dist - Sw);
+           (s.n[0] - Sn0) * Gn0 + (s.n[1] - Sn1) * Gn1 + (s.n[2] - Sn2) * Gn2;
+    if constexpr (kDistortion) {
+      const V Sw = simd::Load<V>(st[bSw] + k);
+      da += gw_dist - Sw;
+      simd::Store(st[bSw] + k, simd::Select(valid, a * gw_dist + (1.0f - a) * Sw, Sw));
+    }
     da = da * T + simd::Load<V>(st[bTfin] + k) * inv * simd::Load<V>(st[bGA] + k);
     const V keep = 1.0f - a;
     simd::Store(st[bSc0] + k, simd::Select(valid, a * s.c[0] + keep * Sc0, Sc0));
@@ -375,7 +388,6 @@ void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y
     simd::Store(st[bSn1] + k, simd::Select(valid, a * s.n[1] + keep * Sn1, Sn1));
     simd::Store(st[bSn2] + k, simd::Select(valid, a * s.n[2] + keep * Sn2, Sn2));
     simd::Store(st[bSz] + k, simd::Select(valid, a * h.z + keep * Sz, Sz));
-    simd::Store(st[bSw] + k, simd::Select(valid, a * gw_dist + keep * Sw, Sw));
     const M slope = valid & (raw < kMaxAlpha);  // the clamp at 0.99 has zero slope
     gop += simd::Masked(slope, h.G * da);
     const V dG = simd::Masked(slope, s.op * da);
@@ -436,14 +448,17 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   EnsureImage(&out->color, W, H, 3);
   EnsureImage(&out->normal, W, H, 3);
   EnsureImage(&out->normal_world, W, H, 3);
-  for (Image* im : {&out->depth, &out->alpha, &out->median_depth, &out->distortion})
-    EnsureImage(im, W, H, 1);
+  for (Image* im : {&out->depth, &out->alpha, &out->median_depth}) EnsureImage(im, W, H, 1);
+  const bool distortion = o.distortion;
+  if (distortion) {
+    EnsureImage(&out->distortion, W, H, 1);
+  } else {
+    out->distortion = Image();
+  }
   out->final_t.resize(npix);
   out->depth_sum.resize(npix);
   out->weight_sum.resize(npix);
-  out->m1.resize(npix);
-  out->m2.resize(npix);
-  out->m_ref.resize(npix);
+  for (std::vector<float>* v : {&out->m1, &out->m2, &out->m_ref}) v->resize(distortion ? npix : 0);
   out->last.resize(npix);
   out->median_index.resize(npix);
   const int threads = omp_get_max_threads();
@@ -486,8 +501,14 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
       int ya, yb;
       BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
       const ColumnWindow win = WindowFor(s.mx, s.rad, x0);
-      const float sum = win.half ? BlendRows<F8>(s, j, min_power, ya, yb, y0, win.first, tl, st)
-                                 : BlendRows<F16>(s, j, min_power, ya, yb, y0, 0, tl, st);
+      float sum;
+      if (distortion) {
+        sum = win.half ? BlendRows<F8, true>(s, j, min_power, ya, yb, y0, win.first, tl, st)
+                       : BlendRows<F16, true>(s, j, min_power, ya, yb, y0, 0, tl, st);
+      } else {
+        sum = win.half ? BlendRows<F8, false>(s, j, min_power, ya, yb, y0, win.first, tl, st)
+                       : BlendRows<F16, false>(s, j, min_power, ya, yb, y0, 0, tl, st);
+      }
       if (weights != nullptr) weights[j] += sum;
     }
     for (int y = y0; y < y_end; ++y) {
@@ -510,13 +531,15 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
         // put one surfel's depth off its own z.
         out->depth.plane(0)[pix] = A >= kMinDepthAlpha ? st[aDs][k] / st[aWs][k] : 0.0f;
         out->median_depth.plane(0)[pix] = st[aZmed][k];
-        out->distortion.plane(0)[pix] = st[aDist][k];
         out->final_t[pix] = T;
         out->depth_sum[pix] = st[aDs][k];
         out->weight_sum[pix] = st[aWs][k];
-        out->m1[pix] = st[aM1][k];
-        out->m2[pix] = st[aM2][k];
-        out->m_ref[pix] = st[aMref][k];
+        if (distortion) {
+          out->distortion.plane(0)[pix] = st[aDist][k];
+          out->m1[pix] = st[aM1][k];
+          out->m2[pix] = st[aM2][k];
+          out->m_ref[pix] = st[aMref][k];
+        }
         out->last[pix] = static_cast<uint32_t>(st[aLast][k]);
         out->median_index[pix] = static_cast<uint32_t>(st[aMed][k]);
       }
@@ -547,6 +570,8 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
   const Eigen::Matrix3f Rc = o.camera.R.cast<float>();
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
+  // The distortion terms only where its output was rendered and has a gradient.
+  const bool distortion = o.distortion && !g.distortion.empty();
 
   scratch->entry_grads.resize(bins.ids.size() * kGradStride);
   scratch->tile_used.assign(bins.num_tiles(), 0);
@@ -604,12 +629,14 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
             bg_dot += (bg_image != nullptr ? bg_image->plane(c)[pix] : o.background[c]) * gc[c];
           st[bGA][k] = a_grad - bg_dot;
           st[bGZmed][k] = g.median_depth.empty() ? 0.0f : g.median_depth.plane(0)[pix];
-          st[bGDist][k] = g.distortion.empty() ? 0.0f : g.distortion.plane(0)[pix];
           st[bT][k] = st[bTfin][k] = r.final_t[pix];
-          st[bAN][k] = A;
-          st[bM1N][k] = r.m1[pix];
-          st[bM2N][k] = r.m2[pix];
-          st[bMref][k] = r.m_ref[pix];
+          if (distortion) {
+            st[bGDist][k] = g.distortion.plane(0)[pix];
+            st[bAN][k] = A;
+            st[bM1N][k] = r.m1[pix];
+            st[bM2N][k] = r.m2[pix];
+            st[bMref][k] = r.m_ref[pix];
+          }
           st[bLast][k] = static_cast<float>(r.last[pix]);
           st[bMed][k] = static_cast<float>(r.median_index[pix]);
           max_last = std::max(max_last, static_cast<int>(r.last[pix]));
@@ -630,10 +657,16 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
         BoxRange(s.my, s.rad, y0, y_end - 1, &ya, &yb);
         float* dst = tg + static_cast<size_t>(j) * kGradStride;
         const ColumnWindow win = WindowFor(s.mx, s.rad, x0);
-        if (win.half) {
-          GradientRows<F8>(s, j, min_power, ya, yb, y0, win.first, tl, st, dlow, dst);
+        if (distortion) {
+          if (win.half) {
+            GradientRows<F8, true>(s, j, min_power, ya, yb, y0, win.first, tl, st, dlow, dst);
+          } else {
+            GradientRows<F16, true>(s, j, min_power, ya, yb, y0, 0, tl, st, dlow, dst);
+          }
+        } else if (win.half) {
+          GradientRows<F8, false>(s, j, min_power, ya, yb, y0, win.first, tl, st, dlow, dst);
         } else {
-          GradientRows<F16>(s, j, min_power, ya, yb, y0, 0, tl, st, dlow, dst);
+          GradientRows<F16, false>(s, j, min_power, ya, yb, y0, 0, tl, st, dlow, dst);
         }
       }
       scratch->tile_used[tile] = static_cast<uint32_t>(max_last);

@@ -53,6 +53,11 @@ struct SurfelRenderOptions {
   // Also sum each surfel's blend weights over the image (SurfelRender::contribution): what pruning
   // by contribution reads. Off in training steps (it costs a reduction per row).
   bool record_contribution = false;
+  // Also the depth distortion (SurfelRender::distortion and its backward state). Off, its image
+  // and state stay empty, the pass skips its sums (a division and eight tile-state loads and
+  // stores per blended row), and the backward ignores a distortion gradient. Training turns it off
+  // when no active loss row reads the buffer (the reference never uses it).
+  bool distortion = true;
 };
 
 struct SurfelRender {

@@ -252,6 +252,63 @@ TEST(SurfelRendererTest, ContributionsSumToTheBlendedWeights) {
   EXPECT_EQ(recorded.contribution[0], 0.0f);
 }
 
+// Without the distortion (what training renders when no loss row reads it) the distortion image
+// is absent, every other output and every gradient through them is the same to the bit, and a
+// distortion gradient is ignored; with it, that gradient reaches the surfels.
+TEST(SurfelRendererTest, SkippingTheDistortionChangesNothingElse) {
+  const Camera cam = testing::RenderTestCamera(40, 36);
+  const SurfelModel m = RandomSurfels(30, 7);
+  SurfelRenderOptions on = Options(cam), off = on;
+  off.distortion = false;
+  Rng rng(3);
+  auto random_image = [&](int channels) {
+    Image im(cam.width, cam.height, channels);
+    for (size_t i = 0; i < im.size(); ++i) im.data()[i] = static_cast<float>(rng.Uniform(-1, 1));
+    return im;
+  };
+  SurfelRenderGrad grad;
+  grad.color = random_image(3);
+  grad.normal_world = random_image(3);
+  grad.depth = random_image(1);
+  grad.alpha = random_image(1);
+  grad.median_depth = random_image(1);
+  SurfelRenderGrad with_distortion = grad;
+  with_distortion.distortion = random_image(1);
+
+  SurfelRenderer renderer;
+  SurfelRender with, without;
+  SurfelGradients g_on, g_on_distortion, g_off, g_off_distortion;
+  renderer.Forward(m, on, &with);
+  renderer.Backward(m, on, with, grad, &g_on);
+  renderer.Backward(m, on, with, with_distortion, &g_on_distortion);
+  renderer.Forward(m, off, &without);
+  renderer.Backward(m, off, without, grad, &g_off);
+  renderer.Backward(m, off, without, with_distortion, &g_off_distortion);
+
+  EXPECT_TRUE(without.distortion.empty());
+  float largest = 0;
+  for (size_t i = 0; i < with.distortion.size(); ++i)
+    largest = std::max(largest, std::abs(with.distortion.data()[i]));
+  EXPECT_GT(largest, 0.0f);
+  for (auto image :
+       {&SurfelRender::color, &SurfelRender::depth, &SurfelRender::alpha, &SurfelRender::normal,
+        &SurfelRender::normal_world, &SurfelRender::median_depth}) {
+    const Image& a = with.*image;
+    const Image& b = without.*image;
+    ASSERT_EQ(a.size(), b.size());
+    EXPECT_TRUE(std::equal(a.data(), a.data() + a.size(), b.data()));
+  }
+  const auto same = [](SurfelGradients& a, SurfelGradients& b) {
+    const std::vector<ParamBlock> x = a.params.Blocks(), y = b.params.Blocks();
+    for (size_t k = 0; k < x.size(); ++k)
+      if (*x[k].data != *y[k].data) return false;
+    return true;
+  };
+  EXPECT_TRUE(same(g_on, g_off));
+  EXPECT_TRUE(same(g_off, g_off_distortion));
+  EXPECT_FALSE(same(g_on, g_on_distortion));
+}
+
 TEST(SurfelRendererGradientTest, AllParametersAllOutputsMatchNumericDifferentiation) {
   CheckGradients(RandomSurfels(8, 11, 0.15, 0.35), testing::RenderTestCamera(), "splats", true);
 }

@@ -28,10 +28,12 @@ struct BandRenderOptions {
   int sh_degree = 0;
   float background[3] = {0, 0, 0};
   bool record_contribution = false;
+  bool alpha = true;  // an output a type may skip (SkippingBandPrimitive)
 };
 
 struct BandRender {
   Image color;
+  Image alpha;                      // 1 everywhere, when rendered
   std::vector<float> contribution;  // empty: the stub never prunes
 };
 
@@ -52,6 +54,12 @@ class BandRenderer {
  public:
   void Forward(const BandModel& m, const BandRenderOptions& o, BandRender* out) {
     ++forwards;
+    out->alpha = Image();
+    if (o.alpha) {
+      ++alpha_renders;
+      out->alpha = Image(o.camera.width, o.camera.height, 1);
+      out->alpha.Fill(1.0f);
+    }
     out->color = Image(o.camera.width, o.camera.height, 3);
     for (int y = 0; y < o.camera.height; ++y) {
       const int k = BandOfRow(y, o.camera.height, m.size());
@@ -75,13 +83,15 @@ class BandRenderer {
     }
   }
   const std::vector<float>& radius() const { return radius_; }
-  static int forwards;  // every Forward of every band renderer
+  static int forwards;       // every Forward of every band renderer
+  static int alpha_renders;  // those that rendered the alpha
 
  private:
   std::vector<float> radius_;
 };
 
 int BandRenderer::forwards = 0;
+int BandRenderer::alpha_renders = 0;
 
 // The primitive type's description for PrimitiveTrainer: no density control (a fixed band count).
 struct BandPrimitive {
@@ -97,6 +107,7 @@ struct BandPrimitive {
     RenderBuffers in;
     in.camera = &camera;
     in.Set(Buffer::kColor, &r.color);
+    if (!r.alpha.empty()) in.Set(Buffer::kAlpha, &r.alpha);
     return in;
   }
   static void TakeGradients(RenderGradients* from, RenderGrad* to) {
@@ -157,6 +168,17 @@ int CountingDensity::after_calls = 0;
 int CountingDensity::events = 0;
 size_t CountingDensity::rows_seen = 0;
 
+// The same type skipping its alpha where no active loss row reads it (as the 2DGS branch skips
+// its distortion).
+struct SkippingBandPrimitive : BandPrimitive {
+  static void SkipUnread(BufferSet read, RenderOptions* o) {
+    o->alpha = (read & BufferBit(Buffer::kAlpha)) != 0;
+  }
+  static bool Provides(const RenderOptions& have, const RenderOptions& want) {
+    return have.alpha || !want.alpha;
+  }
+};
+
 using BandTrainer = PrimitiveTrainer<BandPrimitive>;
 
 Camera SmallCamera() {
@@ -200,12 +222,13 @@ BranchTrainerOptions StubOptions() {
   return o;
 }
 
-std::unique_ptr<BandTrainer> MakeTrainer(ExposureModel* exposure, Rng* rng) {
+template <typename Trainer = BandTrainer>
+std::unique_ptr<Trainer> MakeTrainer(ExposureModel* exposure, Rng* rng) {
   BandModel m;
   m.Resize(4);
   std::fill(m.colour.begin(), m.colour.end(), 0.5f);
-  auto t = std::make_unique<BandTrainer>(std::move(m), BandRenderOptions(), StubOptions(), exposure,
-                                         rng);
+  auto t =
+      std::make_unique<Trainer>(std::move(m), BandRenderOptions(), StubOptions(), exposure, rng);
   LossSpec row;
   row.branch = Branch::kGaussians3D;
   row.stage = Stage::kWarmup;
@@ -371,6 +394,83 @@ TEST(BranchTrainerTest, ARowTheBranchCannotFeedStopsTheStepNamingIt) {
   EXPECT_NE(t->StepStatus().message().find("3DGS warmup loss row"), std::string::npos)
       << t->StepStatus().message();
   EXPECT_NE(t->StepStatus().message().find("depth_smooth"), std::string::npos)
+      << t->StepStatus().message();
+}
+
+// A type that can skip outputs renders only what the active rows read: a row switched on at
+// iteration 3 brings its buffer back (and is checked then); a held render made without a buffer
+// the step reads is not reused, one made with it is.
+TEST(BranchTrainerTest, RendersSkipBuffersNoActiveRowReads) {
+  const Camera camera = SmallCamera();
+  const Image photo = BandPhoto(camera);
+  Targets targets;
+  targets.image = &photo;
+  ExposureModel exposure;
+  exposure.Reset(1, ExposureMode::kOff);
+  Rng rng(1);
+  auto t = MakeTrainer<PrimitiveTrainer<SkippingBandPrimitive>>(&exposure, &rng);
+  LossSpec row;
+  row.branch = Branch::kGaussians3D;
+  row.stage = Stage::kWarmup;
+  row.name = "alpha_smooth";
+  row.term = "tv";
+  row.config = {{"buffer", "alpha"}, {"guide", "image"}};
+  row.weight = 1.0;
+  row.first_iteration = 3;
+  Status s;
+  t->AddLossRow(row, LossRegistry::Get().Create("tv", row.config, &s), false);
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(t->StageReads(Stage::kWarmup, 2), BufferBit(Buffer::kColor));
+  EXPECT_EQ(t->StageReads(Stage::kWarmup, 3),
+            BufferBit(Buffer::kColor) | BufferBit(Buffer::kAlpha));
+  int alpha_before = BandRenderer::alpha_renders;
+  for (int it = 1; it <= 2; ++it) t->Step(Stage::kWarmup, 0, camera, it, targets);
+  EXPECT_EQ(BandRenderer::alpha_renders - alpha_before, 0);
+  const double loss = t->Step(Stage::kWarmup, 0, camera, 3, targets);
+  ASSERT_TRUE(t->StepStatus().ok()) << t->StepStatus().message();
+  EXPECT_TRUE(std::isfinite(loss));
+  EXPECT_EQ(BandRenderer::alpha_renders - alpha_before, 1);
+  // Held for a colour target only: the step reading the alpha renders again.
+  t->Hold(camera, BufferBit(Buffer::kColor));
+  int before = BandRenderer::forwards;
+  t->Step(Stage::kWarmup, 0, camera, 4, targets);
+  EXPECT_EQ(BandRenderer::forwards - before, 1);
+  // Held with everything: reused.
+  t->Hold(camera);
+  before = BandRenderer::forwards;
+  t->Step(Stage::kWarmup, 0, camera, 5, targets);
+  EXPECT_EQ(BandRenderer::forwards - before, 0);
+}
+
+// A row switched on later is checked when it switches on: one the branch cannot feed stops that
+// step, naming it (and the steps before it ran).
+TEST(BranchTrainerTest, ARowSwitchedOnLaterIsCheckedThen) {
+  const Camera camera = SmallCamera();
+  const Image photo = BandPhoto(camera);
+  Targets targets;
+  targets.image = &photo;
+  ExposureModel exposure;
+  exposure.Reset(1, ExposureMode::kOff);
+  Rng rng(1);
+  std::unique_ptr<BandTrainer> t = MakeTrainer(&exposure, &rng);
+  LossSpec row;
+  row.branch = Branch::kGaussians3D;
+  row.stage = Stage::kWarmup;
+  row.name = "late_depth_smooth";
+  row.term = "tv";
+  row.config = {{"buffer", "depth"}, {"guide", "image"}};
+  row.weight = 1.0;
+  row.first_iteration = 3;
+  Status s;
+  t->AddLossRow(row, LossRegistry::Get().Create("tv", row.config, &s), false);
+  ASSERT_TRUE(s.ok()) << s.message();
+  for (int it = 1; it <= 2; ++it) {
+    EXPECT_TRUE(std::isfinite(t->Step(Stage::kWarmup, 0, camera, it, targets)));
+    EXPECT_TRUE(t->StepStatus().ok());
+  }
+  EXPECT_TRUE(std::isnan(t->Step(Stage::kWarmup, 0, camera, 3, targets)));
+  ASSERT_FALSE(t->StepStatus().ok());
+  EXPECT_NE(t->StepStatus().message().find("late_depth_smooth"), std::string::npos)
       << t->StepStatus().message();
 }
 
