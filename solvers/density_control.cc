@@ -99,7 +99,7 @@ size_t DefaultPrimitiveBudget(const Scene& scene) {
   return std::max(kMinBudget, kBudgetPerPixel * pixels);
 }
 
-SceneBudget AutoPrimitiveBudget(const Scene& scene) {
+SceneBudget AutoPrimitiveBudget(const Scene& scene, bool gaussians_alone) {
   std::vector<double> counts;
   std::string source = "every pixel (no masks or alpha)";
   for (int i : scene.TrainIndices()) {
@@ -123,14 +123,16 @@ SceneBudget AutoPrimitiveBudget(const Scene& scene) {
   auto budget = [&](double rate) {
     return std::max(kMinAutoBudget, static_cast<size_t>(std::lround(rate * size)));
   };
-  b.gaussians = budget(kAutoGaussiansPerSqrtPixel);
+  const double gaussian_rate =
+      gaussians_alone ? kAutoGaussiansAlonePerSqrtPixel : kAutoGaussiansPerSqrtPixel;
+  b.gaussians = budget(gaussian_rate);
   b.surfels = budget(kAutoSurfelsPerSqrtPixel);
-  char why[256];
+  char why[320];
   std::snprintf(why, sizeof(why),
-                "auto: %.0f Gaussians and %.0f surfels x sqrt(foreground pixels of the median "
+                "auto: %.0f Gaussians%s and %.0f surfels x sqrt(foreground pixels of the median "
                 "training view: %.0f by %s), at least %zu",
-                kAutoGaussiansPerSqrtPixel, kAutoSurfelsPerSqrtPixel, b.foreground_pixels,
-                source.c_str(), kMinAutoBudget);
+                gaussian_rate, gaussians_alone ? " (without surfels: they are the geometry)" : "",
+                kAutoSurfelsPerSqrtPixel, b.foreground_pixels, source.c_str(), kMinAutoBudget);
   b.why = why;
   return b;
 }

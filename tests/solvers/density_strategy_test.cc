@@ -310,6 +310,8 @@ TEST(DensityStrategyTest, AutoBudgetCountsTheForegroundOfTheMedianView) {
   EXPECT_EQ(b.gaussians, 2846u);
   EXPECT_EQ(b.surfels, 8538u);
   EXPECT_NE(b.why.find("4000 by mask"), std::string::npos) << b.why;
+  // Without the 2DGS branch the Gaussians are the geometry: 180 x sqrt(4000) = 11,384.
+  EXPECT_EQ(AutoPrimitiveBudget(scene, /*gaussians_alone=*/true).gaussians, 11384u);
   // Without masks or alpha every pixel counts.
   for (View& v : scene.views) v.mask = Image();
   b = AutoPrimitiveBudget(scene);
