@@ -317,6 +317,8 @@ TEST(DensityStrategyTest, AutoBudgetCountsTheForegroundOfTheMedianView) {
   b = AutoPrimitiveBudget(scene);
   EXPECT_EQ(b.foreground_pixels, 8000);
   EXPECT_NE(b.why.find("every pixel"), std::string::npos) << b.why;
+  // ... and the Gaussians keep the full rate: 180 x sqrt(8000) = 16,100.
+  EXPECT_EQ(b.gaussians, 16100u);
 }
 
 // Pruning by contribution drops what no training view sees (behind every camera, hidden behind
