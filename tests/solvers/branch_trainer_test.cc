@@ -241,6 +241,35 @@ std::unique_ptr<Trainer> MakeTrainer(ExposureModel* exposure, Rng* rng) {
   return t;
 }
 
+// One view of the band photo, without exposure compensation.
+struct BandView {
+  BandView() {
+    targets.image = &photo;
+    exposure.Reset(1, ExposureMode::kOff);
+  }
+  const Camera camera = SmallCamera();
+  const Image photo = BandPhoto(camera);
+  Targets targets;
+  ExposureModel exposure;
+};
+
+// Adds a warm-up row of the edge-aware TV of `buffer` (guided by the photo), on from
+// `first_iteration`.
+void AddTvRow(BranchTrainer* t, const std::string& name, const std::string& buffer,
+              int first_iteration = 0) {
+  LossSpec row;
+  row.branch = Branch::kGaussians3D;
+  row.stage = Stage::kWarmup;
+  row.name = name;
+  row.term = "tv";
+  row.config = {{"buffer", buffer}, {"guide", "image"}};
+  row.weight = 1.0;
+  row.first_iteration = first_iteration;
+  Status s;
+  t->AddLossRow(row, LossRegistry::Get().Create("tv", row.config, &s), false);
+  ASSERT_TRUE(s.ok()) << s.message();
+}
+
 TEST(BranchTrainerTest, AStubPrimitiveTrainsChecksPointsAndSupervisesThroughTheGenericTrainer) {
   CountingDensity::begin_calls = CountingDensity::before_calls = CountingDensity::after_calls =
       CountingDensity::events = 0;
@@ -370,25 +399,11 @@ TEST(BranchTrainerTest, AStepReusesTheHeldRenderOfTheSameViewAndModel) {
 }
 
 TEST(BranchTrainerTest, ARowTheBranchCannotFeedStopsTheStepNamingIt) {
-  const Camera camera = SmallCamera();
-  const Image photo = BandPhoto(camera);
-  Targets targets;
-  targets.image = &photo;
-  ExposureModel exposure;
-  exposure.Reset(1, ExposureMode::kOff);
+  BandView v;
   Rng rng(1);
-  std::unique_ptr<BandTrainer> t = MakeTrainer(&exposure, &rng);
-  LossSpec row;
-  row.branch = Branch::kGaussians3D;
-  row.stage = Stage::kWarmup;
-  row.name = "depth_smooth";
-  row.term = "tv";
-  row.config = {{"buffer", "depth"}, {"guide", "image"}};
-  row.weight = 1.0;
-  Status s;
-  t->AddLossRow(row, LossRegistry::Get().Create("tv", row.config, &s), false);
-  ASSERT_TRUE(s.ok()) << s.message();
-  const double loss = t->Step(Stage::kWarmup, 0, camera, 1, targets);
+  std::unique_ptr<BandTrainer> t = MakeTrainer(&v.exposure, &rng);
+  AddTvRow(t.get(), "depth_smooth", "depth");
+  const double loss = t->Step(Stage::kWarmup, 0, v.camera, 1, v.targets);
   EXPECT_TRUE(std::isnan(loss));
   ASSERT_FALSE(t->StepStatus().ok());
   EXPECT_NE(t->StepStatus().message().find("3DGS warmup loss row"), std::string::npos)
@@ -401,74 +416,44 @@ TEST(BranchTrainerTest, ARowTheBranchCannotFeedStopsTheStepNamingIt) {
 // iteration 3 brings its buffer back (and is checked then); a held render made without a buffer
 // the step reads is not reused, one made with it is.
 TEST(BranchTrainerTest, RendersSkipBuffersNoActiveRowReads) {
-  const Camera camera = SmallCamera();
-  const Image photo = BandPhoto(camera);
-  Targets targets;
-  targets.image = &photo;
-  ExposureModel exposure;
-  exposure.Reset(1, ExposureMode::kOff);
+  BandView v;
   Rng rng(1);
-  auto t = MakeTrainer<PrimitiveTrainer<SkippingBandPrimitive>>(&exposure, &rng);
-  LossSpec row;
-  row.branch = Branch::kGaussians3D;
-  row.stage = Stage::kWarmup;
-  row.name = "alpha_smooth";
-  row.term = "tv";
-  row.config = {{"buffer", "alpha"}, {"guide", "image"}};
-  row.weight = 1.0;
-  row.first_iteration = 3;
-  Status s;
-  t->AddLossRow(row, LossRegistry::Get().Create("tv", row.config, &s), false);
-  ASSERT_TRUE(s.ok()) << s.message();
+  auto t = MakeTrainer<PrimitiveTrainer<SkippingBandPrimitive>>(&v.exposure, &rng);
+  AddTvRow(t.get(), "alpha_smooth", "alpha", /*first_iteration=*/3);
   EXPECT_EQ(t->StageReads(Stage::kWarmup, 2), BufferBit(Buffer::kColor));
   EXPECT_EQ(t->StageReads(Stage::kWarmup, 3),
             BufferBit(Buffer::kColor) | BufferBit(Buffer::kAlpha));
-  int alpha_before = BandRenderer::alpha_renders;
-  for (int it = 1; it <= 2; ++it) t->Step(Stage::kWarmup, 0, camera, it, targets);
+  const int alpha_before = BandRenderer::alpha_renders;
+  for (int it = 1; it <= 2; ++it) t->Step(Stage::kWarmup, 0, v.camera, it, v.targets);
   EXPECT_EQ(BandRenderer::alpha_renders - alpha_before, 0);
-  const double loss = t->Step(Stage::kWarmup, 0, camera, 3, targets);
+  const double loss = t->Step(Stage::kWarmup, 0, v.camera, 3, v.targets);
   ASSERT_TRUE(t->StepStatus().ok()) << t->StepStatus().message();
   EXPECT_TRUE(std::isfinite(loss));
   EXPECT_EQ(BandRenderer::alpha_renders - alpha_before, 1);
   // Held for a colour target only: the step reading the alpha renders again.
-  t->Hold(camera, BufferBit(Buffer::kColor));
+  t->Hold(v.camera, BufferBit(Buffer::kColor));
   int before = BandRenderer::forwards;
-  t->Step(Stage::kWarmup, 0, camera, 4, targets);
+  t->Step(Stage::kWarmup, 0, v.camera, 4, v.targets);
   EXPECT_EQ(BandRenderer::forwards - before, 1);
   // Held with everything: reused.
-  t->Hold(camera);
+  t->Hold(v.camera);
   before = BandRenderer::forwards;
-  t->Step(Stage::kWarmup, 0, camera, 5, targets);
+  t->Step(Stage::kWarmup, 0, v.camera, 5, v.targets);
   EXPECT_EQ(BandRenderer::forwards - before, 0);
 }
 
 // A row switched on later is checked when it switches on: one the branch cannot feed stops that
 // step, naming it (and the steps before it ran).
 TEST(BranchTrainerTest, ARowSwitchedOnLaterIsCheckedThen) {
-  const Camera camera = SmallCamera();
-  const Image photo = BandPhoto(camera);
-  Targets targets;
-  targets.image = &photo;
-  ExposureModel exposure;
-  exposure.Reset(1, ExposureMode::kOff);
+  BandView v;
   Rng rng(1);
-  std::unique_ptr<BandTrainer> t = MakeTrainer(&exposure, &rng);
-  LossSpec row;
-  row.branch = Branch::kGaussians3D;
-  row.stage = Stage::kWarmup;
-  row.name = "late_depth_smooth";
-  row.term = "tv";
-  row.config = {{"buffer", "depth"}, {"guide", "image"}};
-  row.weight = 1.0;
-  row.first_iteration = 3;
-  Status s;
-  t->AddLossRow(row, LossRegistry::Get().Create("tv", row.config, &s), false);
-  ASSERT_TRUE(s.ok()) << s.message();
+  std::unique_ptr<BandTrainer> t = MakeTrainer(&v.exposure, &rng);
+  AddTvRow(t.get(), "late_depth_smooth", "depth", /*first_iteration=*/3);
   for (int it = 1; it <= 2; ++it) {
-    EXPECT_TRUE(std::isfinite(t->Step(Stage::kWarmup, 0, camera, it, targets)));
+    EXPECT_TRUE(std::isfinite(t->Step(Stage::kWarmup, 0, v.camera, it, v.targets)));
     EXPECT_TRUE(t->StepStatus().ok());
   }
-  EXPECT_TRUE(std::isnan(t->Step(Stage::kWarmup, 0, camera, 3, targets)));
+  EXPECT_TRUE(std::isnan(t->Step(Stage::kWarmup, 0, v.camera, 3, v.targets)));
   ASSERT_FALSE(t->StepStatus().ok());
   EXPECT_NE(t->StepStatus().message().find("late_depth_smooth"), std::string::npos)
       << t->StepStatus().message();
