@@ -99,7 +99,7 @@ size_t DefaultPrimitiveBudget(const Scene& scene) {
   return std::max(kMinBudget, kBudgetPerPixel * pixels);
 }
 
-SceneBudget AutoPrimitiveBudget(const Scene& scene, bool gaussians_alone) {
+SceneBudget AutoPrimitiveBudget(const Scene& scene) {
   std::vector<double> counts;
   std::string source = "every pixel (no masks or alpha)";
   for (int i : scene.TrainIndices()) {
@@ -123,20 +123,14 @@ SceneBudget AutoPrimitiveBudget(const Scene& scene, bool gaussians_alone) {
   auto budget = [&](double rate) {
     return std::max(kMinAutoBudget, static_cast<size_t>(std::lround(rate * size)));
   };
-  const bool foreground_known = source == "mask" || source == "alpha";
-  const double gaussian_rate = gaussians_alone || !foreground_known ? kAutoGaussiansFullPerSqrtPixel
-                                                                    : kAutoGaussiansPerSqrtPixel;
-  b.gaussians = budget(gaussian_rate);
+  b.gaussians = budget(kAutoGaussiansPerSqrtPixel);
   b.surfels = budget(kAutoSurfelsPerSqrtPixel);
-  char why[320];
+  char why[256];
   std::snprintf(why, sizeof(why),
-                "auto: %.0f Gaussians%s and %.0f surfels x sqrt(foreground pixels of the median "
+                "auto: %.0f Gaussians and %.0f surfels x sqrt(foreground pixels of the median "
                 "training view: %.0f by %s), at least %zu",
-                gaussian_rate,
-                gaussians_alone     ? " (without surfels: they are the geometry)"
-                : !foreground_known ? " (no masks: they teach the surfels the whole frame)"
-                                    : "",
-                kAutoSurfelsPerSqrtPixel, b.foreground_pixels, source.c_str(), kMinAutoBudget);
+                kAutoGaussiansPerSqrtPixel, kAutoSurfelsPerSqrtPixel, b.foreground_pixels,
+                source.c_str(), kMinAutoBudget);
   b.why = why;
   return b;
 }

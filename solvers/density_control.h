@@ -71,19 +71,14 @@ size_t DefaultPrimitiveBudget(const Scene& scene);
 // its area. Why not the area: flat primitives that follow a surface of curvature radius R to
 // within a fixed part of a pixel footprint f can be at most ~sqrt(R f) across, so a surface of
 // area A needs ~A / (R f) of them, which for one shape (A / R^2 fixed) grows as R / f, i.e. as
-// sqrt(F). The two branches need different counts: the surfels carry the mesh, and with a quarter
-// to a third of them the exact CD was 6-10% worse on four scenes, while a quarter of the Gaussians
-// (which only render) kept NC, CD and aligned PSNR within the run-to-run spread on five scenes
-// (mean changes -0.07 NC points, -1% CD, +0.02 dB; dented 128 px: 3,056 instead of 12,223
-// Gaussians, NC 97.87 / CD 5.34 / 25.15 dB against 97.81 / 5.38 / 25.14 dB). BENCHMARKS.md,
-// "Quality against model size", has the runs. Those scenes all have masks; the Gaussians keep
-// their former rate (kAutoGaussiansFullPerSqrtPixel) where the views have neither masks nor alpha
-// (the 3DGS renders that teach the 2DGS branch then cover the whole frame, and a quarter of them
-// cost the harness's no_masks scene 4.6 NC points and CD 12.9 -> 35.4) and without the 2DGS
-// branch (`gaussians_alone`: the 3DGS-only methods, whose Gaussians are the geometry too). At
-// least kMinAutoBudget. `why` says how, for the log and metrics.json.
-constexpr double kAutoGaussiansPerSqrtPixel = 45;
-constexpr double kAutoGaussiansFullPerSqrtPixel = 180;
+// sqrt(F). Measured (BENCHMARKS.md, quality against model size): suzanne at 256 px (F 12,271)
+// keeps its NC and PSNR from ~15,000 surfels and ~20,000 Gaussians, the 64 px torus (F 1,114)
+// from ~5,000 of each: 2.5x the count for 11x the pixels. A quarter of the Gaussians (45) was
+// tried: within the run-to-run spread on NC and CD of eight masked scenes and 1.4x faster, but
+// the harness's constant-light scene lost 1.6 dB of aligned PSNR (control 31.10 -> 29.48) and the
+// unmasked one 4.6 NC points (BENCHMARKS.md, "Quality against model size"). At least
+// kMinAutoBudget. `why` says how, for the log and metrics.json.
+constexpr double kAutoGaussiansPerSqrtPixel = 180;
 constexpr double kAutoSurfelsPerSqrtPixel = 135;
 constexpr size_t kMinAutoBudget = 1000;
 struct SceneBudget {
@@ -91,6 +86,6 @@ struct SceneBudget {
   double foreground_pixels = 0;  // the median per training view
   std::string why;
 };
-SceneBudget AutoPrimitiveBudget(const Scene& scene, bool gaussians_alone = false);
+SceneBudget AutoPrimitiveBudget(const Scene& scene);
 
 }  // namespace mgsr

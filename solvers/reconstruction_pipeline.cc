@@ -498,7 +498,7 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   size_t budget_3d = 0, budget_2d = 0;
   std::string budget_why;
   if (budget_mode == "auto") {
-    const SceneBudget b = AutoPrimitiveBudget(scene, /*gaussians_alone=*/!options.train_2d);
+    const SceneBudget b = AutoPrimitiveBudget(scene);
     budget_3d = b.gaussians;
     budget_2d = b.surfels;
     budget_why = b.why;

@@ -306,19 +306,15 @@ TEST(DensityStrategyTest, AutoBudgetCountsTheForegroundOfTheMedianView) {
   }
   SceneBudget b = AutoPrimitiveBudget(scene);
   EXPECT_EQ(b.foreground_pixels, 4000);
-  // 45 and 135 x sqrt(4000) = 2,846 and 8,538.
-  EXPECT_EQ(b.gaussians, 2846u);
+  // 180 and 135 x sqrt(4000) = 11,384 and 8,538.
+  EXPECT_EQ(b.gaussians, 11384u);
   EXPECT_EQ(b.surfels, 8538u);
   EXPECT_NE(b.why.find("4000 by mask"), std::string::npos) << b.why;
-  // Without the 2DGS branch the Gaussians are the geometry: 180 x sqrt(4000) = 11,384.
-  EXPECT_EQ(AutoPrimitiveBudget(scene, /*gaussians_alone=*/true).gaussians, 11384u);
   // Without masks or alpha every pixel counts.
   for (View& v : scene.views) v.mask = Image();
   b = AutoPrimitiveBudget(scene);
   EXPECT_EQ(b.foreground_pixels, 8000);
   EXPECT_NE(b.why.find("every pixel"), std::string::npos) << b.why;
-  // ... and the Gaussians keep the full rate: 180 x sqrt(8000) = 16,100.
-  EXPECT_EQ(b.gaussians, 16100u);
 }
 
 // Pruning by contribution drops what no training view sees (behind every camera, hidden behind
