@@ -55,14 +55,15 @@ void BranchTrainer::AddLossRow(const LossSpec& row, std::unique_ptr<LossTerm> te
   sp.reads.push_back(reads);
 }
 
+double BranchTrainer::RowWeightAt(const LossSpec& row, int iteration) {
+  return iteration >= row.first_iteration ? row.weight : 0.0;
+}
+
 BufferSet BranchTrainer::StageReads(Stage stage, int iteration) const {
   const StageProblem& sp = ProblemFor(stage);
   BufferSet reads = 0;
-  for (size_t i = 0; i < sp.rows.size(); ++i) {
-    // The weight EvaluateLoss gives the row at this iteration.
-    if ((iteration >= sp.rows[i].first_iteration ? sp.rows[i].weight : 0.0) != 0)
-      reads |= sp.reads[i];
-  }
+  for (size_t i = 0; i < sp.rows.size(); ++i)
+    if (RowWeightAt(sp.rows[i], iteration) != 0) reads |= sp.reads[i];
   return reads;
 }
 
@@ -72,7 +73,7 @@ double BranchTrainer::EvaluateLoss(Stage stage, int view, int iteration, const R
   StageProblem& sp = ProblemFor(stage);
   size_t active = 0;
   for (size_t i = 0; i < sp.rows.size(); ++i) {
-    const double weight = iteration >= sp.rows[i].first_iteration ? sp.rows[i].weight : 0.0;
+    const double weight = RowWeightAt(sp.rows[i], iteration);
     sp.problem.SetWeight(i, weight);
     active += weight != 0;
   }

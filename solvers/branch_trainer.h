@@ -261,6 +261,9 @@ class BranchTrainer {
     // switch on, so a change of count is a change of set).
     size_t checked_active = static_cast<size_t>(-1);
   };
+  // A row's weight at `iteration`: 0 before its first iteration (what EvaluateLoss sets and
+  // StageReads reads).
+  static double RowWeightAt(const LossSpec& row, int iteration);
   StageProblem& ProblemFor(Stage s) { return problems_[s == Stage::kWarmup ? 0 : 1]; }
   const StageProblem& ProblemFor(Stage s) const { return problems_[s == Stage::kWarmup ? 0 : 1]; }
 
