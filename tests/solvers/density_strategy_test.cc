@@ -108,27 +108,26 @@ const Camera& HeadOnCamera() {
       LookAtCamera({0, 0, 3}, {0, 0, 0}, Eigen::Vector3d::UnitY(), 48, 48, 60, 60);
   return camera;
 }
-Image AlphaOf(const GaussianModel& m) {
-  GaussianRenderOptions o;
+template <class Renderer, class Render, class Model, class Options>
+Image RenderAlpha(const Model& m, Options o) {
   o.camera = HeadOnCamera();
   o.sh_degree = 0;
-  o.reflection = false;
-  GaussianRenderer renderer;
-  GaussianRender out;
+  Renderer renderer;
+  Render out;
   renderer.Forward(m, o, &out);
   return out.alpha;
 }
+Image AlphaOf(const GaussianModel& m) {
+  GaussianRenderOptions o;
+  o.reflection = false;
+  return RenderAlpha<GaussianRenderer, GaussianRender>(m, o);
+}
 Image AlphaOf(const SurfelModel& m) {
   SurfelRenderOptions o;
-  o.camera = HeadOnCamera();
-  o.sh_degree = 0;
   o.low_pass = SurfelLowPass::kAreaPreserving;
   o.filter_sigma = 0.29f;
   o.distortion = false;
-  SurfelRenderer renderer;
-  SurfelRender out;
-  renderer.Forward(m, o, &out);
-  return out.alpha;
+  return RenderAlpha<SurfelRenderer, SurfelRender>(m, o);
 }
 double MaxAbsDiff(const Image& a, const Image& b) {
   double d = 0;
