@@ -2,11 +2,16 @@
 
 #include <glog/logging.h>
 
+#include <algorithm>
 #include <limits>
 
 #include "mgsr/core/profiler.h"
 
 namespace mgsr {
+namespace {
+// More batch positions than any batch has: a larger count in a checkpoint is damage.
+constexpr uint32_t kMaxKeptBuffers = 1u << 16;
+}  // namespace
 
 const char* BranchLabel(Branch branch) { return branch == Branch::kSurfels2D ? "2DGS" : "3DGS"; }
 
@@ -115,6 +120,81 @@ double BranchTrainer::Step(Stage stage, int view, const Camera& camera, int iter
 void BranchTrainer::BeginBatch(Stage stage, int count) {
   position_stride_ = 1 + kColorTransformSize + ProblemFor(stage).rows.size();
   position_values_.assign(position_stride_ * count, 0.0);
+  if (keep_step_buffer_) {
+    // Grows only (the images keep their storage between steps).
+    if (kept_.size() < static_cast<size_t>(count)) kept_.resize(count);
+    for (KeptBuffer& k : kept_) k.view = -1;
+  }
+}
+
+void BranchTrainer::KeepFromStep(int position, int view, const RenderBuffers& buffers) {
+  if (!keep_step_buffer_) return;
+  const Image* image = buffers.Get(kept_buffer_);
+  if (image == nullptr || image->empty()) return;
+  KeptBuffer& k = kept_[position];
+  k.image = *image;
+  k.view = view;
+}
+
+void BranchTrainer::ShareStepBuffers(const BatchView* views, int count, ViewGroup* group) {
+  if (!keep_step_buffer_) return;
+  ProfileScope scope("batch sum");
+  int begin = 0, end = count;
+  BatchPart(count, group->rank(), group->size(), &begin, &end);
+  // Each position belongs to one process: its shape, then its values, summed over the
+  // processes where every other process holds zeros (exact in any order).
+  shared_shapes_.assign(3 * static_cast<size_t>(count), 0.0);
+  for (int p = begin; p < end; ++p) {
+    const Image& image = kept_[p].image;
+    if (kept_[p].view < 0) continue;
+    shared_shapes_[3 * p] = image.width();
+    shared_shapes_[3 * p + 1] = image.height();
+    shared_shapes_[3 * p + 2] = image.channels();
+  }
+  Status s = group->SumDisjoint(shared_shapes_.data(), shared_shapes_.size());
+  if (!s.ok()) {
+    step_error_ = s;
+    return;
+  }
+  const auto size_of = [&](int p) {
+    return static_cast<size_t>(shared_shapes_[3 * p]) *
+           static_cast<size_t>(shared_shapes_[3 * p + 1]) *
+           static_cast<size_t>(shared_shapes_[3 * p + 2]);
+  };
+  size_t total = 0;
+  for (int p = 0; p < count; ++p) total += size_of(p);
+  shared_data_.assign(total, 0.0f);
+  size_t offset = 0;
+  for (int p = 0; p < count; ++p) {
+    if (p >= begin && p < end && kept_[p].view >= 0)
+      std::copy(kept_[p].image.data(), kept_[p].image.data() + size_of(p),
+                shared_data_.data() + offset);
+    offset += size_of(p);
+  }
+  s = group->SumTree(shared_data_.data(), shared_data_.size());
+  if (!s.ok()) {
+    step_error_ = s;
+    return;
+  }
+  offset = 0;
+  for (int p = 0; p < count; ++p) {
+    const size_t n = size_of(p);
+    if ((p < begin || p >= end) && n > 0) {
+      KeptBuffer& k = kept_[p];
+      k.image.Reset(static_cast<int>(shared_shapes_[3 * p]),
+                    static_cast<int>(shared_shapes_[3 * p + 1]),
+                    static_cast<int>(shared_shapes_[3 * p + 2]));
+      std::copy(shared_data_.data() + offset, shared_data_.data() + offset + n, k.image.data());
+      k.view = views[p].view;
+    }
+    offset += n;
+  }
+}
+
+const Image* BranchTrainer::StepBuffer(int position, int view) const {
+  if (position < 0 || position >= static_cast<int>(kept_.size())) return nullptr;
+  const KeptBuffer& k = kept_[position];
+  return k.view == view && view >= 0 ? &k.image : nullptr;
 }
 
 void BranchTrainer::RecordView(int position, double loss) {
@@ -199,6 +279,12 @@ void BranchTrainer::Save(BinaryWriter* w) const {
   WriteAdamState(w, adam_);
   density_->Save(w);
   if (environment_ != nullptr) environment_->Save(w);
+  w->Write<uint32_t>(static_cast<uint32_t>(kept_.size()));
+  for (const KeptBuffer& k : kept_) {
+    w->Write<int32_t>(k.view);
+    for (int d : {k.image.width(), k.image.height(), k.image.channels()}) w->Write<int32_t>(d);
+    WriteVector(w, std::vector<float>(k.image.data(), k.image.data() + k.image.size()));
+  }
 }
 
 Status BranchTrainer::Read(BinaryReader* r) {
@@ -218,6 +304,23 @@ Status BranchTrainer::Read(BinaryReader* r) {
   MGSR_RETURN_IF_ERROR(ReadAdamState(r, &p.adam));
   MGSR_RETURN_IF_ERROR(density_->Read(r));
   if (environment_ != nullptr) MGSR_RETURN_IF_ERROR(environment_->Read(r));
+  uint32_t kept = 0;
+  MGSR_RETURN_IF_ERROR(r->Read(&kept));
+  if (kept > kMaxKeptBuffers)
+    return Status::Error(r->path() + ": corrupt checkpoint (" + name() + " kept buffers)");
+  p.kept.resize(kept);
+  for (KeptBuffer& k : p.kept) {
+    int32_t view = 0, width = 0, height = 0, channels = 0;
+    for (int32_t* x : {&view, &width, &height, &channels}) MGSR_RETURN_IF_ERROR(r->Read(x));
+    std::vector<float> data;
+    MGSR_RETURN_IF_ERROR(ReadVector(r, &data));
+    if (view < -1 || width < 0 || height < 0 || channels < 0 ||
+        data.size() != static_cast<size_t>(width) * height * channels || !AllFinite(data))
+      return Status::Error(r->path() + ": corrupt checkpoint (" + name() + " kept buffer)");
+    k.view = view;
+    k.image = Image(width, height, channels);
+    std::copy(data.begin(), data.end(), k.image.data());
+  }
   pending_ = std::move(p);
   return Status::Ok();
 }
@@ -229,6 +332,7 @@ void BranchTrainer::CommitRead() {
   if (environment_ != nullptr) environment_->CommitRead();
   auto_stop_.set_window(pending_.window);
   summary_ = pending_.summary;
+  kept_ = std::move(pending_.kept);
   pending_ = Pending();
 }
 

@@ -197,6 +197,19 @@ class BranchTrainer {
   // is below `min_weight` (never all of them). Returns how many it dropped.
   virtual size_t PruneByContribution(const std::vector<Camera>& cameras, double min_weight) = 0;
 
+  // --- Supervising the other branch with the render a step already made.
+  // From the next step on, each step keeps a copy of `buffer` of the render of each view of its
+  // batch: the render its loss compared, made before the step's update. The other branch's step
+  // that follows may read it as its target (StepBuffer) instead of rendering this branch again
+  // (Hold): the authors' code, too, renders both branches on a view before it updates either.
+  void KeepStepBuffer(Buffer buffer) {
+    keep_step_buffer_ = true;
+    kept_buffer_ = buffer;
+  }
+  // The kept buffer of batch position `position` of this branch's last step, if that step
+  // rendered view `view` there; else null.
+  const Image* StepBuffer(int position, int view) const;
+
   // --- Checkpoints: everything needed to continue exactly (model, optimiser state, density
   // statistics, auto-stop window, summary). Read checks every value and keeps what it read aside;
   // CommitRead installs it (the solver commits only once the whole file has been read).
@@ -216,6 +229,13 @@ class BranchTrainer {
   // order and returns the mean loss (the mean term values into LastTerms' rows).
   void BeginBatch(Stage stage, int count);
   void RecordView(int position, double loss);
+  // With KeepStepBuffer: copies the kept buffer of the render of `view` at `position`.
+  void KeepFromStep(int position, int view, const RenderBuffers& buffers);
+  // With KeepStepBuffer and several processes: every process ends with the kept buffers of the
+  // whole batch. A process's next step reads only those of its own part (it rendered them); the
+  // exchange is for the checkpoint, which process 0 writes for a resume in any process count.
+  // Sets step_error_ on a failed exchange.
+  void ShareStepBuffers(const BatchView* views, int count, ViewGroup* group);
   double FinishViews(Stage stage, const BatchView* views, int count, ViewGroup* group);
   // After the backward passes: the density strategy's statistics (the batch's sum, or null) and
   // regulariser, Adam, then its row operations on the model's rows (BindRows).
@@ -290,11 +310,23 @@ class BranchTrainer {
   // Per batch position: loss, the colour transform's gradient, the term values.
   std::vector<double> position_values_;
   size_t position_stride_ = 0;
+  // KeepStepBuffer's copies, per batch position of the last step (view -1: none). Checkpointed:
+  // a run stopped between the two steps of a mutual round resumes with them.
+  struct KeptBuffer {
+    int view = -1;
+    Image image;
+  };
+  bool keep_step_buffer_ = false;
+  Buffer kept_buffer_ = Buffer::kColor;
+  std::vector<KeptBuffer> kept_;
+  std::vector<double> shared_shapes_;  // ShareStepBuffers' scratch
+  std::vector<float> shared_data_;
   // Read, not yet committed.
   struct Pending {
     Adam adam;
     std::vector<double> window;
     BranchSummary summary;
+    std::vector<KeptBuffer> kept;
   } pending_;
 };
 
@@ -362,6 +394,7 @@ class PrimitiveTrainer : public BranchTrainer {
     }
     Slot& sum = *slots_[0];
     if (group->size() > 1) SumOverGroup(group, &sum);
+    if (group->size() > 1) ShareStepBuffers(views, count, group);
     const double loss = FinishViews(stage, views, count, group);
     if (!step_error_.ok()) return loss;
     nonfinite_block_ = OptimizeAndControlDensity(statistics_width > 0 ? &sum.statistics : nullptr,
@@ -511,8 +544,10 @@ class PrimitiveTrainer : public BranchTrainer {
     if (!reuse) renderer_.Forward(model_, step_options_, &step_render_);
     const typename P::Render& render = reuse ? held_ : step_render_;
     held_current_ = held_is_current_model_ = false;
-    const double loss = EvaluateLoss(stage, v.view, iteration, P::Buffers(camera, render), targets,
-                                     &step_buffer_grad_);
+    const RenderBuffers buffers = P::Buffers(camera, render);
+    KeepFromStep(position, v.view, buffers);
+    const double loss =
+        EvaluateLoss(stage, v.view, iteration, buffers, targets, &step_buffer_grad_);
     if (!step_error_.ok()) return;
     RecordView(position, loss);
     P::TakeGradients(&step_buffer_grad_, &step_render_grad_);

@@ -23,8 +23,8 @@ namespace mgsr {
 namespace {
 
 // Format 2 added the exposure models, 3 the options, the scene fingerprint and the checksum, 4
-// wrote each branch through its trainer.
-constexpr char kMagic[8] = {'M', 'G', 'S', 'R', 'C', 'K', 'P', '4'};
+// wrote each branch through its trainer, 5 added each trainer's kept step buffers.
+constexpr char kMagic[8] = {'M', 'G', 'S', 'R', 'C', 'K', 'P', '5'};
 constexpr size_t kChecksumChars = 64;
 
 std::string SettingsText(const SolverOptions& o) {

@@ -270,6 +270,10 @@ void MutualBoostedSolver::NextBatch() {
   }
 }
 
+void MutualBoostedSolver::ReturnBatch() {
+  for (auto b = batch_.rbegin(); b != batch_.rend(); ++b) view_stack_.push_back(b->view);
+}
+
 int MutualBoostedSolver::NextView() {
   // A shuffled stack of the training views, refilled when empty (reference 1.3).
   if (view_stack_.empty()) {
@@ -334,7 +338,11 @@ Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* te
         // The solver's work, not the learner's (this runs inside the learner's step).
         ProfileContext solver_context("");
         ProfileScope scope("mutual targets");
-        target = *teacher->Hold(v.camera, BufferBit(sup.buffer)).Get(sup.buffer);
+        // The teacher's render of this view from its own step just before, if it kept one
+        // (KeepStepBuffer); else a render now.
+        const Image* kept = teacher->StepBuffer(position, view);
+        target = kept != nullptr ? *kept
+                                 : *teacher->Hold(v.camera, BufferBit(sup.buffer)).Get(sup.buffer);
         if (sup.background_outside_mask && !v.mask.empty())
           FillOutsideMask(v.mask, background, &target);
       }
@@ -558,10 +566,22 @@ Status MutualBoostedSolver::Run() {
   Timer mutual;
   const double mutual_before = sum.mutual_seconds;
   const bool both = o.train_2d && o.train_3d;
+  // Each round's 2DGS step comes first and renders the views the 3DGS step after it reads the
+  // depth of: that step takes the depth from the 2DGS step's render (made before its update,
+  // as in the authors' code) instead of rendering the 2DGS branch again. Not with
+  // bidirectional supervision (its gradient needs a held render).
+  if (both && !o.bidirectional)
+    surfels_->KeepStepBuffer(SupervisionFor(Branch::kGaussians3D).buffer);
   while (both && next_iteration_ <= o.mutual_iterations) {
     const int it = next_iteration_;
-    NextBatch();
     const bool joint = o.mutual_mode == "joint";
+    NextBatch();
+    // In alternate mode a round (the 2DGS step, then the 3DGS step) takes one batch, as the
+    // reference's iteration takes one view for both branches: the views go back on the stack for
+    // the round's second step (a checkpoint between the steps keeps them). That step then reuses
+    // the 3DGS render that supervised the first (the branch has not changed since): one 3DGS
+    // forward less per round.
+    if (!joint && it % 2 == 1) ReturnBatch();
     // The count the branch schedules (density control, opacity reset, learning rates) see. In
     // alternate mode the 2DGS branch steps on odd counts only, so it takes the count of the round
     // it opens: events on even counts then reach both branches, in the same round.

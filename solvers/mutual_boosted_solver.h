@@ -179,9 +179,12 @@ class MutualBoostedSolver {
   int NextView();
   // The next batch of views (batch_views of them, from NextView) into batch_.
   void NextBatch();
+  // Puts the batch's views back on the stack: the next NextBatch draws them again, in order.
+  void ReturnBatch();
   // The loss table's rows, each added to its branch's trainer once, when Solve first runs.
   Status BuildProblems();
-  // Ceres fit of every training view's transform against the current renders.
+  // The fit of every training view's transform against the current renders
+  // (solvers/exposure_fit.h).
   void FitExposures();
   // Pruning by contribution of every training branch over the training views (end of a stage).
   void PruneByContribution();

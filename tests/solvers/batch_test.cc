@@ -292,6 +292,32 @@ TEST(BatchTest, TheMeshIsFusedFromFramesTheProcessesRender) {
   EXPECT_TRUE(meshes[0].vertex_colors == alone.vertex_colors);
 }
 
+// Asks `solver` to stop at the end of iteration `iteration` of `stage`.
+struct StopAfter : IterationCallback {
+  StopAfter(MutualBoostedSolver* s, Stage st, int it) : solver(s), stage(st), iteration(it) {}
+  CallbackReturnType operator()(const IterationInfo&) override {
+    return CallbackReturnType::kContinue;
+  }
+  CallbackReturnType OnIterationEnd(const MutualBoostedSolver&, Stage s, int it) override {
+    if (s == stage && it == iteration) solver->RequestStop();
+    return CallbackReturnType::kContinue;
+  }
+  MutualBoostedSolver* solver;
+  Stage stage;
+  int iteration;
+};
+
+// Solves s0 here and s1 in a second thread (one core each); both must end without error.
+void SolveTwo(MutualBoostedSolver* s0, MutualBoostedSolver* s1, SolveSummary* r0,
+              SolveSummary* r1) {
+  std::thread t([&] {
+    omp_set_num_threads(1);
+    ASSERT_TRUE(s1->Solve(r1).ok());
+  });
+  ASSERT_TRUE(s0->Solve(r0).ok());
+  t.join();
+}
+
 TEST(BatchTest, AProcessThatStopsStopsTheGroup) {
   // Process 1 alone asks to stop after its third iteration; both end there, at the same state.
   const Scene scene = testing::TinySolverScene(testing::ScratchDir());
@@ -301,30 +327,46 @@ TEST(BatchTest, AProcessThatStopsStopsTheGroup) {
   MutualBoostedSolver s0(o, scene), s1(o, scene);
   s0.SetViewGroup(&g0);
   s1.SetViewGroup(&g1);
-  struct StopAt : IterationCallback {
-    MutualBoostedSolver* solver;
-    CallbackReturnType operator()(const IterationInfo&) override {
-      return CallbackReturnType::kContinue;
-    }
-    CallbackReturnType OnIterationEnd(const MutualBoostedSolver&, Stage, int iteration) override {
-      if (iteration == 3) solver->RequestStop();
-      return CallbackReturnType::kContinue;
-    }
-  } stop;
-  stop.solver = &s1;
+  StopAfter stop(&s1, Stage::kWarmup, 3);
   s1.AddCallback(&stop);
   SolveSummary r0, r1;
-  std::thread t([&] {
-    omp_set_num_threads(1);
-    ASSERT_TRUE(s1.Solve(&r1).ok());
-  });
-  ASSERT_TRUE(s0.Solve(&r0).ok());
-  t.join();
+  SolveTwo(&s0, &s1, &r0, &r1);
   EXPECT_EQ(r0.termination_type, TerminationType::kInterrupted);
   EXPECT_EQ(r1.termination_type, TerminationType::kInterrupted);
   EXPECT_EQ(r0.branch(Branch::kGaussians3D).warmup_iterations, 3);
   EXPECT_EQ(r1.branch(Branch::kGaussians3D).warmup_iterations, 3);
   ExpectSameModels(s0, s1);
+}
+
+// Stopped over two processes between the two steps of a mutual round (after the 2DGS step of
+// iteration 3), process 0's checkpoint resumes in one process to the models of an uninterrupted
+// run: it holds the depth each process's 2DGS step kept for the 3DGS step, also of the views the
+// other process rendered (ShareStepBuffers).
+TEST(BatchTest, ACheckpointBetweenTheStepsOfARoundResumesInAnyProcessCount) {
+  const std::string dir = testing::ScratchDir();
+  const Scene scene = testing::TinySolverScene(dir);
+  const SolverOptions o = BatchOptions(4);
+  MutualBoostedSolver whole(o, scene);
+  SolveSummary summary;
+  ASSERT_TRUE(whole.Solve(&summary).ok());
+  SharedBoard board(2);
+  ThreadViewGroup g0(&board, 0), g1(&board, 1);
+  MutualBoostedSolver s0(o, scene), s1(o, scene);
+  s0.SetViewGroup(&g0);
+  s1.SetViewGroup(&g1);
+  StopAfter stop(&s0, Stage::kMutual, 3);
+  s0.AddCallback(&stop);
+  SolveSummary r0, r1;
+  SolveTwo(&s0, &s1, &r0, &r1);
+  ASSERT_EQ(r0.termination_type, TerminationType::kInterrupted);
+  ASSERT_EQ(r0.mutual_iterations, 3);
+  const std::string checkpoint = dir + "/round.ckpt";
+  ASSERT_TRUE(s0.SaveCheckpoint(checkpoint).ok());
+  MutualBoostedSolver resumed(o, scene);
+  ASSERT_TRUE(resumed.LoadCheckpoint(checkpoint).ok());
+  ASSERT_TRUE(resumed.Solve(&summary).ok());
+  EXPECT_EQ(summary.mutual_iterations, 12);
+  ExpectSameModels(whole, resumed);
 }
 
 // A density strategy that counts, per primitive, the views of a step that drew it.

@@ -291,8 +291,13 @@ TEST(MutualBoostedSolverTest, ProfileAccountsForEachStage) {
       EXPECT_EQ(calls["2DGS/adam"], 30);
     } else {
       // Alternate: each branch learns on every other iteration and supervises on the others.
+      // A round (2DGS step, 3DGS step) takes one view, and each branch renders it once: the
+      // 3DGS step reuses its render that supervised the 2DGS step (the branch has not changed
+      // since), and its depth target is the 2DGS step's render.
       EXPECT_EQ(calls["2DGS/raster backward"], 5);
-      EXPECT_EQ(calls["2DGS/raster forward"], 10);
+      EXPECT_EQ(calls["2DGS/raster forward"], 5);
+      EXPECT_EQ(calls["3DGS/raster backward"], 5);
+      EXPECT_EQ(calls["3DGS/raster forward"], 5);
       EXPECT_EQ(calls["/mutual targets"], 10);
       EXPECT_EQ(calls["/exposure fit"], 1);
     }
