@@ -156,7 +156,13 @@ class MutualBoostedSolver {
     o.reflection = o.reflection && reflection;
     gaussians_->Render(o, out);
   }
-  void RenderSurfels(const Camera& camera, SurfelRender* out) { surfels_->Render(camera, out); }
+  // With `distortion` off the 2DGS render leaves its depth distortion (a loss term's input, which
+  // no output reads) empty: every other buffer is the same, at less cost.
+  void RenderSurfels(const Camera& camera, SurfelRender* out, bool distortion = true) {
+    SurfelRenderOptions o = surfels_->RenderOptionsFor(camera);
+    o.distortion = distortion;
+    surfels_->Render(o, out);
+  }
 
  private:
   const BranchTrainer& trainer(Branch b) const { return *trainers_[BranchIndex(b)]; }

@@ -9,7 +9,7 @@ ViewRender RenderView(MutualBoostedSolver* solver, const SolverOptions& o, const
   ViewRender out;
   if (o.train_2d) {
     SurfelRender sr;
-    solver->RenderSurfels(camera, &sr);
+    solver->RenderSurfels(camera, &sr, /*distortion=*/false);
     const float bg = o.background_2d;
     if (!o.train_3d) {
       const int w = sr.color.width(), h = sr.color.height();
