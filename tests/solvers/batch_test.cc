@@ -318,24 +318,36 @@ void SolveTwo(MutualBoostedSolver* s0, MutualBoostedSolver* s1, SolveSummary* r0
   t.join();
 }
 
+// A job of two simulated processes in which process `stopper` asks to stop after iteration
+// `iteration` of `stage`: solved on construction.
+struct StoppedPair {
+  StoppedPair(const SolverOptions& o, const Scene& scene, int stopper, Stage stage, int iteration)
+      : g0(&board, 0),
+        g1(&board, 1),
+        s0(o, scene),
+        s1(o, scene),
+        stop(stopper == 0 ? &s0 : &s1, stage, iteration) {
+    s0.SetViewGroup(&g0);
+    s1.SetViewGroup(&g1);
+    (stopper == 0 ? s0 : s1).AddCallback(&stop);
+    SolveTwo(&s0, &s1, &r0, &r1);
+  }
+  SharedBoard board{2};
+  ThreadViewGroup g0, g1;
+  MutualBoostedSolver s0, s1;
+  StopAfter stop;
+  SolveSummary r0, r1;
+};
+
 TEST(BatchTest, AProcessThatStopsStopsTheGroup) {
   // Process 1 alone asks to stop after its third iteration; both end there, at the same state.
   const Scene scene = testing::TinySolverScene(testing::ScratchDir());
-  const SolverOptions o = BatchOptions(2);
-  SharedBoard board(2);
-  ThreadViewGroup g0(&board, 0), g1(&board, 1);
-  MutualBoostedSolver s0(o, scene), s1(o, scene);
-  s0.SetViewGroup(&g0);
-  s1.SetViewGroup(&g1);
-  StopAfter stop(&s1, Stage::kWarmup, 3);
-  s1.AddCallback(&stop);
-  SolveSummary r0, r1;
-  SolveTwo(&s0, &s1, &r0, &r1);
-  EXPECT_EQ(r0.termination_type, TerminationType::kInterrupted);
-  EXPECT_EQ(r1.termination_type, TerminationType::kInterrupted);
-  EXPECT_EQ(r0.branch(Branch::kGaussians3D).warmup_iterations, 3);
-  EXPECT_EQ(r1.branch(Branch::kGaussians3D).warmup_iterations, 3);
-  ExpectSameModels(s0, s1);
+  const StoppedPair p(BatchOptions(2), scene, 1, Stage::kWarmup, 3);
+  EXPECT_EQ(p.r0.termination_type, TerminationType::kInterrupted);
+  EXPECT_EQ(p.r1.termination_type, TerminationType::kInterrupted);
+  EXPECT_EQ(p.r0.branch(Branch::kGaussians3D).warmup_iterations, 3);
+  EXPECT_EQ(p.r1.branch(Branch::kGaussians3D).warmup_iterations, 3);
+  ExpectSameModels(p.s0, p.s1);
 }
 
 // Stopped over two processes between the two steps of a mutual round (after the 2DGS step of
@@ -349,19 +361,11 @@ TEST(BatchTest, ACheckpointBetweenTheStepsOfARoundResumesInAnyProcessCount) {
   MutualBoostedSolver whole(o, scene);
   SolveSummary summary;
   ASSERT_TRUE(whole.Solve(&summary).ok());
-  SharedBoard board(2);
-  ThreadViewGroup g0(&board, 0), g1(&board, 1);
-  MutualBoostedSolver s0(o, scene), s1(o, scene);
-  s0.SetViewGroup(&g0);
-  s1.SetViewGroup(&g1);
-  StopAfter stop(&s0, Stage::kMutual, 3);
-  s0.AddCallback(&stop);
-  SolveSummary r0, r1;
-  SolveTwo(&s0, &s1, &r0, &r1);
-  ASSERT_EQ(r0.termination_type, TerminationType::kInterrupted);
-  ASSERT_EQ(r0.mutual_iterations, 3);
+  const StoppedPair p(o, scene, 0, Stage::kMutual, 3);
+  ASSERT_EQ(p.r0.termination_type, TerminationType::kInterrupted);
+  ASSERT_EQ(p.r0.mutual_iterations, 3);
   const std::string checkpoint = dir + "/round.ckpt";
-  ASSERT_TRUE(s0.SaveCheckpoint(checkpoint).ok());
+  ASSERT_TRUE(p.s0.SaveCheckpoint(checkpoint).ok());
   MutualBoostedSolver resumed(o, scene);
   ASSERT_TRUE(resumed.LoadCheckpoint(checkpoint).ok());
   ASSERT_TRUE(resumed.Solve(&summary).ok());

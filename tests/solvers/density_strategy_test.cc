@@ -54,6 +54,13 @@ DensityContext McmcContext(size_t cap) {
   return c;
 }
 
+// The MCMC strategy capped at `cap`, relocating only (no growth).
+McmcDensity RelocatingMcmc(size_t cap) {
+  McmcOptions mo;
+  mo.growth = 0;
+  return McmcDensity(McmcContext(cap), mo);
+}
+
 DensityStep EventStep(int iteration) {
   DensityStep s;
   s.iteration = iteration;
@@ -175,9 +182,7 @@ void ExpectRelocationKeepsTheImage(int axes) {
     ASSERT_GT(Sum(before), 20.0);
     const PrimitiveLayout layout = Primitive::Layout();
     PrimitiveRows rows(m.Blocks(), &adam, &layout);
-    McmcOptions mo;
-    mo.growth = 0;
-    McmcDensity mcmc(McmcContext(2), mo);
+    McmcDensity mcmc = RelocatingMcmc(2);
     Rng rng(1);
     ASSERT_EQ(mcmc.AfterStep(EventStep(10), &rows, &rng).relocated, 1u);
     ASSERT_EQ(m.means[3 * 1], 0.0f) << "the dead row now sits on the live one";
@@ -217,9 +222,7 @@ TEST(DensityStrategyTest, McmcRelocatesTheDeadOntoLivePrimitivesAndZeroesTheirMo
   m.opacity_logits[5] = -10.0f;
   const PrimitiveLayout layout = GaussianPrimitive::Layout();
   PrimitiveRows rows(m.Blocks(), &adam, &layout);
-  McmcOptions mo;
-  mo.growth = 0;
-  McmcDensity mcmc(McmcContext(6), mo);
+  McmcDensity mcmc = RelocatingMcmc(6);
   Rng rng(3);
   const DensifyResult r = mcmc.AfterStep(EventStep(10), &rows, &rng);
   EXPECT_EQ(r.relocated, 2u);
