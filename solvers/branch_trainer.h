@@ -393,8 +393,10 @@ class PrimitiveTrainer : public BranchTrainer {
       return std::numeric_limits<double>::quiet_NaN();
     }
     Slot& sum = *slots_[0];
-    if (group->size() > 1) SumOverGroup(group, &sum);
-    if (group->size() > 1) ShareStepBuffers(views, count, group);
+    if (group->size() > 1) {
+      SumOverGroup(group, &sum);
+      ShareStepBuffers(views, count, group);
+    }
     const double loss = FinishViews(stage, views, count, group);
     if (!step_error_.ok()) return loss;
     nonfinite_block_ = OptimizeAndControlDensity(statistics_width > 0 ? &sum.statistics : nullptr,

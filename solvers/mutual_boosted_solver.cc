@@ -320,8 +320,9 @@ Targets MutualBoostedSolver::LossTargets(Branch branch, int view, const Image* o
 
 Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* teacher, int it,
                                        int schedule_it) {
-  // The teacher's render of each view of the batch, a constant target (reference 1.5), rendered
-  // just before the learner renders that view, into storage kept between iterations.
+  // The teacher's render of each view of the batch, a constant target (reference 1.5): the one
+  // its own step just made of that view if it kept it, else rendered just before the learner
+  // renders that view; copied into storage kept between iterations.
   struct TeacherTargets : BatchTargets {
     MutualBoostedSolver* solver;
     BranchTrainer* learner;
@@ -338,8 +339,6 @@ Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* te
         // The solver's work, not the learner's (this runs inside the learner's step).
         ProfileContext solver_context("");
         ProfileScope scope("mutual targets");
-        // The teacher's render of this view from its own step just before, if it kept one
-        // (KeepStepBuffer); else a render now.
         const Image* kept = teacher->StepBuffer(position, view);
         target = kept != nullptr ? *kept
                                  : *teacher->Hold(v.camera, BufferBit(sup.buffer)).Get(sup.buffer);
