@@ -133,6 +133,17 @@ class PixelArrays {
   float* arrays_[kMaxArrays] = {};
 };
 
+// Clears a tile's backward pixel state before its per-pixel set-up. Arrays [acc_begin, acc_end)
+// (the "behind" accumulators, which the set-up does not write) start at zero; the set-up writes
+// every other array the pixel loops read at every pixel inside the image, so those are cleared
+// only when the image edge cuts the tile: the vector lanes still read the outside pixels (masked),
+// and those must hold finite values.
+inline void ClearBackwardState(const PixelArrays& st, int count, int acc_begin, int acc_end,
+                               bool cut_by_edge) {
+  const int begin = cut_by_edge ? 0 : acc_begin, end = cut_by_edge ? count : acc_end;
+  for (int a = begin; a < end; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
+}
+
 // d loss / d (each pixel's background) for a render whose colour outputs hold
 // T_N * background: T_N times the sum of those outputs' gradients (an empty image counts 0).
 inline void BackgroundGradientOf(const std::vector<float>& final_t, int width, int height,

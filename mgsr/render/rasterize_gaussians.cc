@@ -220,8 +220,13 @@ float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const 
     const float dy = y + 0.5f - s.my;
     if (std::abs(dy) > s.ey || !RowHitsEllipse(dy, s.ca, s.cb, s.cc, s.min_power)) continue;
     const int k = (y - y0) * kTileSize + first;
+    // Pixels whose chains have both terminated take no part: a row of them costs two loads, not
+    // the exponent and the blends (behind an opaque surface, most rows of a tile's later entries).
+    const M alive = lanes_ok & ((simd::Load<V>(st[aLiveT] + k) > 0.5f) |
+                                (simd::Load<V>(st[aLiveR] + k) > 0.5f));
+    if (!simd::Any(alive)) continue;
     M in;
-    const V power = RowPower(s, dx, dy, lanes_ok, &in);
+    const V power = RowPower(s, dx, dy, alive, &in);
     if (!simd::Any(in)) continue;
     const V G = simd::Exp(simd::Max(power, simd::Splat<V>(-80.0f)));
     const V wt = BlendChain(kTransmittedChain, st, k, in, G, s.op, s.ct0, s.ct1, s.ct2, jp1);
@@ -279,11 +284,13 @@ void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, cons
     const float dy = y + 0.5f - s.my;
     if (std::abs(dy) > s.ey || !RowHitsEllipse(dy, s.ca, s.cb, s.cc, s.min_power)) continue;
     const int k = (y - y0) * kTileSize + first;
-    M in;
-    const V power = RowPower(s, dx, dy, lanes_ok, &in);
-    // Only pixels that blended this Gaussian (j < last) take part.
+    // Only pixels that blended this Gaussian (j < last) take part; a row without any skips the
+    // exponent.
     const V last_t = simd::Load<V>(st[bLastT] + k), last_r = simd::Load<V>(st[bLastR] + k);
-    in &= (jf < last_t) | (jf < last_r);
+    const M blended = lanes_ok & ((jf < last_t) | (jf < last_r));
+    if (!simd::Any(blended)) continue;
+    M in;
+    const V power = RowPower(s, dx, dy, blended, &in);
     if (!simd::Any(in)) continue;
     const V G = simd::Exp(simd::Max(power, simd::Splat<V>(-80.0f)));
     // Transmitted chain: recover T_j = T_{j+1} / (1 - a_j), then the gradients.
@@ -506,7 +513,8 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
       const TileLanes tl(x0, x_end - x0);
 
       const PixelArrays st(&scratch->pixel_state[thread], kBackwardArrays);
-      for (int a = 0; a < kBackwardArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
+      raster_internal::ClearBackwardState(st, kBackwardArrays, bSt0, bSz + 1,
+                                          x_end - x0 < kTileSize || y_end - y0 < kTileSize);
       int max_last = 0;
       for (int y = y0; y < y_end; ++y) {
         for (int x = x0; x < x_end; ++x) {

@@ -226,11 +226,14 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
   for (int y = ya; y <= yb; ++y) {
     const float py = y + 0.5f;
     if (std::abs(s.my - py) > s.rad) continue;
-    RowHit<V> h;
-    IntersectRow(s, px, py, min_power, lanes_ok, &h);
     const int k = (y - y0) * kTileSize + first;
+    // A row whose pixels have all terminated costs one load, not the intersection and the exponent
+    // (behind an opaque surface, most rows of a tile's later entries).
     const V live = simd::Load<V>(st[aLive] + k);
-    h.in &= live > 0.5f;
+    const M alive = lanes_ok & (live > 0.5f);
+    if (!simd::Any(alive)) continue;
+    RowHit<V> h;
+    IntersectRow(s, px, py, min_power, alive, &h);
     if (!simd::Any(h.in)) continue;
     const V T = simd::Load<V>(st[aT] + k);
     const V a = simd::Min(s.op * h.G, simd::Splat<V>(kMaxAlpha));
@@ -327,9 +330,12 @@ void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y
     const float py = y + 0.5f;
     if (std::abs(s.my - py) > s.rad) continue;
     const int k = (y - y0) * kTileSize + first;
+    // Only pixels that blended this surfel (j < last) take part; a row without any skips the
+    // intersection.
+    const M blended = lanes_ok & (jf < simd::Load<V>(st[bLast] + k));
+    if (!simd::Any(blended)) continue;
     RowHit<V> h;
-    IntersectRow(s, px, py, min_power, lanes_ok, &h);
-    h.in &= jf < simd::Load<V>(st[bLast] + k);
+    IntersectRow(s, px, py, min_power, blended, &h);
     if (!simd::Any(h.in)) continue;
     const V raw = s.op * h.G;
     const V a = simd::Min(raw, simd::Splat<V>(kMaxAlpha));
@@ -593,7 +599,8 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
       const TileLanes tl(x0, x_end - x0);
 
       const PixelArrays st(&scratch->pixel_state[thread], kBackwardArrays);
-      for (int a = 0; a < kBackwardArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
+      raster_internal::ClearBackwardState(st, kBackwardArrays, bSc0, bSw + 1,
+                                          x_end - x0 < kTileSize || y_end - y0 < kTileSize);
       int max_last = 0;
       for (int y = y0; y < y_end; ++y) {
         for (int x = x0; x < x_end; ++x) {
