@@ -222,18 +222,21 @@ float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const 
     const int k = (y - y0) * kTileSize + first;
     // Pixels whose chains have both terminated take no part: a row of them costs two loads, not
     // the exponent and the blends (behind an opaque surface, most rows of a tile's later entries).
-    const M alive = lanes_ok & ((simd::Load<V>(st[aLiveT] + k) > 0.5f) |
-                                (simd::Load<V>(st[aLiveR] + k) > 0.5f));
-    if (!simd::Any(alive)) continue;
+    // A chain whose pixels here have all terminated is skipped too (it would blend nothing): behind
+    // an opaque surface the reflected chain, with its lower opacities, often runs on alone.
+    const M live_t = lanes_ok & (simd::Load<V>(st[aLiveT] + k) > 0.5f);
+    const M live_r = lanes_ok & (simd::Load<V>(st[aLiveR] + k) > 0.5f);
     M in;
-    const V power = RowPower(s, dx, dy, alive, &in);
+    const V power = RowPower(s, dx, dy, live_t | live_r, &in);
     if (!simd::Any(in)) continue;
     const V G = simd::Exp(simd::Max(power, simd::Splat<V>(-80.0f)));
-    const V wt = BlendChain(kTransmittedChain, st, k, in, G, s.op, s.ct0, s.ct1, s.ct2, jp1);
-    simd::Store(st[aWs] + k, simd::Load<V>(st[aWs] + k) + wt * s.beta);
-    simd::Store(st[aDs] + k, simd::Load<V>(st[aDs] + k) + wt * s.z);
-    weight_sum += wt;
-    if (refl)
+    if (simd::Any(in & live_t)) {
+      const V wt = BlendChain(kTransmittedChain, st, k, in, G, s.op, s.ct0, s.ct1, s.ct2, jp1);
+      simd::Store(st[aWs] + k, simd::Load<V>(st[aWs] + k) + wt * s.beta);
+      simd::Store(st[aDs] + k, simd::Load<V>(st[aDs] + k) + wt * s.z);
+      weight_sum += wt;
+    }
+    if (refl && simd::Any(in & live_r))
       weight_sum += BlendChain(kReflectedChain, st, k, in, G, s.rop, s.cr0, s.cr1, s.cr2, jp1);
   }
   return simd::Sum(weight_sum);
@@ -293,43 +296,46 @@ void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, cons
     const V power = RowPower(s, dx, dy, blended, &in);
     if (!simd::Any(in)) continue;
     const V G = simd::Exp(simd::Max(power, simd::Splat<V>(-80.0f)));
-    // Transmitted chain: recover T_j = T_{j+1} / (1 - a_j), then the gradients.
-    const V raw_t = s.op * G;
+    // Transmitted chain: recover T_j = T_{j+1} / (1 - a_j), then the gradients. A chain that
+    // blended no pixel of the row is skipped (it would add nothing).
+    const V raw_t = s.op * G, raw_r = s.rop * G;
     const V at = simd::Min(raw_t, simd::Splat<V>(kMaxAlpha));
+    const V ar = simd::Min(raw_r, simd::Splat<V>(kMaxAlpha));
     const M vt = in & (jf < last_t) & (at >= kMinAlpha);
-    const V inv_t = 1.0f / (1.0f - at);
-    const V T_next = simd::Load<V>(st[bT] + k);
-    const V T = simd::Select(vt, T_next * inv_t, T_next);
-    simd::Store(st[bT] + k, T);
-    const V wt = simd::Masked(vt, at * T);
-    const V gt0 = simd::Load<V>(st[bGt0] + k), gt1 = simd::Load<V>(st[bGt1] + k),
-            gt2 = simd::Load<V>(st[bGt2] + k);
-    const V gW = simd::Load<V>(st[bGW] + k), gN = simd::Load<V>(st[bGN] + k);
-    g_ct0 += wt * gt0;
-    g_ct1 += wt * gt1;
-    g_ct2 += wt * gt2;
-    g_beta += wt * gW;
-    g_z += wt * gN;
-    const V St0 = simd::Load<V>(st[bSt0] + k), St1 = simd::Load<V>(st[bSt1] + k),
-            St2 = simd::Load<V>(st[bSt2] + k);
-    const V Sb = simd::Load<V>(st[bSb] + k), Sz = simd::Load<V>(st[bSz] + k);
-    V da_t = (s.ct0 - St0) * gt0 + (s.ct1 - St1) * gt1 + (s.ct2 - St2) * gt2 + (s.beta - Sb) * gW +
-             (s.z - Sz) * gN;
-    da_t = da_t * T + simd::Load<V>(st[bTfin] + k) * inv_t * simd::Load<V>(st[bGA] + k);
-    const V keep_t = 1.0f - at;
-    simd::Store(st[bSt0] + k, simd::Select(vt, at * s.ct0 + keep_t * St0, St0));
-    simd::Store(st[bSt1] + k, simd::Select(vt, at * s.ct1 + keep_t * St1, St1));
-    simd::Store(st[bSt2] + k, simd::Select(vt, at * s.ct2 + keep_t * St2, St2));
-    simd::Store(st[bSb] + k, simd::Select(vt, at * s.beta + keep_t * Sb, Sb));
-    simd::Store(st[bSz] + k, simd::Select(vt, at * s.z + keep_t * Sz, Sz));
-    const M slope_t = vt & (raw_t < kMaxAlpha);  // the clamp at 0.99 has zero slope
-    g_op += simd::Masked(slope_t, G * da_t);
-    V dG = simd::Masked(slope_t, s.op * da_t);
-    if (refl) {
-      // Reflected chain.
-      const V raw_r = s.rop * G;
-      const V ar = simd::Min(raw_r, simd::Splat<V>(kMaxAlpha));
-      const M vr = in & (jf < last_r) & (ar >= kMinAlpha);
+    const M vr = in & (jf < last_r) & (ar >= kMinAlpha);  // none without reflection (last_r = 0)
+    if (!simd::Any(vt | vr)) continue;
+    V dG{};
+    if (simd::Any(vt)) {
+      const V inv_t = 1.0f / (1.0f - at);
+      const V T_next = simd::Load<V>(st[bT] + k);
+      const V T = simd::Select(vt, T_next * inv_t, T_next);
+      simd::Store(st[bT] + k, T);
+      const V wt = simd::Masked(vt, at * T);
+      const V gt0 = simd::Load<V>(st[bGt0] + k), gt1 = simd::Load<V>(st[bGt1] + k),
+              gt2 = simd::Load<V>(st[bGt2] + k);
+      const V gW = simd::Load<V>(st[bGW] + k), gN = simd::Load<V>(st[bGN] + k);
+      g_ct0 += wt * gt0;
+      g_ct1 += wt * gt1;
+      g_ct2 += wt * gt2;
+      g_beta += wt * gW;
+      g_z += wt * gN;
+      const V St0 = simd::Load<V>(st[bSt0] + k), St1 = simd::Load<V>(st[bSt1] + k),
+              St2 = simd::Load<V>(st[bSt2] + k);
+      const V Sb = simd::Load<V>(st[bSb] + k), Sz = simd::Load<V>(st[bSz] + k);
+      V da_t = (s.ct0 - St0) * gt0 + (s.ct1 - St1) * gt1 + (s.ct2 - St2) * gt2 +
+               (s.beta - Sb) * gW + (s.z - Sz) * gN;
+      da_t = da_t * T + simd::Load<V>(st[bTfin] + k) * inv_t * simd::Load<V>(st[bGA] + k);
+      const V keep_t = 1.0f - at;
+      simd::Store(st[bSt0] + k, simd::Select(vt, at * s.ct0 + keep_t * St0, St0));
+      simd::Store(st[bSt1] + k, simd::Select(vt, at * s.ct1 + keep_t * St1, St1));
+      simd::Store(st[bSt2] + k, simd::Select(vt, at * s.ct2 + keep_t * St2, St2));
+      simd::Store(st[bSb] + k, simd::Select(vt, at * s.beta + keep_t * Sb, Sb));
+      simd::Store(st[bSz] + k, simd::Select(vt, at * s.z + keep_t * Sz, Sz));
+      const M slope_t = vt & (raw_t < kMaxAlpha);  // the clamp at 0.99 has zero slope
+      g_op += simd::Masked(slope_t, G * da_t);
+      dG = simd::Masked(slope_t, s.op * da_t);
+    }
+    if (refl && simd::Any(vr)) {  // the reflected chain
       const V inv_r = 1.0f / (1.0f - ar);
       const V Tr_next = simd::Load<V>(st[bTr] + k);
       const V Tr = simd::Select(vr, Tr_next * inv_r, Tr_next);
