@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "mgsr/model/activations.h"
+#include "mgsr/render/project_gaussians.h"  // kMinBlendAlpha
 #include "mgsr/render/sh.h"
 
 namespace mgsr {
@@ -40,9 +41,50 @@ void ComputeGeometry(const SurfelModel& m, size_t i, const Mat3& Rc, const Eigen
   g->M = K * g->A;
 }
 
-constexpr float kCutoff2 = 9.0f;  // (3 sigma)^2
-
+constexpr float kCutoff2 = 9.0f;         // (3 sigma)^2
+constexpr float kMinFilterArea = 1e-6f;  // below: the filter adds nothing visible (c is capped)
 }  // namespace
+
+float SurfelLowPassOffset(const float tu[3], const float tv[3], const float tw[3], float inv_square,
+                          float dc[9]) {
+  const float cof[9] = {
+      tv[1] * tw[2] - tv[2] * tw[1], tv[2] * tw[0] - tv[0] * tw[2], tv[0] * tw[1] - tv[1] * tw[0],
+      tw[1] * tu[2] - tw[2] * tu[1], tw[2] * tu[0] - tw[0] * tu[2], tw[0] * tu[1] - tw[1] * tu[0],
+      tu[1] * tv[2] - tu[2] * tv[1], tu[2] * tv[0] - tu[0] * tv[2], tu[0] * tv[1] - tu[1] * tv[0]};
+  const float det = tu[0] * cof[0] + tu[1] * cof[1] + tu[2] * cof[2];
+  const float z = tw[2];
+  const float area = inv_square * std::abs(det) / (z * z * z);
+  if (dc != nullptr) std::fill(dc, dc + 9, 0.0f);
+  if (!(area < 1.0f)) return 0.0f;
+  if (!(area > kMinFilterArea)) return -2.0f * std::log(kMinFilterArea);
+  if (dc != nullptr) {
+    // c = -2 ln|det| + 6 ln z + const; d ln|det| / d M = cof / det.
+    for (int q = 0; q < 9; ++q) dc[q] = -2.0f * cof[q] / det;
+    dc[8] += 6.0f / z;
+  }
+  return -2.0f * std::log(area);
+}
+
+void SurfelAlphaReach(const float tu[3], const float tv[3], const float tw[3], float radius,
+                      float low_pass, float inv_square, float min_power, float* ex, float* ey) {
+  *ex = *ey = radius;
+  const float r2 = -2.0f * min_power;
+  const float d = r2 * (tw[0] * tw[0] + tw[1] * tw[1]) - tw[2] * tw[2];
+  if (!(d < 0.0f)) return;  // the disk of radius r is not all in front of the camera
+  const float f[3] = {r2 / d, r2 / d, -1.0f / d};
+  const float cx = f[0] * tu[0] * tw[0] + f[1] * tu[1] * tw[1] + f[2] * tu[2] * tw[2];
+  const float cy = f[0] * tv[0] * tw[0] + f[1] * tv[1] * tw[1] + f[2] * tv[2] * tw[2];
+  const float qx = f[0] * tu[0] * tu[0] + f[1] * tu[1] * tu[1] + f[2] * tu[2] * tu[2];
+  const float qy = f[0] * tv[0] * tv[0] + f[1] * tv[1] * tv[1] + f[2] * tv[2] * tv[2];
+  const float disk_x = std::abs(cx) + std::sqrt(std::max(0.0f, cx * cx - qx));
+  const float disk_y = std::abs(cy) + std::sqrt(std::max(0.0f, cy * cy - qy));
+  const float circle = std::sqrt(std::max(0.0f, r2 - low_pass) / inv_square);
+  const float x = std::max(disk_x, circle) * 1.02f + 0.5f;
+  const float y = std::max(disk_y, circle) * 1.02f + 0.5f;
+  if (!std::isfinite(x) || !std::isfinite(y)) return;
+  *ex = std::min(radius, x);
+  *ey = std::min(radius, y);
+}
 
 void ProjectedSurfels::Resize(size_t n) {
   M.resize(9 * n);
@@ -56,6 +98,9 @@ void ProjectedSurfels::Resize(size_t n) {
   color.resize(3 * n);
   clamp.resize(3 * n);
   view_dir.resize(3 * n);
+  low_pass.resize(n);
+  min_power.resize(n);
+  extent.resize(2 * n);
 }
 
 void ProjectedSurfelsGrad::ResizeAndZero(size_t n) {
@@ -75,7 +120,7 @@ void SurfelGradients::ResizeAndZero(const SurfelModel& model) {
 }
 
 void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, ProjectedSurfels* out,
-                    float filter_sigma) {
+                    float filter_sigma, SurfelLowPass low_pass) {
   const Eigen::Matrix3d Kd = Intrinsics(cam).cast<double>();
   const int n = static_cast<int>(m.size());
   out->Resize(n);
@@ -88,6 +133,7 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
   const int Kc = m.sh_coeffs();
   const int degree = std::min(sh_degree, m.max_sh_degree);
   const float min_radius = 3.0f * filter_sigma;  // 3 sigma of the low-pass filter
+  const float inv_square = 1.0f / (filter_sigma * filter_sigma);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     out->radius[i] = 0;
@@ -134,7 +180,23 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
       out->normal[3 * i + r] = n_view[r];
     }
     out->normal_sign[i] = sign;
-    out->opacity[i] = Sigmoid(m.opacity_logits[i]);
+    const float opacity = Sigmoid(m.opacity_logits[i]);
+    out->opacity[i] = opacity;
+    // What the pixel loops need (see the header), and the tiles where a pixel may reach 1/255.
+    const float* rows_f = &out->M[9 * i];
+    out->low_pass[i] =
+        low_pass == SurfelLowPass::kAreaPreserving
+            ? SurfelLowPassOffset(rows_f, rows_f + 3, rows_f + 6, inv_square, nullptr)
+            : 0.0f;
+    out->min_power[i] = opacity > kMinBlendAlpha ? std::log(kMinBlendAlpha / opacity) : 0.0f;
+    float* ext = &out->extent[2 * i];
+    if (opacity > kMinBlendAlpha) {
+      SurfelAlphaReach(rows_f, rows_f + 3, rows_f + 6, radius, out->low_pass[i], inv_square,
+                       out->min_power[i], &ext[0], &ext[1]);
+      out->rects[i] = TileRectFromBox(mx, my, ext[0], ext[1], tiles_x, tiles_y);
+    } else {
+      ext[0] = ext[1] = radius;
+    }
     const Eigen::Vector3f dir = (g.p - center).normalized();
     for (int k = 0; k < 3; ++k) out->view_dir[3 * i + k] = dir[k];
     EvalShColor(degree, &m.sh[static_cast<size_t>(i) * Kc * 3], dir.data(), &out->color[3 * i],

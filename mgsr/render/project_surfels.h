@@ -19,6 +19,11 @@ constexpr float kSurfelNear = 0.2f, kSurfelFar = 100.0f;
 // The reference's screen low-pass: a Gaussian of sigma sqrt(2)/2 px (rho2d = 2 |d|^2).
 constexpr float kReferenceSurfelFilterSigma = 0.70710678f;
 
+enum class SurfelLowPass {
+  kReference,       // 2DGS: the filter at the surfel's full opacity
+  kAreaPreserving,  // the filter's opacity scaled by the surfel's projected area (no dilation)
+};
+
 struct ProjectedSurfels {
   // N x 9: rows T_u - m_x T_w, T_v - m_y T_w, T_w. Centring on the screen centre m keeps the
   // per-pixel intersection (k = (x - m_x) T_w - T_u', ...) free of float cancellation; the rows are
@@ -34,6 +39,12 @@ struct ProjectedSurfels {
   std::vector<float> color;        // N x 3
   std::vector<uint8_t> clamp;      // N x 3
   std::vector<float> view_dir;     // N x 3
+  // What the pixel loops need that no tile changes: the low-pass offset c added to rho2d (see
+  // rasterize_surfels.h), the exponent below which alpha < 1/255 (0 when the opacity is below it),
+  // and the half-extents around m beyond which no pixel reaches 1/255 (SurfelAlphaReach), whose
+  // box gives `rects`; `radius` (the 3-sigma square, what "visible" means) is at least as wide.
+  std::vector<float> low_pass, min_power;  // N
+  std::vector<float> extent;               // N x 2
 
   size_t size() const { return depth.size(); }
   void Resize(size_t n);
@@ -52,7 +63,24 @@ struct SurfelGradients {
 
 // filter_sigma: the screen low-pass's sigma in pixels; the screen radius is at least 3 of them.
 void ProjectSurfels(const SurfelModel& model, const Camera& camera, int sh_degree,
-                    ProjectedSurfels* out, float filter_sigma = kReferenceSurfelFilterSigma);
+                    ProjectedSurfels* out, float filter_sigma = kReferenceSurfelFilterSigma,
+                    SurfelLowPass low_pass = SurfelLowPass::kReference);
+
+// The area-preserving low-pass floor's offset c of rho2d (see rasterize_surfels.h) from the stored
+// rows tu, tv, tw of ProjectedSurfels::M: e^{-c/2} = min(1, |det J| / s^2) with det J = det M /
+// T_w2^3 and s the filter's sigma (inv_square = 1 / s^2). `dc` (may be null) receives d c / d M
+// (row-major over the stored rows, which differ from M by row operations that keep its
+// determinant) where c > 0 and not capped.
+float SurfelLowPassOffset(const float tu[3], const float tv[3], const float tw[3], float inv_square,
+                          float dc[9]);
+
+// The half-extents (ex, ey) around the centre beyond which no pixel of a surfel reaches alpha
+// 1/255, i.e. rho = min(rho3d, rho2d) <= r2 = -2 min_power: the bounding box of the image of the
+// disk u^2 + v^2 <= r2 (a conic; the box as for the 3-sigma one, from the stored rows) and of the
+// low-pass circle |pixel - m|^2 <= (r2 - c) sigma^2, widened by 2% and half a pixel against float
+// rounding in the pixel loops, and at most `radius`.
+void SurfelAlphaReach(const float tu[3], const float tv[3], const float tw[3], float radius,
+                      float low_pass, float inv_square, float min_power, float* ex, float* ey);
 
 void ProjectSurfelsBackward(const SurfelModel& model, const Camera& camera, int sh_degree,
                             const ProjectedSurfels& projected,

@@ -10,7 +10,8 @@ void SurfelRenderer::Forward(const SurfelModel& model, const SurfelRenderOptions
                              SurfelRender* out) {
   {
     ProfileScope scope("projection & SH");
-    ProjectSurfels(model, options.camera, options.sh_degree, &projected_, options.filter_sigma);
+    ProjectSurfels(model, options.camera, options.sh_degree, &projected_, options.filter_sigma,
+                   options.low_pass);
   }
   {
     ProfileScope scope("binning");
