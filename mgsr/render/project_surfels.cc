@@ -41,29 +41,9 @@ void ComputeGeometry(const SurfelModel& m, size_t i, const Mat3& Rc, const Eigen
   g->M = K * g->A;
 }
 
-constexpr float kCutoff2 = 9.0f;         // (3 sigma)^2
-constexpr float kMinFilterArea = 1e-6f;  // below: the filter adds nothing visible (c is capped)
-}  // namespace
+constexpr float kCutoff2 = 9.0f;  // (3 sigma)^2
 
-float SurfelLowPassOffset(const float tu[3], const float tv[3], const float tw[3], float inv_square,
-                          float dc[9]) {
-  const float cof[9] = {
-      tv[1] * tw[2] - tv[2] * tw[1], tv[2] * tw[0] - tv[0] * tw[2], tv[0] * tw[1] - tv[1] * tw[0],
-      tw[1] * tu[2] - tw[2] * tu[1], tw[2] * tu[0] - tw[0] * tu[2], tw[0] * tu[1] - tw[1] * tu[0],
-      tu[1] * tv[2] - tu[2] * tv[1], tu[2] * tv[0] - tu[0] * tv[2], tu[0] * tv[1] - tu[1] * tv[0]};
-  const float det = tu[0] * cof[0] + tu[1] * cof[1] + tu[2] * cof[2];
-  const float z = tw[2];
-  const float area = inv_square * std::abs(det) / (z * z * z);
-  if (dc != nullptr) std::fill(dc, dc + 9, 0.0f);
-  if (!(area < 1.0f)) return 0.0f;
-  if (!(area > kMinFilterArea)) return -2.0f * std::log(kMinFilterArea);
-  if (dc != nullptr) {
-    // c = -2 ln|det| + 6 ln z + const; d ln|det| / d M = cof / det.
-    for (int q = 0; q < 9; ++q) dc[q] = -2.0f * cof[q] / det;
-    dc[8] += 6.0f / z;
-  }
-  return -2.0f * std::log(area);
-}
+}  // namespace
 
 void SurfelAlphaReach(const float tu[3], const float tv[3], const float tw[3], float radius,
                       float low_pass, float inv_square, float min_power, float* ex, float* ey) {

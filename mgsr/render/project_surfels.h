@@ -6,6 +6,8 @@
 // (with the low-pass floor), opacity and SH colour.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -71,8 +73,26 @@ void ProjectSurfels(const SurfelModel& model, const Camera& camera, int sh_degre
 // T_w2^3 and s the filter's sigma (inv_square = 1 / s^2). `dc` (may be null) receives d c / d M
 // (row-major over the stored rows, which differ from M by row operations that keep its
 // determinant) where c > 0 and not capped.
-float SurfelLowPassOffset(const float tu[3], const float tv[3], const float tw[3], float inv_square,
-                          float dc[9]);
+constexpr float kMinFilterArea = 1e-6f;  // below: the filter adds nothing visible (c is capped)
+inline float SurfelLowPassOffset(const float tu[3], const float tv[3], const float tw[3],
+                                 float inv_square, float dc[9]) {
+  const float cof[9] = {
+      tv[1] * tw[2] - tv[2] * tw[1], tv[2] * tw[0] - tv[0] * tw[2], tv[0] * tw[1] - tv[1] * tw[0],
+      tw[1] * tu[2] - tw[2] * tu[1], tw[2] * tu[0] - tw[0] * tu[2], tw[0] * tu[1] - tw[1] * tu[0],
+      tu[1] * tv[2] - tu[2] * tv[1], tu[2] * tv[0] - tu[0] * tv[2], tu[0] * tv[1] - tu[1] * tv[0]};
+  const float det = tu[0] * cof[0] + tu[1] * cof[1] + tu[2] * cof[2];
+  const float z = tw[2];
+  const float area = inv_square * std::abs(det) / (z * z * z);
+  if (dc != nullptr) std::fill(dc, dc + 9, 0.0f);
+  if (!(area < 1.0f)) return 0.0f;
+  if (!(area > kMinFilterArea)) return -2.0f * std::log(kMinFilterArea);
+  if (dc != nullptr) {
+    // c = -2 ln|det| + 6 ln z + const; d ln|det| / d M = cof / det.
+    for (int q = 0; q < 9; ++q) dc[q] = -2.0f * cof[q] / det;
+    dc[8] += 6.0f / z;
+  }
+  return -2.0f * std::log(area);
+}
 
 // The half-extents (ex, ey) around the centre beyond which no pixel of a surfel reaches alpha
 // 1/255, i.e. rho = min(rho3d, rho2d) <= r2 = -2 min_power: the bounding box of the image of the

@@ -72,7 +72,12 @@ enum GradField {
   kGradStride
 };
 
-void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, std::vector<float>* buffer) {
+// `area_low_pass`: the area-preserving low-pass, whose offset c is evaluated here from the rows
+// (with inv_square), not read from the projection's: the two places compile to different float
+// rounding, and this one is what the pixel loops have always used, so renders stay the same to the
+// bit (the projection's c only bounds the alpha reach, where the last bit does not matter).
+void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, bool area_low_pass,
+                float inv_square, std::vector<float>* buffer) {
   buffer->resize(static_cast<size_t>(kNumFields) * n);
   float* f = buffer->data();
   for (int j = 0; j < n; ++j) {
@@ -86,7 +91,9 @@ void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, std::vect
       f[(kN0 + c) * n + j] = p.normal[3 * g + c];
       f[(kC0 + c) * n + j] = p.color[3 * g + c];
     }
-    f[kLowPass * n + j] = p.low_pass[g];
+    const float* rows = &p.M[9 * g];
+    f[kLowPass * n + j] =
+        area_low_pass ? SurfelLowPassOffset(rows, rows + 3, rows + 6, inv_square, nullptr) : 0.0f;
     f[kMinPow * n + j] = p.min_power[g];
     f[kEx * n + j] = p.extent[2 * g];
     f[kEy * n + j] = p.extent[2 * g + 1];
@@ -460,6 +467,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   EnsureScratch(scratch, threads, bins, kNumFields);
   const Image* bg_image = o.background_image;
   const Eigen::Matrix3f Rt = o.camera.R.transpose().cast<float>();
+  const bool area_low_pass = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
   // Per tile entry: the entry's summed blend weights (only when recording contributions).
   std::vector<float> entry_weight(o.record_contribution ? bins.ids.size() : 0, 0.0f);
@@ -472,7 +480,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
     const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
     float* const weights = o.record_contribution ? entry_weight.data() + begin : nullptr;
     std::vector<float>& buffer = scratch->tile_data[thread];
-    GatherTile(p, bins.ids.data() + begin, n, &buffer);
+    GatherTile(p, bins.ids.data() + begin, n, area_low_pass, inv_square, &buffer);
     const float* f = buffer.data();
     const int x0 = tx * kTileSize, y0 = ty * kTileSize;
     const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
@@ -561,6 +569,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
   EnsureScratch(scratch, threads, bins, kNumFields);
   const Image* bg_image = o.background_image;
   const Eigen::Matrix3f Rc = o.camera.R.cast<float>();
+  const bool area_low_pass = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
   // The distortion terms only where its output was rendered and has a gradient.
   const bool distortion = o.distortion && !g.distortion.empty();
@@ -577,7 +586,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
       const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
       if (n == 0) continue;
       std::vector<float>& buffer = scratch->tile_data[thread];
-      GatherTile(p, bins.ids.data() + begin, n, &buffer);
+      GatherTile(p, bins.ids.data() + begin, n, area_low_pass, inv_square, &buffer);
       float* tg = scratch->entry_grads.data() + static_cast<size_t>(begin) * kGradStride;
       const float* f = buffer.data();
       const int x0 = tx * kTileSize, y0 = ty * kTileSize;
