@@ -43,10 +43,14 @@ void ComputeGeometry(const SurfelModel& m, size_t i, const Mat3& Rc, const Eigen
 
 constexpr float kCutoff2 = 9.0f;  // (3 sigma)^2
 
-}  // namespace
-
-void SurfelAlphaReach(const float tu[3], const float tv[3], const float tw[3], float radius,
-                      float low_pass, float inv_square, float min_power, float* ex, float* ey) {
+// The half-extents (ex, ey) around the centre beyond which no pixel of a surfel reaches alpha
+// 1/255, i.e. rho = min(rho3d, rho2d) <= r2 = -2 min_power: the bounding box of the image of the
+// disk u^2 + v^2 <= r2 (a conic; the box as for the 3-sigma one, from the stored rows) and of the
+// low-pass circle |pixel - m|^2 <= r2 sigma^2 (its widest: the area-preserving offset only shrinks
+// it), widened by 2% and half a pixel against float rounding in the pixel loops, and at most
+// `radius`. (Tested against the per-pixel reference renderer, which has no such box.)
+void AlphaReach(const float tu[3], const float tv[3], const float tw[3], float radius,
+                float inv_square, float min_power, float* ex, float* ey) {
   *ex = *ey = radius;
   const float r2 = -2.0f * min_power;
   const float d = r2 * (tw[0] * tw[0] + tw[1] * tw[1]) - tw[2] * tw[2];
@@ -58,13 +62,15 @@ void SurfelAlphaReach(const float tu[3], const float tv[3], const float tw[3], f
   const float qy = f[0] * tv[0] * tv[0] + f[1] * tv[1] * tv[1] + f[2] * tv[2] * tv[2];
   const float disk_x = std::abs(cx) + std::sqrt(std::max(0.0f, cx * cx - qx));
   const float disk_y = std::abs(cy) + std::sqrt(std::max(0.0f, cy * cy - qy));
-  const float circle = std::sqrt(std::max(0.0f, r2 - low_pass) / inv_square);
+  const float circle = std::sqrt(r2 / inv_square);
   const float x = std::max(disk_x, circle) * 1.02f + 0.5f;
   const float y = std::max(disk_y, circle) * 1.02f + 0.5f;
   if (!std::isfinite(x) || !std::isfinite(y)) return;
   *ex = std::min(radius, x);
   *ey = std::min(radius, y);
 }
+
+}  // namespace
 
 void ProjectedSurfels::Resize(size_t n) {
   M.resize(9 * n);
@@ -78,7 +84,6 @@ void ProjectedSurfels::Resize(size_t n) {
   color.resize(3 * n);
   clamp.resize(3 * n);
   view_dir.resize(3 * n);
-  low_pass.resize(n);
   min_power.resize(n);
   extent.resize(2 * n);
 }
@@ -100,7 +105,7 @@ void SurfelGradients::ResizeAndZero(const SurfelModel& model) {
 }
 
 void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, ProjectedSurfels* out,
-                    float filter_sigma, SurfelLowPass low_pass) {
+                    float filter_sigma) {
   const Eigen::Matrix3d Kd = Intrinsics(cam).cast<double>();
   const int n = static_cast<int>(m.size());
   out->Resize(n);
@@ -163,16 +168,12 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
     const float opacity = Sigmoid(m.opacity_logits[i]);
     out->opacity[i] = opacity;
     // What the pixel loops need (see the header), and the tiles where a pixel may reach 1/255.
-    const float* rows_f = &out->M[9 * i];
-    out->low_pass[i] =
-        low_pass == SurfelLowPass::kAreaPreserving
-            ? SurfelLowPassOffset(rows_f, rows_f + 3, rows_f + 6, inv_square, nullptr)
-            : 0.0f;
     out->min_power[i] = opacity > kMinBlendAlpha ? std::log(kMinBlendAlpha / opacity) : 0.0f;
     float* ext = &out->extent[2 * i];
     if (opacity > kMinBlendAlpha) {
-      SurfelAlphaReach(rows_f, rows_f + 3, rows_f + 6, radius, out->low_pass[i], inv_square,
-                       out->min_power[i], &ext[0], &ext[1]);
+      const float* rows_f = &out->M[9 * i];
+      AlphaReach(rows_f, rows_f + 3, rows_f + 6, radius, inv_square, out->min_power[i], &ext[0],
+                 &ext[1]);
       out->rects[i] = TileRectFromBox(mx, my, ext[0], ext[1], tiles_x, tiles_y);
     } else {
       ext[0] = ext[1] = radius;

@@ -43,7 +43,6 @@ enum Field {
   kC0,
   kC1,
   kC2,
-  kLowPass,
   kMinPow,
   kEx,
   kEy,
@@ -72,12 +71,7 @@ enum GradField {
   kGradStride
 };
 
-// `area_low_pass`: the area-preserving low-pass, whose offset c is evaluated here from the rows
-// (with inv_square), not read from the projection's: the two places compile to different float
-// rounding, and this one is what the pixel loops have always used, so renders stay the same to the
-// bit (the projection's c only bounds the alpha reach, where the last bit does not matter).
-void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, bool area_low_pass,
-                float inv_square, std::vector<float>* buffer) {
+void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, std::vector<float>* buffer) {
   buffer->resize(static_cast<size_t>(kNumFields) * n);
   float* f = buffer->data();
   for (int j = 0; j < n; ++j) {
@@ -91,21 +85,43 @@ void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, bool area
       f[(kN0 + c) * n + j] = p.normal[3 * g + c];
       f[(kC0 + c) * n + j] = p.color[3 * g + c];
     }
-    const float* rows = &p.M[9 * g];
-    f[kLowPass * n + j] =
-        area_low_pass ? SurfelLowPassOffset(rows, rows + 3, rows + 6, inv_square, nullptr) : 0.0f;
     f[kMinPow * n + j] = p.min_power[g];
     f[kEx * n + j] = p.extent[2 * g];
     f[kEy * n + j] = p.extent[2 * g + 1];
   }
 }
 
+// The low-pass floor's offset c of rho2d (see rasterize_surfels.h): e^{-c/2} = min(1, |det J| /
+// s^2) with det J = det M / T_w2^3 and s the filter's sigma (inv_square = 1 / s^2). `dc` receives
+// d c / d M (row-major over the stored rows, which differ from M by row operations that keep its
+// determinant) where c > 0 and not clamped.
+constexpr float kMinFilterArea = 1e-6f;  // below: the filter adds nothing visible (c is capped)
+inline float LowPassOffset(const float tu[3], const float tv[3], const float tw[3],
+                           float inv_square, float dc[9]) {
+  const float cof[9] = {
+      tv[1] * tw[2] - tv[2] * tw[1], tv[2] * tw[0] - tv[0] * tw[2], tv[0] * tw[1] - tv[1] * tw[0],
+      tw[1] * tu[2] - tw[2] * tu[1], tw[2] * tu[0] - tw[0] * tu[2], tw[0] * tu[1] - tw[1] * tu[0],
+      tu[1] * tv[2] - tu[2] * tv[1], tu[2] * tv[0] - tu[0] * tv[2], tu[0] * tv[1] - tu[1] * tv[0]};
+  const float det = tu[0] * cof[0] + tu[1] * cof[1] + tu[2] * cof[2];
+  const float z = tw[2];
+  const float area = inv_square * std::abs(det) / (z * z * z);
+  if (dc != nullptr) std::fill(dc, dc + 9, 0.0f);
+  if (!(area < 1.0f)) return 0.0f;
+  if (!(area > kMinFilterArea)) return -2.0f * std::log(kMinFilterArea);
+  if (dc != nullptr) {
+    // c = -2 ln|det| + 6 ln z + const; d ln|det| / d M = cof / det.
+    for (int q = 0; q < 9; ++q) dc[q] = -2.0f * cof[q] / det;
+    dc[8] += 6.0f / z;
+  }
+  return -2.0f * std::log(area);
+}
+
 struct Surfel {
   float tu[3], tv[3], tw[3], mx, my, rad, op, n[3], c[3];
-  float low_pass;    // c: added to rho2d
-  float inv_square;  // 1 / sigma^2 of the screen low-pass
-  float min_power;   // below this exponent alpha < 1/255
-  float ex, ey;      // half-extents around m beyond which no pixel reaches it
+  float low_pass = 0;  // c: added to rho2d
+  float inv_square;    // 1 / sigma^2 of the screen low-pass
+  float min_power;     // below this exponent alpha < 1/255 (ProjectedSurfels::min_power)
+  float ex, ey;        // where a pixel may reach 1/255 (ProjectedSurfels::extent)
   Surfel(const float* f, int n_, int j, float inv_square_) : inv_square(inv_square_) {
     for (int q = 0; q < 3; ++q) {
       tu[q] = f[(kTu0 + q) * n_ + j];
@@ -118,7 +134,6 @@ struct Surfel {
     my = f[kMy * n_ + j];
     rad = f[kRad * n_ + j];
     op = f[kOp * n_ + j];
-    low_pass = f[kLowPass * n_ + j];
     min_power = f[kMinPow * n_ + j];
     ex = f[kEx * n_ + j];
     ey = f[kEy * n_ + j];
@@ -467,7 +482,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   EnsureScratch(scratch, threads, bins, kNumFields);
   const Image* bg_image = o.background_image;
   const Eigen::Matrix3f Rt = o.camera.R.transpose().cast<float>();
-  const bool area_low_pass = o.low_pass == SurfelLowPass::kAreaPreserving;
+  const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
   // Per tile entry: the entry's summed blend weights (only when recording contributions).
   std::vector<float> entry_weight(o.record_contribution ? bins.ids.size() : 0, 0.0f);
@@ -480,7 +495,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
     const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
     float* const weights = o.record_contribution ? entry_weight.data() + begin : nullptr;
     std::vector<float>& buffer = scratch->tile_data[thread];
-    GatherTile(p, bins.ids.data() + begin, n, area_low_pass, inv_square, &buffer);
+    GatherTile(p, bins.ids.data() + begin, n, &buffer);
     const float* f = buffer.data();
     const int x0 = tx * kTileSize, y0 = ty * kTileSize;
     const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
@@ -496,8 +511,9 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
         for (int k = 0; k < kTilePixels; ++k) any += st[aLive][k];
         if (any == 0) break;
       }
-      const Surfel s(f, n, j, inv_square);
+      Surfel s(f, n, j, inv_square);
       if (!(s.op > kMinAlpha)) continue;
+      if (area_preserving) s.low_pass = LowPassOffset(s.tu, s.tv, s.tw, s.inv_square, nullptr);
       const float min_power = s.min_power;
       int ya, yb;
       BoxRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
@@ -569,7 +585,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
   EnsureScratch(scratch, threads, bins, kNumFields);
   const Image* bg_image = o.background_image;
   const Eigen::Matrix3f Rc = o.camera.R.cast<float>();
-  const bool area_low_pass = o.low_pass == SurfelLowPass::kAreaPreserving;
+  const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
   // The distortion terms only where its output was rendered and has a gradient.
   const bool distortion = o.distortion && !g.distortion.empty();
@@ -586,7 +602,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
       const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
       if (n == 0) continue;
       std::vector<float>& buffer = scratch->tile_data[thread];
-      GatherTile(p, bins.ids.data() + begin, n, area_low_pass, inv_square, &buffer);
+      GatherTile(p, bins.ids.data() + begin, n, &buffer);
       float* tg = scratch->entry_grads.data() + static_cast<size_t>(begin) * kGradStride;
       const float* f = buffer.data();
       const int x0 = tx * kTileSize, y0 = ty * kTileSize;
@@ -652,8 +668,8 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
                     tg + static_cast<size_t>(j + 1) * kGradStride, 0.0f);
           continue;
         }
-        float dlow[9] = {};  // d c / d M where the low-pass offset c is positive
-        if (s.low_pass > 0) SurfelLowPassOffset(s.tu, s.tv, s.tw, s.inv_square, dlow);
+        float dlow[9] = {};
+        if (area_preserving) s.low_pass = LowPassOffset(s.tu, s.tv, s.tw, s.inv_square, dlow);
         const float min_power = s.min_power;
         int ya, yb;
         BoxRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);

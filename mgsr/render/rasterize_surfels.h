@@ -32,6 +32,11 @@
 
 namespace mgsr {
 
+enum class SurfelLowPass {
+  kReference,       // 2DGS: the filter at the surfel's full opacity
+  kAreaPreserving,  // the filter's opacity scaled by the surfel's projected area (no dilation)
+};
+
 struct SurfelRenderOptions {
   Camera camera;
   int sh_degree = 3;

@@ -10,8 +10,7 @@ void SurfelRenderer::Forward(const SurfelModel& model, const SurfelRenderOptions
                              SurfelRender* out) {
   {
     ProfileScope scope("projection & SH");
-    ProjectSurfels(model, options.camera, options.sh_degree, &projected_, options.filter_sigma,
-                   options.low_pass);
+    ProjectSurfels(model, options.camera, options.sh_degree, &projected_, options.filter_sigma);
   }
   {
     ProfileScope scope("binning");
