@@ -220,10 +220,11 @@ float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const 
     const float dy = y + 0.5f - s.my;
     if (std::abs(dy) > s.ey || !RowHitsEllipse(dy, s.ca, s.cb, s.cc, s.min_power)) continue;
     const int k = (y - y0) * kTileSize + first;
-    // Pixels whose chains have both terminated take no part: a row of them costs two loads, not
-    // the exponent and the blends (behind an opaque surface, most rows of a tile's later entries).
-    // A chain whose pixels here have all terminated is skipped too (it would blend nothing): behind
-    // an opaque surface the reflected chain, with its lower opacities, often runs on alone.
+    // Pixels whose chains have both terminated take no part: a row of them costs the exponent's
+    // argument, not the exponent and the blends (behind an opaque surface, most rows of a tile's
+    // later entries). A chain whose pixels here have all terminated is skipped too (it would blend
+    // nothing): behind an opaque surface the reflected chain, with its lower opacities, often runs
+    // on alone.
     const M live_t = lanes_ok & (simd::Load<V>(st[aLiveT] + k) > 0.5f);
     const M live_r = lanes_ok & (simd::Load<V>(st[aLiveR] + k) > 0.5f);
     M in;
