@@ -234,18 +234,28 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
   const M lanes_ok = tl.Ok<V>(first);
   V weight_sum{};
   const float jp1 = static_cast<float>(j + 1);
+  // In two loops (see the 3DGS BlendRows): first the rows' intersections and exponents, which
+  // read only the "live" flags (each row is blended once per surfel, so they are those the blend
+  // sees), then the blends.
+  RowHit<V> hit[kTileSize];
+  int row_k[kTileSize];
+  int rows = 0;
   for (int y = ya; y <= yb; ++y) {
     const float py = y + 0.5f;
     if (std::abs(s.my - py) > s.ey) continue;
     const int k = (y - y0) * kTileSize + first;
     // A row whose pixels have all terminated costs one load, not the intersection and the exponent
     // (behind an opaque surface, most rows of a tile's later entries).
-    const V live = simd::Load<V>(st[aLive] + k);
-    const M alive = lanes_ok & (live > 0.5f);
+    const M alive = lanes_ok & (simd::Load<V>(st[aLive] + k) > 0.5f);
     if (!simd::Any(alive)) continue;
-    RowHit<V> h;
-    IntersectRow(s, px, py, min_power, alive, &h);
-    if (!simd::Any(h.in)) continue;
+    IntersectRow(s, px, py, min_power, alive, &hit[rows]);
+    if (!simd::Any(hit[rows].in)) continue;
+    row_k[rows++] = k;
+  }
+  for (int r = 0; r < rows; ++r) {
+    const RowHit<V>& h = hit[r];
+    const int k = row_k[r];
+    const V live = simd::Load<V>(st[aLive] + k);
     const V T = simd::Load<V>(st[aT] + k);
     const V a = simd::Min(s.op * h.G, simd::Splat<V>(kMaxAlpha));
     const M valid = h.in & (a >= kMinAlpha);
@@ -337,6 +347,11 @@ void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y
   V glow{};  // d loss / d c (the low-pass offset)
   V gTu0{}, gTu1{}, gTu2{}, gTv0{}, gTv1{}, gTv2{}, gTw0{}, gTw1{}, gTw2{}, gmx{}, gmy{}, gop{};
   V gn0{}, gn1{}, gn2{}, gc0{}, gc1{}, gc2{};
+  // In two loops (see BlendRows): the rows' intersections and exponents (which read only the
+  // last-blended indices, which this pass does not write), then the un-blending and gradients.
+  RowHit<V> hit[kTileSize];
+  int row_k[kTileSize];
+  int rows = 0;
   for (int y = ya; y <= yb; ++y) {
     const float py = y + 0.5f;
     if (std::abs(s.my - py) > s.ey) continue;
@@ -345,9 +360,13 @@ void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y
     // intersection.
     const M blended = lanes_ok & (jf < simd::Load<V>(st[bLast] + k));
     if (!simd::Any(blended)) continue;
-    RowHit<V> h;
-    IntersectRow(s, px, py, min_power, blended, &h);
-    if (!simd::Any(h.in)) continue;
+    IntersectRow(s, px, py, min_power, blended, &hit[rows]);
+    if (!simd::Any(hit[rows].in)) continue;
+    row_k[rows++] = k;
+  }
+  for (int r = 0; r < rows; ++r) {
+    const RowHit<V>& h = hit[r];
+    const int k = row_k[r];
     const V raw = s.op * h.G;
     const V a = simd::Min(raw, simd::Splat<V>(kMaxAlpha));
     const M valid = h.in & (a >= kMinAlpha);
