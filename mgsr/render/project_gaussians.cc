@@ -71,6 +71,7 @@ void ProjectedGaussians::Resize(size_t n) {
   depth.resize(n);
   radius.resize(n);
   extent.resize(2 * n);
+  min_power.resize(n);
   rects.resize(n);
   opacity.resize(n);
   ref_opacity.resize(n);
@@ -123,6 +124,7 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
     out->radius[i] = 0;
     out->rects[i] = TileRect();
     out->extent[2 * i] = out->extent[2 * i + 1] = 0;
+    out->min_power[i] = 0;
     Geometry g;
     ComputeGeometry(m, i, Rc, tc, cam, &g);
     out->depth[i] = g.t.z();
@@ -148,6 +150,7 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
     float ex = 0, ey = 0;
     if (AlphaExtent(a, c, o, radius, &ex, &ey)) {
       out->rects[i] = TileRectFromBox(u, v, ex, ey, tiles_x, tiles_y);
+      out->min_power[i] = std::log(kMinBlendAlpha / o);
     }
     out->extent[2 * i] = ex;
     out->extent[2 * i + 1] = ey;

@@ -34,6 +34,9 @@ struct ProjectedGaussians {
   // (and, with reflection, its reflected alpha) stays below 1/255; at most the radius. The tile
   // rectangle and the rasterizers' row and column ranges come from it.
   std::vector<float> extent;
+  // N: the exponent (power) below which neither alpha reaches 1/255, ln(1/255 / o) with o the
+  // larger of the two opacities (the transmitted one without reflection); 0 where not binned.
+  std::vector<float> min_power;
   std::vector<TileRect> rects;
   std::vector<float> opacity, ref_opacity, beta;  // N, activated
   std::vector<float> color_t, color_r;            // N x 3

@@ -53,15 +53,9 @@ enum GradField {
   kGradStride
 };
 
-// Below this exponent neither chain's alpha reaches 1/255, so the pixel is skipped.
-inline float MinPower(float opacity, float ref_opacity, bool reflection) {
-  const float o = reflection ? std::max(opacity, ref_opacity) : opacity;
-  return o > 0 ? std::log(kMinAlpha / o) : 0.0f;
-}
-
 // Everything the pixel loops read about one Gaussian, packed into one row (AoS), so a tile's loop
 // touches one or two cache lines per Gaussian instead of 18 scattered arrays.
-void PackGaussians(const ProjectedGaussians& p, bool reflection, std::vector<float>* packed) {
+void PackGaussians(const ProjectedGaussians& p, std::vector<float>* packed) {
   const int64_t n = static_cast<int64_t>(p.size());
   packed->resize(static_cast<size_t>(n) * kNumFields);
   float* out = packed->data();
@@ -78,7 +72,7 @@ void PackGaussians(const ProjectedGaussians& p, bool reflection, std::vector<flo
     f[kCc] = p.conic[3 * g + 2];
     f[kOp] = p.opacity[g];
     f[kRefOp] = p.ref_opacity[g];
-    f[kMinPow] = MinPower(p.opacity[g], p.ref_opacity[g], reflection);
+    f[kMinPow] = p.min_power[g];
     f[kBeta] = p.beta[g];
     f[kZ] = p.depth[g];
     for (int c = 0; c < 3; ++c) {
@@ -443,7 +437,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
   EnsureScratch(scratch, threads, bins, kNumFields);
   const bool refl = o.reflection;
   const Image* bg_image = o.background_image;
-  PackGaussians(p, refl, &scratch->packed);
+  PackGaussians(p, &scratch->packed);
   const float* packed = scratch->packed.data();
   // Per tile entry: the entry's summed blend weights (only when recording contributions).
   std::vector<float> entry_weight(o.record_contribution ? bins.ids.size() : 0, 0.0f);
@@ -534,7 +528,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
   EnsureScratch(scratch, threads, bins, kNumFields);
   const bool refl = o.reflection;
   const Image* bg_image = o.background_image;
-  PackGaussians(p, refl, &scratch->packed);
+  PackGaussians(p, &scratch->packed);
   const float* packed = scratch->packed.data();
 
   scratch->entry_grads.resize(bins.ids.size() * kGradStride);
