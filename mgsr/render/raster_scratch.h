@@ -16,7 +16,8 @@
 namespace mgsr {
 
 struct RasterScratch {
-  std::vector<float> packed;                    // per primitive: the fields the pixel loops read
+  // Per primitive, what the pixel loops read: the 3DGS packed rows, the surfels' low-pass table.
+  std::vector<float> packed;
   std::vector<std::vector<float>> pixel_state;  // per thread: pixel state of the current tile
   std::vector<std::vector<float>> tile_data;  // per thread: gathered primitives of the current tile
   std::vector<float> entry_grads;             // per tile entry: gradient fields (stride floats)

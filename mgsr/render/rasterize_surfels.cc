@@ -116,6 +116,26 @@ inline float LowPassOffset(const float tu[3], const float tv[3], const float tw[
   return -2.0f * std::log(area);
 }
 
+// The area-preserving low-pass offset c of every surfel a tile lists, once per surfel rather than
+// once per tile entry (a log and a 3x3 determinant; a surfel has about four entries per view):
+// table row i holds c and, with `with_gradient`, d c / d M (10 floats per surfel). Surfels in no
+// tile or too faint to blend get zeros. Evaluated by the same inline function as before, so the
+// offsets are the same to the bit.
+constexpr int kLowPassStride = 10;
+void LowPassTable(const ProjectedSurfels& p, float inv_square, bool with_gradient,
+                  std::vector<float>* table) {
+  const int64_t n = static_cast<int64_t>(p.size());
+  table->assign(static_cast<size_t>(n) * kLowPassStride, 0.0f);
+  float* out = table->data();
+#pragma omp parallel for schedule(static)
+  for (int64_t i = 0; i < n; ++i) {
+    if (p.rects[i].empty() || !(p.opacity[i] > kMinAlpha)) continue;
+    const float* m = &p.M[9 * i];
+    float* row = out + i * kLowPassStride;
+    row[0] = LowPassOffset(m, m + 3, m + 6, inv_square, with_gradient ? row + 1 : nullptr);
+  }
+}
+
 struct Surfel {
   float tu[3], tv[3], tw[3], mx, my, rad, op, n[3], c[3];
   float low_pass = 0;  // c: added to rho2d
@@ -237,7 +257,9 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
   // In two loops (see the 3DGS BlendRows): first the rows' intersections and exponents, which
   // read only the "live" flags (each row is blended once per surfel, so they are those the blend
   // sees), then the blends.
-  RowHit<V> hit[kTileSize];
+  // The blend needs only the exponent, the depth and the mask of each row's intersection.
+  V G_row[kTileSize], z_row[kTileSize];
+  M in_row[kTileSize];
   int row_k[kTileSize];
   int rows = 0;
   for (int y = ya; y <= yb; ++y) {
@@ -248,17 +270,22 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
     // (behind an opaque surface, most rows of a tile's later entries).
     const M alive = lanes_ok & (simd::Load<V>(st[aLive] + k) > 0.5f);
     if (!simd::Any(alive)) continue;
-    IntersectRow(s, px, py, min_power, alive, &hit[rows]);
-    if (!simd::Any(hit[rows].in)) continue;
+    RowHit<V> h;
+    IntersectRow(s, px, py, min_power, alive, &h);
+    if (!simd::Any(h.in)) continue;
+    G_row[rows] = h.G;
+    z_row[rows] = h.z;
+    in_row[rows] = h.in;
     row_k[rows++] = k;
   }
   for (int r = 0; r < rows; ++r) {
-    const RowHit<V>& h = hit[r];
+    const V G = G_row[r], z = z_row[r];
+    const M in = in_row[r];
     const int k = row_k[r];
     const V live = simd::Load<V>(st[aLive] + k);
     const V T = simd::Load<V>(st[aT] + k);
-    const V a = simd::Min(s.op * h.G, simd::Splat<V>(kMaxAlpha));
-    const M valid = h.in & (a >= kMinAlpha);
+    const V a = simd::Min(s.op * G, simd::Splat<V>(kMaxAlpha));
+    const M valid = in & (a >= kMinAlpha);
     const V test = T * (1.0f - a);
     const M term = valid & (test < kMinTransmittance);
     const M blend = valid & ~term;
@@ -266,21 +293,21 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
     simd::Store(st[aC0] + k, simd::Load<V>(st[aC0] + k) + w * s.c[0]);
     simd::Store(st[aC1] + k, simd::Load<V>(st[aC1] + k) + w * s.c[1]);
     simd::Store(st[aC2] + k, simd::Load<V>(st[aC2] + k) + w * s.c[2]);
-    simd::Store(st[aDs] + k, simd::Load<V>(st[aDs] + k) + w * h.z);
+    simd::Store(st[aDs] + k, simd::Load<V>(st[aDs] + k) + w * z);
     simd::Store(st[aWs] + k, simd::Load<V>(st[aWs] + k) + w);
     simd::Store(st[aN0] + k, simd::Load<V>(st[aN0] + k) + w * s.n[0]);
     simd::Store(st[aN1] + k, simd::Load<V>(st[aN1] + k) + w * s.n[1]);
     simd::Store(st[aN2] + k, simd::Load<V>(st[aN2] + k) + w * s.n[2]);
     // Median: the last surfel blended while the incoming transmittance is above one half.
     const M med = blend & (T > 0.5f);
-    simd::Store(st[aZmed] + k, simd::Select(med, h.z, simd::Load<V>(st[aZmed] + k)));
+    simd::Store(st[aZmed] + k, simd::Select(med, z, simd::Load<V>(st[aZmed] + k)));
     simd::Store(st[aMed] + k, simd::Select(med, simd::Splat<V>(jp1), simd::Load<V>(st[aMed] + k)));
     if constexpr (kDistortion) {
       // Distortion: w_i (m_i^2 A_i + M2_i - 2 m_i M1_i), A_i = 1 - T_i, M1/M2 over the surfels in
       // front. It only depends on differences of m, so m is taken relative to the pixel's first
       // blended surfel: in float, the absolute NDC depths (all close to 1) would cancel
       // catastrophically.
-      const V m_abs = NdcDepth(simd::Select(blend, h.z, simd::Splat<V>(1.0f)));
+      const V m_abs = NdcDepth(simd::Select(blend, z, simd::Splat<V>(1.0f)));
       const V mref = simd::Select(blend & (simd::Load<V>(st[aLast] + k) == 0.0f), m_abs,
                                   simd::Load<V>(st[aMref] + k));
       simd::Store(st[aMref] + k, mref);
@@ -503,6 +530,8 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   const Eigen::Matrix3f Rt = o.camera.R.transpose().cast<float>();
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
+  if (area_preserving) LowPassTable(p, inv_square, false, &scratch->packed);
+  const float* low_pass = scratch->packed.data();
   // Per tile entry: the entry's summed blend weights (only when recording contributions).
   std::vector<float> entry_weight(o.record_contribution ? bins.ids.size() : 0, 0.0f);
 
@@ -514,7 +543,8 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
     const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
     float* const weights = o.record_contribution ? entry_weight.data() + begin : nullptr;
     std::vector<float>& buffer = scratch->tile_data[thread];
-    GatherTile(p, bins.ids.data() + begin, n, &buffer);
+    const uint32_t* ids = bins.ids.data() + begin;
+    GatherTile(p, ids, n, &buffer);
     const float* f = buffer.data();
     const int x0 = tx * kTileSize, y0 = ty * kTileSize;
     const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
@@ -532,7 +562,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
       }
       Surfel s(f, n, j, inv_square);
       if (!(s.op > kMinAlpha)) continue;
-      if (area_preserving) s.low_pass = LowPassOffset(s.tu, s.tv, s.tw, s.inv_square, nullptr);
+      if (area_preserving) s.low_pass = low_pass[static_cast<size_t>(ids[j]) * kLowPassStride];
       const float min_power = s.min_power;
       int ya, yb;
       BoxRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
@@ -606,6 +636,8 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
   const Eigen::Matrix3f Rc = o.camera.R.cast<float>();
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
+  if (area_preserving) LowPassTable(p, inv_square, true, &scratch->packed);
+  const float* low_pass = scratch->packed.data();
   // The distortion terms only where its output was rendered and has a gradient.
   const bool distortion = o.distortion && !g.distortion.empty();
 
@@ -621,7 +653,8 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
       const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
       if (n == 0) continue;
       std::vector<float>& buffer = scratch->tile_data[thread];
-      GatherTile(p, bins.ids.data() + begin, n, &buffer);
+      const uint32_t* ids = bins.ids.data() + begin;
+      GatherTile(p, ids, n, &buffer);
       float* tg = scratch->entry_grads.data() + static_cast<size_t>(begin) * kGradStride;
       const float* f = buffer.data();
       const int x0 = tx * kTileSize, y0 = ty * kTileSize;
@@ -687,8 +720,13 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
                     tg + static_cast<size_t>(j + 1) * kGradStride, 0.0f);
           continue;
         }
-        float dlow[9] = {};
-        if (area_preserving) s.low_pass = LowPassOffset(s.tu, s.tv, s.tw, s.inv_square, dlow);
+        static constexpr float kNoLowPass[9] = {};
+        const float* dlow = kNoLowPass;
+        if (area_preserving) {
+          const float* row = low_pass + static_cast<size_t>(ids[j]) * kLowPassStride;
+          s.low_pass = row[0];
+          dlow = row + 1;
+        }
         const float min_power = s.min_power;
         int ya, yb;
         BoxRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
