@@ -256,8 +256,7 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
   const float jp1 = static_cast<float>(j + 1);
   // In two loops (see the 3DGS BlendRows): first the rows' intersections and exponents, which
   // read only the "live" flags (each row is blended once per surfel, so they are those the blend
-  // sees), then the blends.
-  // The blend needs only the exponent, the depth and the mask of each row's intersection.
+  // sees), then the blends, which need only each intersection's exponent, depth and mask.
   V G_row[kTileSize], z_row[kTileSize];
   M in_row[kTileSize];
   int row_k[kTileSize];
