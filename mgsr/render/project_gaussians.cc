@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "mgsr/core/zero_fill.h"
 #include "mgsr/model/activations.h"
 #include "mgsr/render/sh.h"
 
@@ -84,17 +85,20 @@ void ProjectedGaussians::Resize(size_t n) {
 }
 
 void ProjectedGaussiansGrad::ResizeAndZero(size_t n) {
-  for (auto* v : {&mean2d}) v->assign(2 * n, 0.0f);
-  for (auto* v : {&conic, &color_t, &color_r}) v->assign(3 * n, 0.0f);
-  for (auto* v : {&depth, &opacity, &ref_opacity, &beta}) v->assign(n, 0.0f);
+  for (auto* v : {&mean2d}) ZeroFill(2 * n, v);
+  for (auto* v : {&conic, &color_t, &color_r}) ZeroFill(3 * n, v);
+  for (auto* v : {&depth, &opacity, &ref_opacity, &beta}) ZeroFill(n, v);
 }
 
 void GaussianGradients::ResizeAndZero(const GaussianModel& model) {
   params.max_sh_degree = model.max_sh_degree;
-  // Emptied, then grown back: every entry zero, in the storage the blocks already have.
-  params.Resize(0);
-  params.Resize(model.size());
-  mean2d.assign(2 * model.size(), 0.0f);
+  const size_t n = model.size(), k3 = 3 * static_cast<size_t>(params.sh_coeffs());
+  for (auto* v : {&params.means, &params.log_scales}) ZeroFill(3 * n, v);
+  ZeroFill(4 * n, &params.quats);
+  for (auto* v : {&params.sh, &params.ref_sh}) ZeroFill(k3 * n, v);
+  for (auto* v : {&params.opacity_logits, &params.ref_opacity_logits, &params.beta_logits})
+    ZeroFill(n, v);
+  ZeroFill(2 * n, &mean2d);
 }
 
 void ScreenGradientNorms(const std::vector<float>& mean2d, int width, int height,

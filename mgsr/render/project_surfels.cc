@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "mgsr/core/zero_fill.h"
 #include "mgsr/model/activations.h"
 #include "mgsr/render/project_gaussians.h"  // kMinBlendAlpha
 #include "mgsr/render/sh.h"
@@ -89,19 +90,22 @@ void ProjectedSurfels::Resize(size_t n) {
 }
 
 void ProjectedSurfelsGrad::ResizeAndZero(size_t n) {
-  M.assign(9 * n, 0.0f);
-  center.assign(2 * n, 0.0f);
-  normal.assign(3 * n, 0.0f);
-  opacity.assign(n, 0.0f);
-  color.assign(3 * n, 0.0f);
+  ZeroFill(9 * n, &M);
+  ZeroFill(2 * n, &center);
+  ZeroFill(3 * n, &normal);
+  ZeroFill(n, &opacity);
+  ZeroFill(3 * n, &color);
 }
 
 void SurfelGradients::ResizeAndZero(const SurfelModel& model) {
   params.max_sh_degree = model.max_sh_degree;
-  // Emptied, then grown back: every entry zero, in the storage the blocks already have.
-  params.Resize(0);
-  params.Resize(model.size());
-  mean2d.assign(2 * model.size(), 0.0f);
+  const size_t n = model.size();
+  ZeroFill(3 * n, &params.means);
+  ZeroFill(2 * n, &params.log_scales);
+  ZeroFill(4 * n, &params.quats);
+  ZeroFill(n, &params.opacity_logits);
+  ZeroFill(3 * static_cast<size_t>(params.sh_coeffs()) * n, &params.sh);
+  ZeroFill(2 * n, &mean2d);
 }
 
 void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, ProjectedSurfels* out,

@@ -176,13 +176,16 @@ inline void SumEntriesPerPrimitive(const TileBins& bins, const std::vector<float
 inline void ReduceEntryGradients(const TileBins& bins, const std::vector<uint32_t>& tile_used,
                                  const std::vector<float>& entry_grads, int stride, size_t num,
                                  std::vector<float>* out) {
-  out->assign(num * stride, 0.0f);
+  out->resize(num * stride);
   const int threads = omp_get_max_threads();
 #pragma omp parallel num_threads(threads)
   {
     const int t = omp_get_thread_num();
     const uint32_t lo = static_cast<uint32_t>(num * t / threads),
                    hi = static_cast<uint32_t>(num * (t + 1) / threads);
+    // Each thread zeroes the rows it sums into (a serial fill left the others waiting).
+    std::fill(out->data() + static_cast<size_t>(lo) * stride,
+              out->data() + static_cast<size_t>(hi) * stride, 0.0f);
     for (int tile = 0; tile < bins.num_tiles(); ++tile) {
       const uint32_t begin = bins.tile_start[tile];
       for (uint32_t j = 0; j < tile_used[tile]; ++j) {
