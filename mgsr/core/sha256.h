@@ -8,4 +8,8 @@ namespace mgsr {
 
 std::string Sha256Hex(const std::string& bytes);
 
+// The same; `portable` true: without the processor's SHA instructions even where it has them
+// (Sha256Hex uses them when it can; tests compare the two).
+std::string Sha256HexWith(const std::string& bytes, bool portable);
+
 }  // namespace mgsr
