@@ -82,12 +82,16 @@ void PackGaussians(const ProjectedGaussians& p, std::vector<float>* packed) {
   }
 }
 
-// Copies the packed rows of a tile's Gaussians into one contiguous buffer first: the independent
-// loads overlap their cache misses, which the compute-heavy pixel loop would otherwise serialise.
-void GatherTile(const float* packed, const uint32_t* ids, int n, std::vector<float>* buffer) {
+// Copies the packed rows of a tile's Gaussians [begin, end) into one contiguous buffer (sized for
+// all `n`) before the pixel loops read them: the independent loads overlap their cache misses,
+// which the compute-heavy pixel loop would otherwise serialise. The passes gather only the entries
+// they reach: the forward 32 at a time, as it stops once the tile is saturated; the backward those
+// in front of the last blended one.
+void GatherTile(const float* packed, const uint32_t* ids, int n, int begin, int end,
+                std::vector<float>* buffer) {
   buffer->resize(static_cast<size_t>(n) * kNumFields);
   float* out = buffer->data();
-  for (int j = 0; j < n; ++j) {
+  for (int j = begin; j < end; ++j) {
     std::memcpy(out + static_cast<size_t>(j) * kNumFields,
                 packed + static_cast<size_t>(ids[j]) * kNumFields, kNumFields * sizeof(float));
   }
@@ -450,7 +454,8 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
     const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
     float* const weights = o.record_contribution ? entry_weight.data() + begin : nullptr;
     std::vector<float>& buffer = scratch->tile_data[thread];
-    GatherTile(packed, bins.ids.data() + begin, n, &buffer);
+    const uint32_t* ids = bins.ids.data() + begin;
+    buffer.resize(static_cast<size_t>(n) * kNumFields);
     const float* f = buffer.data();
     const int x0 = tx * kTileSize, y0 = ty * kTileSize;
     const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
@@ -470,6 +475,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
         for (int k = 0; k < kTilePixels; ++k) any += st[aLiveT][k] + st[aLiveR][k];
         if (any == 0) break;
       }
+      if ((j & 31) == 0) GatherTile(packed, ids, n, j, std::min(n, j + 32), &buffer);
       const Splat s(f + static_cast<size_t>(j) * kNumFields);
       if (!(s.min_power < 0.0f)) continue;  // too transparent to reach 1/255 anywhere
       int ya, yb;
@@ -544,8 +550,6 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
       if (n == 0) continue;
       const uint32_t* ids = bins.ids.data() + begin;
       std::vector<float>& buffer = scratch->tile_data[thread];
-      GatherTile(packed, ids, n, &buffer);
-      const float* f = buffer.data();
       float* tg = scratch->entry_grads.data() + static_cast<size_t>(begin) * kGradStride;
       const int x0 = tx * kTileSize, y0 = ty * kTileSize;
       const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
@@ -592,6 +596,8 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
           max_last = std::max(max_last, std::max(lt, lr));
         }
       }
+      GatherTile(packed, ids, n, 0, max_last, &buffer);
+      const float* f = buffer.data();
       for (int j = max_last - 1; j >= 0; --j) {
         const Splat s(f + static_cast<size_t>(j) * kNumFields);
         float* dst = tg + static_cast<size_t>(j) * kGradStride;

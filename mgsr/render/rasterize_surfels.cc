@@ -71,10 +71,14 @@ enum GradField {
   kGradStride
 };
 
-void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, std::vector<float>* buffer) {
+// Gathers the fields of a tile's surfels [begin, end) (of n: field q of entry j at q * n + j).
+// The passes gather only the entries they reach: the forward 32 at a time, as it stops once the
+// tile is saturated; the backward those in front of the last blended one.
+void GatherTile(const ProjectedSurfels& p, const uint32_t* ids, int n, int begin, int end,
+                std::vector<float>* buffer) {
   buffer->resize(static_cast<size_t>(kNumFields) * n);
   float* f = buffer->data();
-  for (int j = 0; j < n; ++j) {
+  for (int j = begin; j < end; ++j) {
     const uint32_t g = ids[j];
     for (int q = 0; q < 9; ++q) f[(kTu0 + q) * n + j] = p.M[9 * g + q];
     f[kMx * n + j] = p.center[2 * g];
@@ -543,7 +547,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
     float* const weights = o.record_contribution ? entry_weight.data() + begin : nullptr;
     std::vector<float>& buffer = scratch->tile_data[thread];
     const uint32_t* ids = bins.ids.data() + begin;
-    GatherTile(p, ids, n, &buffer);
+    buffer.resize(static_cast<size_t>(kNumFields) * n);
     const float* f = buffer.data();
     const int x0 = tx * kTileSize, y0 = ty * kTileSize;
     const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
@@ -559,6 +563,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
         for (int k = 0; k < kTilePixels; ++k) any += st[aLive][k];
         if (any == 0) break;
       }
+      if ((j & 31) == 0) GatherTile(p, ids, n, j, std::min(n, j + 32), &buffer);
       Surfel s(f, n, j, inv_square);
       if (!(s.op > kMinAlpha)) continue;
       if (area_preserving) s.low_pass = low_pass[static_cast<size_t>(ids[j]) * kLowPassStride];
@@ -653,9 +658,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
       if (n == 0) continue;
       std::vector<float>& buffer = scratch->tile_data[thread];
       const uint32_t* ids = bins.ids.data() + begin;
-      GatherTile(p, ids, n, &buffer);
       float* tg = scratch->entry_grads.data() + static_cast<size_t>(begin) * kGradStride;
-      const float* f = buffer.data();
       const int x0 = tx * kTileSize, y0 = ty * kTileSize;
       const int x_end = std::min(W, x0 + kTileSize), y_end = std::min(H, y0 + kTileSize);
       const TileLanes tl(x0, x_end - x0);
@@ -711,6 +714,8 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
           max_last = std::max(max_last, static_cast<int>(r.last[pix]));
         }
       }
+      GatherTile(p, ids, n, 0, max_last, &buffer);
+      const float* f = buffer.data();
       for (int j = max_last - 1; j >= 0; --j) {
         Surfel s(f, n, j, inv_square);
         if (!(s.op >
