@@ -31,7 +31,7 @@ void GaussianRenderer::Backward(const GaussianModel& model, const GaussianRender
     RasterizeGaussiansBackward(projected_, bins_, options, render, grad, &d_projected_, &scratch_);
   }
   ProfileScope scope("projection & SH backward");
-  grads->ResizeAndZero(model);
+  grads->ResizeForBackward(model);
   ProjectGaussiansBackward(model, options.camera, options.sh_degree, options.reflection, projected_,
                            d_projected_, grads);
 }

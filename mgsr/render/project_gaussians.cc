@@ -91,11 +91,16 @@ void ProjectedGaussiansGrad::ResizeAndZero(size_t n) {
 }
 
 void GaussianGradients::ResizeAndZero(const GaussianModel& model) {
+  ResizeForBackward(model);
+  for (auto* v : {&params.sh, &params.ref_sh}) ZeroFill(v->size(), v);
+}
+
+void GaussianGradients::ResizeForBackward(const GaussianModel& model) {
   params.max_sh_degree = model.max_sh_degree;
   const size_t n = model.size(), k3 = 3 * static_cast<size_t>(params.sh_coeffs());
   for (auto* v : {&params.means, &params.log_scales}) ZeroFill(3 * n, v);
   ZeroFill(4 * n, &params.quats);
-  for (auto* v : {&params.sh, &params.ref_sh}) ZeroFill(k3 * n, v);
+  for (auto* v : {&params.sh, &params.ref_sh}) v->resize(k3 * n);
   for (auto* v : {&params.opacity_logits, &params.ref_opacity_logits, &params.beta_logits})
     ZeroFill(n, v);
   ZeroFill(2 * n, &mean2d);
@@ -190,9 +195,16 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
   const int degree = std::min(sh_degree, m.max_sh_degree);
   const int n_coeffs = (degree + 1) * (degree + 1);
   GaussianModel& G = grads->params;
+  const size_t row = static_cast<size_t>(K) * 3;  // SH floats per Gaussian
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
-    if (p.radius[i] <= 0) continue;
+    float* const d_sh = &G.sh[row * i];
+    float* const d_ref_sh = &G.ref_sh[row * i];
+    if (p.radius[i] <= 0) {  // not drawn: its SH rows are written zero, the rest stays zero
+      std::fill(d_sh, d_sh + row, 0.0f);
+      std::fill(d_ref_sh, d_ref_sh + row, 0.0f);
+      continue;
+    }
     grads->mean2d[2 * i] += d.mean2d[2 * i];
     grads->mean2d[2 * i + 1] += d.mean2d[2 * i + 1];
     // Activations.
@@ -206,13 +218,16 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
     float sum_dir[3] = {0, 0, 0}, d_v[3];  // d/d dir from both colours
     float basis[kMaxShCoeffs], dbasis[kMaxShCoeffs][3];
     ShBasisWithGradient(degree, &p.view_dir[3 * i], basis, dbasis);
-    EvalShColorBackwardFromBasis(n_coeffs, basis, dbasis, &m.sh[static_cast<size_t>(i) * K * 3],
-                                 &p.clamp_t[3 * i], &d.color_t[3 * i],
-                                 &G.sh[static_cast<size_t>(i) * K * 3], sum_dir);
+    // The coefficients above the current degree get zero.
+    WriteShColorBackwardFromBasis(n_coeffs, basis, dbasis, &m.sh[row * i], &p.clamp_t[3 * i],
+                                  &d.color_t[3 * i], d_sh, sum_dir);
+    std::fill(d_sh + 3 * n_coeffs, d_sh + row, 0.0f);
     if (reflection) {
-      EvalShColorBackwardFromBasis(
-          n_coeffs, basis, dbasis, &m.ref_sh[static_cast<size_t>(i) * K * 3], &p.clamp_r[3 * i],
-          &d.color_r[3 * i], &G.ref_sh[static_cast<size_t>(i) * K * 3], sum_dir);
+      WriteShColorBackwardFromBasis(n_coeffs, basis, dbasis, &m.ref_sh[row * i], &p.clamp_r[3 * i],
+                                    &d.color_r[3 * i], d_ref_sh, sum_dir);
+      std::fill(d_ref_sh + 3 * n_coeffs, d_ref_sh + row, 0.0f);
+    } else {
+      std::fill(d_ref_sh, d_ref_sh + row, 0.0f);
     }
     const Eigen::Vector3f mean(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
     const Eigen::Vector3f v = mean - center;

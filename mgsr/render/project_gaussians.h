@@ -64,6 +64,9 @@ struct GaussianGradients {
   std::vector<float> mean2d;  // N x 2
 
   void ResizeAndZero(const GaussianModel& model);
+  // The same, except that the SH blocks (sh, ref_sh) are only sized: ProjectGaussiansBackward
+  // writes every row of them.
+  void ResizeForBackward(const GaussianModel& model);
 };
 
 // |d loss / d screen mean| per Gaussian in NDC units (the pixel gradient times W/2 and H/2), the
@@ -72,7 +75,8 @@ struct GaussianGradients {
 void ScreenGradientNorms(const std::vector<float>& mean2d_grads, int width, int height,
                          std::vector<float>* norms);
 
-// Adds the chain from projected-quantity gradients to every raw parameter into `grads`.
+// Adds the chain from projected-quantity gradients to every raw parameter into `grads`; the SH
+// blocks' rows it writes instead (so they need no zeroing: GaussianGradients::ResizeForBackward).
 void ProjectGaussiansBackward(const GaussianModel& model, const Camera& camera, int sh_degree,
                               bool reflection, const ProjectedGaussians& projected,
                               const ProjectedGaussiansGrad& d_projected, GaussianGradients* grads);

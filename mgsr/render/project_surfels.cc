@@ -98,13 +98,18 @@ void ProjectedSurfelsGrad::ResizeAndZero(size_t n) {
 }
 
 void SurfelGradients::ResizeAndZero(const SurfelModel& model) {
+  ResizeForBackward(model);
+  ZeroFill(params.sh.size(), &params.sh);
+}
+
+void SurfelGradients::ResizeForBackward(const SurfelModel& model) {
   params.max_sh_degree = model.max_sh_degree;
   const size_t n = model.size();
   ZeroFill(3 * n, &params.means);
   ZeroFill(2 * n, &params.log_scales);
   ZeroFill(4 * n, &params.quats);
   ZeroFill(n, &params.opacity_logits);
-  ZeroFill(3 * static_cast<size_t>(params.sh_coeffs()) * n, &params.sh);
+  params.sh.resize(3 * static_cast<size_t>(params.sh_coeffs()) * n);
   ZeroFill(2 * n, &mean2d);
 }
 
@@ -200,17 +205,26 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
   const int Kc = m.sh_coeffs();
   const int degree = std::min(sh_degree, m.max_sh_degree);
   SurfelModel& G = grads->params;
+  const size_t row = static_cast<size_t>(Kc) * 3;  // SH floats per surfel
+  const int n_coeffs = (degree + 1) * (degree + 1);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
-    if (p.radius[i] <= 0) continue;
+    float* const d_sh = &G.sh[row * i];
+    if (p.radius[i] <= 0) {  // not drawn: its SH row is written zero, the rest stays zero
+      std::fill(d_sh, d_sh + row, 0.0f);
+      continue;
+    }
     SurfelGeometry g;
     ComputeGeometry(m, i, Rc, tc, K, &g);
     G.opacity_logits[i] += d.opacity[i] * SigmoidGradFromValue(p.opacity[i]);
     // Colour -> SH and the view direction.
-    float d_dir[3], d_v[3];
-    EvalShColorBackward(degree, &m.sh[static_cast<size_t>(i) * Kc * 3], &p.view_dir[3 * i],
-                        &p.clamp[3 * i], &d.color[3 * i], &G.sh[static_cast<size_t>(i) * Kc * 3],
-                        d_dir);
+    // (The coefficients above the current degree get zero.)
+    float d_dir[3] = {0, 0, 0}, d_v[3];
+    float basis[kMaxShCoeffs], dbasis[kMaxShCoeffs][3];
+    ShBasisWithGradient(degree, &p.view_dir[3 * i], basis, dbasis);
+    WriteShColorBackwardFromBasis(n_coeffs, basis, dbasis, &m.sh[row * i], &p.clamp[3 * i],
+                                  &d.color[3 * i], d_sh, d_dir);
+    std::fill(d_sh + 3 * n_coeffs, d_sh + row, 0.0f);
     const Eigen::Vector3f v = g.p - center;
     NormalizeBackward(v.data(), d_dir, d_v);
     Eigen::Vector3f d_p(d_v[0], d_v[1], d_v[2]);

@@ -54,6 +54,8 @@ struct SurfelGradients {
   SurfelModel params;         // d loss / d raw parameter, model layout
   std::vector<float> mean2d;  // N x 2: the densification statistic of reference 3.8(5), pixels
   void ResizeAndZero(const SurfelModel& model);
+  // The same, except that the SH block is only sized: ProjectSurfelsBackward writes every row.
+  void ResizeForBackward(const SurfelModel& model);
 };
 
 // filter_sigma: the screen low-pass's sigma in pixels; the screen radius is at least 3 of them.

@@ -92,19 +92,41 @@ void EvalShColor(int degree, const float* coeffs, const float dir[3], float rgb[
   EvalShColorFromBasis((degree + 1) * (degree + 1), b, coeffs, rgb, clamped);
 }
 
-void EvalShColorBackwardFromBasis(int n, const float b[kMaxShCoeffs],
-                                  const float g[kMaxShCoeffs][3], const float* coeffs,
-                                  const uint8_t clamped[3], const float d_rgb[3], float* d_coeffs,
-                                  float d_dir[3]) {
+namespace {
+
+// kWrite: d_coeffs = 0 + gradient, else d_coeffs += gradient (the same bits on a zeroed row).
+template <bool kWrite>
+void ShColorBackwardFromBasis(int n, const float b[kMaxShCoeffs], const float g[kMaxShCoeffs][3],
+                              const float* coeffs, const uint8_t clamped[3], const float d_rgb[3],
+                              float* d_coeffs, float d_dir[3]) {
   const float dc[3] = {clamped[0] ? 0.0f : d_rgb[0], clamped[1] ? 0.0f : d_rgb[1],
                        clamped[2] ? 0.0f : d_rgb[2]};
   float acc[4][3] = {};
   for (int k = 0; k < n; ++k) {
     const float s = coeffs[k * 3] * dc[0] + coeffs[k * 3 + 1] * dc[1] + coeffs[k * 3 + 2] * dc[2];
-    for (int c = 0; c < 3; ++c) d_coeffs[k * 3 + c] += b[k] * dc[c];
+    for (int c = 0; c < 3; ++c) {
+      const float before = kWrite ? 0.0f : d_coeffs[k * 3 + c];
+      d_coeffs[k * 3 + c] = before + b[k] * dc[c];
+    }
     for (int c = 0; c < 3; ++c) acc[k & 3][c] += s * g[k][c];
   }
   for (int c = 0; c < 3; ++c) d_dir[c] += (acc[0][c] + acc[1][c]) + (acc[2][c] + acc[3][c]);
+}
+
+}  // namespace
+
+void EvalShColorBackwardFromBasis(int n, const float b[kMaxShCoeffs],
+                                  const float g[kMaxShCoeffs][3], const float* coeffs,
+                                  const uint8_t clamped[3], const float d_rgb[3], float* d_coeffs,
+                                  float d_dir[3]) {
+  ShColorBackwardFromBasis<false>(n, b, g, coeffs, clamped, d_rgb, d_coeffs, d_dir);
+}
+
+void WriteShColorBackwardFromBasis(int n, const float b[kMaxShCoeffs],
+                                   const float g[kMaxShCoeffs][3], const float* coeffs,
+                                   const uint8_t clamped[3], const float d_rgb[3], float* d_coeffs,
+                                   float d_dir[3]) {
+  ShColorBackwardFromBasis<true>(n, b, g, coeffs, clamped, d_rgb, d_coeffs, d_dir);
 }
 
 void EvalShColorBackward(int degree, const float* coeffs, const float dir[3],

@@ -39,6 +39,15 @@ void EvalShColorBackwardFromBasis(int n, const float basis[kMaxShCoeffs],
                                   const uint8_t clamped[3], const float d_rgb[3], float* d_coeffs,
                                   float d_dir[3]);
 
+// The same, but *writes* d/d coeffs: rows k < n get 0 + their gradient (the bits the adding form
+// gives on a zeroed row), rows from n on are left alone. The backward passes write the SH blocks'
+// gradients whole instead of zeroing them first and adding (10 MB per 3DGS step: two passes over
+// memory saved).
+void WriteShColorBackwardFromBasis(int n, const float basis[kMaxShCoeffs],
+                                   const float dbasis[kMaxShCoeffs][3], const float* coeffs,
+                                   const uint8_t clamped[3], const float d_rgb[3], float* d_coeffs,
+                                   float d_dir[3]);
+
 // dir = v / |v|: given d/d dir, returns d/d v.
 void NormalizeBackward(const float v[3], const float d_dir[3], float d_v[3]);
 

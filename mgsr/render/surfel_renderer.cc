@@ -31,7 +31,7 @@ void SurfelRenderer::Backward(const SurfelModel& model, const SurfelRenderOption
     RasterizeSurfelsBackward(projected_, bins_, options, render, grad, &d_projected_, &scratch_);
   }
   ProfileScope scope("projection & SH backward");
-  grads->ResizeAndZero(model);
+  grads->ResizeForBackward(model);
   ProjectSurfelsBackward(model, options.camera, options.sh_degree, projected_, d_projected_, grads);
 }
 

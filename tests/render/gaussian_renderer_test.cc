@@ -330,5 +330,44 @@ TEST(GaussianRendererThreadTest, ResultsDoNotDependOnTheThreadCount) {
   EXPECT_EQ(g[0].mean2d, g[1].mean2d);
 }
 
+// The backward writes the SH blocks' gradient rows instead of adding to zeroed ones: whatever the
+// buffers held before (here NaN), every row comes out as a fresh buffer's, for Gaussians out of
+// view, coefficients above the current degree and the reflected colour when it is off.
+TEST(GaussianRendererGradientTest, BackwardWritesEveryRowWhateverTheBuffersHeld) {
+  const Camera cam = testing::RenderTestCamera(32, 32);
+  GaussianModel m = RandomScene(40, 31);
+  for (int i = 0; i < 5; ++i) m.means[3 * i + 2] = -50.0f;  // behind the camera: not drawn
+  GaussianRenderGrad grad;
+  grad.color = Image(32, 32, 3);
+  Rng rng(5);
+  for (size_t i = 0; i < grad.color.size(); ++i)
+    grad.color.data()[i] = static_cast<float>(rng.Uniform(-1, 1));
+  for (const bool reflection : {true, false}) {
+    for (const int degree : {0, 1, 3}) {
+      GaussianRenderOptions o = Options(cam, reflection);
+      o.sh_degree = degree;
+      GaussianRenderer renderer;
+      GaussianRender out;
+      renderer.Forward(m, o, &out);
+      GaussianGradients fresh, reused;
+      renderer.Backward(m, o, out, grad, &fresh);
+      reused.ResizeAndZero(m);
+      for (const ParamBlock& b : reused.params.Blocks())
+        std::fill(b.data->begin(), b.data->end(), std::nanf(""));
+      renderer.Backward(m, o, out, grad, &reused);
+      const std::vector<ParamBlock> a = fresh.params.Blocks(), b = reused.params.Blocks();
+      for (size_t k = 0; k < a.size(); ++k) {
+        EXPECT_EQ(*a[k].data, *b[k].data)
+            << a[k].name << ", degree " << degree << ", reflection " << reflection;
+      }
+      // And a fresh buffer's rows are zero where nothing reaches them.
+      for (size_t i = 0; i < 5 * fresh.params.sh.size() / m.size(); ++i) {
+        ASSERT_EQ(fresh.params.sh[i], 0.0f);
+        ASSERT_EQ(fresh.params.ref_sh[i], 0.0f);
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace mgsr

@@ -512,5 +512,37 @@ TEST(SurfelRendererEdgeCaseTest, EmptyBehindWholeImageAndDegenerate) {
   check(weird, "degenerate");
 }
 
+// The backward writes the SH block's gradient rows instead of adding to zeroed ones: whatever the
+// buffers held before (here NaN), every row comes out as a fresh buffer's, for surfels out of view
+// and coefficients above the current degree.
+TEST(SurfelRendererTest, BackwardWritesEveryRowWhateverTheBuffersHeld) {
+  const Camera cam = testing::RenderTestCamera(32, 32);
+  SurfelModel m = RandomSurfels(40, 31);
+  for (int i = 0; i < 5; ++i) m.means[3 * i + 2] = -50.0f;  // behind the camera: not drawn
+  SurfelRenderGrad grad;
+  grad.color = Image(32, 32, 3);
+  Rng rng(5);
+  for (size_t i = 0; i < grad.color.size(); ++i)
+    grad.color.data()[i] = static_cast<float>(rng.Uniform(-1, 1));
+  for (const int degree : {0, 1, 3}) {
+    SurfelRenderOptions o = Options(cam);
+    o.sh_degree = degree;
+    SurfelRenderer renderer;
+    SurfelRender out;
+    renderer.Forward(m, o, &out);
+    SurfelGradients fresh, reused;
+    renderer.Backward(m, o, out, grad, &fresh);
+    reused.ResizeAndZero(m);
+    for (const ParamBlock& b : reused.params.Blocks())
+      std::fill(b.data->begin(), b.data->end(), std::nanf(""));
+    renderer.Backward(m, o, out, grad, &reused);
+    const std::vector<ParamBlock> a = fresh.params.Blocks(), b = reused.params.Blocks();
+    for (size_t k = 0; k < a.size(); ++k)
+      EXPECT_EQ(*a[k].data, *b[k].data) << a[k].name << ", degree " << degree;
+    for (size_t i = 0; i < 5 * fresh.params.sh.size() / m.size(); ++i)
+      ASSERT_EQ(fresh.params.sh[i], 0.0f);
+  }
+}
+
 }  // namespace
 }  // namespace mgsr
