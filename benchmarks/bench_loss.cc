@@ -98,6 +98,6 @@ BENCHMARK(BM_EdgeAwareTv)
     ->ArgsProduct({{256, 512}, {1, 3}})
     ->ArgNames({"width", "channels"})
     ->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_Dssim)->Arg(256)->Arg(512)->ArgName("width")->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Dssim)->Arg(128)->Arg(256)->Arg(512)->ArgName("width")->Unit(benchmark::kMillisecond);
 
 }  // namespace

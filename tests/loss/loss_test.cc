@@ -390,9 +390,11 @@ TEST(LossValueTest, HandComputedCases) {
 
 // The fused SSIM kernel behind DssimLoss: its value against the direct window sum, its gradient
 // against central differences (borders included), float against double, and the same bits with
-// one thread as with several. 300 x 230 takes the threaded path, 7 x 4 is smaller than the window.
+// one thread as with several. 300 x 230 and 130 x 129 take the threaded path (from 16,384 pixels:
+// a 128 px view), 7 x 4 is smaller than the window.
 TEST(DssimPlaneTest, MatchesTheDirectWindowAndCentralDifferencesOnAnyThreadCount) {
-  for (const auto& [w, h] : std::vector<std::pair<int, int>>{{300, 230}, {7, 4}, {23, 17}}) {
+  for (const auto& [w, h] :
+       std::vector<std::pair<int, int>>{{300, 230}, {130, 129}, {7, 4}, {23, 17}}) {
     SCOPED_TRACE(std::to_string(w) + " x " + std::to_string(h));
     Rng rng(w * 31 + h);
     const size_t n = static_cast<size_t>(w) * h;
