@@ -520,25 +520,16 @@ TEST(SurfelRendererTest, BackwardWritesEveryRowWhateverTheBuffersHeld) {
   SurfelModel m = RandomSurfels(40, 31);
   for (int i = 0; i < 5; ++i) m.means[3 * i + 2] = -50.0f;  // behind the camera: not drawn
   SurfelRenderGrad grad;
-  grad.color = Image(32, 32, 3);
-  Rng rng(5);
-  for (size_t i = 0; i < grad.color.size(); ++i)
-    grad.color.data()[i] = static_cast<float>(rng.Uniform(-1, 1));
+  grad.color = testing::RandomImage(32, 32, 3, 5);
   for (const int degree : {0, 1, 3}) {
     SurfelRenderOptions o = Options(cam);
     o.sh_degree = degree;
     SurfelRenderer renderer;
     SurfelRender out;
     renderer.Forward(m, o, &out);
-    SurfelGradients fresh, reused;
-    renderer.Backward(m, o, out, grad, &fresh);
-    reused.ResizeAndZero(m);
-    for (const ParamBlock& b : reused.params.Blocks())
-      std::fill(b.data->begin(), b.data->end(), std::nanf(""));
-    renderer.Backward(m, o, out, grad, &reused);
-    const std::vector<ParamBlock> a = fresh.params.Blocks(), b = reused.params.Blocks();
-    for (size_t k = 0; k < a.size(); ++k)
-      EXPECT_EQ(*a[k].data, *b[k].data) << a[k].name << ", degree " << degree;
+    const SurfelGradients fresh =
+        testing::ExpectBackwardWritesEveryRow<SurfelRenderer, SurfelGradients>(
+            &renderer, m, o, out, grad, ", degree " + std::to_string(degree));
     for (size_t i = 0; i < 5 * fresh.params.sh.size() / m.size(); ++i)
       ASSERT_EQ(fresh.params.sh[i], 0.0f);
   }
