@@ -20,11 +20,11 @@ namespace {
 // rate x 1e-15. A pass every 64 steps costs far less than a test per entry in every step (the
 // update loop is ~30% slower with one).
 constexpr int64_t kFlushInterval = 64;
+constexpr float kFlushMoment = 1e-30f;
 // Blocks from this many entries are updated on all threads. (It was 100,000: a model's small
 // blocks, positions, scales, rotations and opacities, 270k entries in all for 25k Gaussians, then
 // ran on one thread while the others waited.)
 constexpr int64_t kParallelFrom = 16384;
-constexpr float kFlushMoment = 1e-30f;
 
 void FlushTinyMoments(std::vector<float>* m, std::vector<float>* v) {
   const int64_t n = static_cast<int64_t>(m->size());
