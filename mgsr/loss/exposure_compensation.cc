@@ -1,5 +1,7 @@
 #include "mgsr/loss/exposure_compensation.h"
 
+#include <cstdint>
+
 #include "mgsr/loss/loss_util.h"
 
 namespace mgsr {
@@ -43,6 +45,9 @@ bool ColorTransformParameterIsFree(ExposureMode mode, int index) {
   return false;
 }
 
+// Element-wise loops over at least this many pixels (a 128 px view) run on all threads.
+constexpr int64_t kParallelFrom = 16384;
+
 template <typename T>
 void ApplyColorTransform(const ColorTransform& p, const ImageT<T>& in, const ImageT<T>* mask,
                          ImageT<T>* out) {
@@ -54,7 +59,9 @@ void ApplyColorTransform(const ColorTransform& p, const ImageT<T>& in, const Ima
     const T a0 = static_cast<T>(p[3 * o]), a1 = static_cast<T>(p[3 * o + 1]),
             a2 = static_cast<T>(p[3 * o + 2]), b = static_cast<T>(p[9 + o]);
     T* dst = out->plane(o);
-    for (size_t i = 0; i < n; ++i) {
+    const int64_t count = static_cast<int64_t>(n);
+#pragma omp parallel for schedule(static) if (count >= kParallelFrom)
+    for (int64_t i = 0; i < count; ++i) {
       const T mapped = a0 * c[0][i] + a1 * c[1][i] + a2 * c[2][i] + b;
       dst[i] = m != nullptr ? m[i] * mapped + (T(1) - m[i]) * c[o][i] : mapped;
     }
@@ -67,20 +74,32 @@ void ColorTransformBackward(const ColorTransform& p, const ImageT<T>& in, const 
   const size_t n = in.plane_size();
   const T* m = mask != nullptr ? mask->plane(0) : nullptr;
   ColorTransform dp{};
+  // d out_o / d c_k = m A_ok + (1 - m) [o == k];  d out_o / d A_ok = m c_k;  d out_o / d b_o = m.
+  // The colour's gradient, pixel by pixel, on all threads (each pixel adds o = 0, 1, 2 in turn);
+  // the parameters' sums after it on one thread, in the order that fixes their bits.
+  const int64_t count = static_cast<int64_t>(n);
   for (int o = 0; o < 3; ++o) {
     const T* g = d_out.plane(o);
-    // d out_o / d c_k = m A_ok + (1 - m) [o == k];  d out_o / d A_ok = m c_k;  d out_o / d b_o = m.
-    double sums[4] = {0, 0, 0, 0};
     for (int k = 0; k < 3; ++k) {
       const T a = static_cast<T>(p[3 * o + k]);
-      const T* c = in.plane(k);
       T* dc = d_in->plane(k);
+#pragma omp parallel for schedule(static) if (count >= kParallelFrom)
+      for (int64_t i = 0; i < count; ++i) {
+        const T w = m != nullptr ? m[i] : T(1);
+        const T identity = (o == k) ? (T(1) - w) : T(0);
+        dc[i] += g[i] * (w * a + identity);
+      }
+    }
+  }
+  for (int o = 0; o < 3; ++o) {
+    const T* g = d_out.plane(o);
+    double sums[4] = {0, 0, 0, 0};
+    for (int k = 0; k < 3; ++k) {
+      const T* c = in.plane(k);
       double s = 0;
 #pragma omp simd reduction(+ : s)
       for (size_t i = 0; i < n; ++i) {
         const T w = m != nullptr ? m[i] : T(1);
-        const T identity = (o == k) ? (T(1) - w) : T(0);
-        dc[i] += g[i] * (w * a + identity);
         s += static_cast<double>(g[i] * w * c[i]);
       }
       sums[k] = s;
