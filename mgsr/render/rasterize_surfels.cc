@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "mgsr/core/zero_fill.h"
 #include "mgsr/render/simd16.h"
 
 namespace mgsr {
@@ -129,7 +130,7 @@ constexpr int kLowPassStride = 10;
 void LowPassTable(const ProjectedSurfels& p, float inv_square, bool with_gradient,
                   std::vector<float>* table) {
   const int64_t n = static_cast<int64_t>(p.size());
-  table->assign(static_cast<size_t>(n) * kLowPassStride, 0.0f);
+  ZeroFill(static_cast<size_t>(n) * kLowPassStride, table);
   float* out = table->data();
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < n; ++i) {
