@@ -70,18 +70,40 @@ void ShBasisWithGradient(int degree, const float d[3], float b[kMaxShCoeffs],
   set(15, kC3[6] * (3 * xx - 3 * yy), -6 * kC3[6] * x * y, 0);
 }
 
+namespace {
+
 // The sums over coefficients run in four interleaved partial sums (k mod 4): sixteen dependent
-// multiply-adds per channel would otherwise be one long latency chain per primitive.
-void EvalShColorFromBasis(int n, const float b[kMaxShCoeffs], const float* coeffs, float rgb[3],
-                          uint8_t clamped[3]) {
+// multiply-adds per channel would otherwise be one long latency chain per primitive. The count is
+// a template argument so the loops unroll and the twelve partial sums stay in registers (with a
+// run-time count they lived on the stack: a store-to-load chain per coefficient).
+template <int N>
+void EvalFromBasis(const float* __restrict b, const float* __restrict coeffs, float rgb[3],
+                   uint8_t clamped[3]) {
   float acc[4][3] = {};
-  for (int k = 0; k < n; ++k) {
+#pragma GCC unroll 16
+  for (int k = 0; k < N; ++k) {
     for (int c = 0; c < 3; ++c) acc[k & 3][c] += b[k] * coeffs[k * 3 + c];
   }
   for (int c = 0; c < 3; ++c) {
     const float v = 0.5f + ((acc[0][c] + acc[1][c]) + (acc[2][c] + acc[3][c]));
     clamped[c] = v < 0.0f;
     rgb[c] = v < 0.0f ? 0.0f : v;
+  }
+}
+
+}  // namespace
+
+void EvalShColorFromBasis(int n, const float b[kMaxShCoeffs], const float* coeffs, float rgb[3],
+                          uint8_t clamped[3]) {
+  switch (n) {
+    case 1:
+      return EvalFromBasis<1>(b, coeffs, rgb, clamped);
+    case 4:
+      return EvalFromBasis<4>(b, coeffs, rgb, clamped);
+    case 9:
+      return EvalFromBasis<9>(b, coeffs, rgb, clamped);
+    default:
+      return EvalFromBasis<16>(b, coeffs, rgb, clamped);
   }
 }
 
@@ -95,14 +117,16 @@ void EvalShColor(int degree, const float* coeffs, const float dir[3], float rgb[
 namespace {
 
 // kWrite: d_coeffs = 0 + gradient, else d_coeffs += gradient (the same bits on a zeroed row).
-template <bool kWrite>
-void ShColorBackwardFromBasis(int n, const float b[kMaxShCoeffs], const float g[kMaxShCoeffs][3],
-                              const float* coeffs, const uint8_t clamped[3], const float d_rgb[3],
-                              float* d_coeffs, float d_dir[3]) {
+// N as in EvalFromBasis.
+template <bool kWrite, int N>
+void ShColorBackwardFromBasis(const float* __restrict b, const float (*__restrict g)[3],
+                              const float* __restrict coeffs, const uint8_t clamped[3],
+                              const float d_rgb[3], float* __restrict d_coeffs, float d_dir[3]) {
   const float dc[3] = {clamped[0] ? 0.0f : d_rgb[0], clamped[1] ? 0.0f : d_rgb[1],
                        clamped[2] ? 0.0f : d_rgb[2]};
   float acc[4][3] = {};
-  for (int k = 0; k < n; ++k) {
+#pragma GCC unroll 16
+  for (int k = 0; k < N; ++k) {
     const float s = coeffs[k * 3] * dc[0] + coeffs[k * 3 + 1] * dc[1] + coeffs[k * 3 + 2] * dc[2];
     for (int c = 0; c < 3; ++c) {
       const float before = kWrite ? 0.0f : d_coeffs[k * 3 + c];
@@ -111,6 +135,22 @@ void ShColorBackwardFromBasis(int n, const float b[kMaxShCoeffs], const float g[
     for (int c = 0; c < 3; ++c) acc[k & 3][c] += s * g[k][c];
   }
   for (int c = 0; c < 3; ++c) d_dir[c] += (acc[0][c] + acc[1][c]) + (acc[2][c] + acc[3][c]);
+}
+
+template <bool kWrite>
+void ShColorBackwardFromBasis(int n, const float b[kMaxShCoeffs], const float g[kMaxShCoeffs][3],
+                              const float* coeffs, const uint8_t clamped[3], const float d_rgb[3],
+                              float* d_coeffs, float d_dir[3]) {
+  switch (n) {
+    case 1:
+      return ShColorBackwardFromBasis<kWrite, 1>(b, g, coeffs, clamped, d_rgb, d_coeffs, d_dir);
+    case 4:
+      return ShColorBackwardFromBasis<kWrite, 4>(b, g, coeffs, clamped, d_rgb, d_coeffs, d_dir);
+    case 9:
+      return ShColorBackwardFromBasis<kWrite, 9>(b, g, coeffs, clamped, d_rgb, d_coeffs, d_dir);
+    default:
+      return ShColorBackwardFromBasis<kWrite, 16>(b, g, coeffs, clamped, d_rgb, d_coeffs, d_dir);
+  }
 }
 
 }  // namespace

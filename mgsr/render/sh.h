@@ -21,8 +21,9 @@ void ShBasisWithGradient(int degree, const float dir[3], float basis[kMaxShCoeff
 void EvalShColor(int degree, const float* coeffs, const float dir[3], float rgb[3],
                  uint8_t clamped[3]);
 
-// The same from basis values computed once (ShBasis) for `n` = (degree + 1)^2 coefficients: a
-// primitive with two colour sets (transmitted and reflected) shares one basis.
+// The same from basis values computed once (ShBasis) for `n` = (degree + 1)^2 coefficients
+// (1, 4, 9 or 16; the FromBasis functions are compiled for these counts): a primitive with two
+// colour sets (transmitted and reflected) shares one basis.
 void EvalShColorFromBasis(int n, const float basis[kMaxShCoeffs], const float* coeffs, float rgb[3],
                           uint8_t clamped[3]);
 
