@@ -1,6 +1,7 @@
-// BM_GaussianForward / BM_GaussianForwardBackward: the 3DGS-branch render on an object-like scene
-// (a shell of radius 1 seen from distance 3, scales matched to the point spacing, SH degree 3,
-// reflection on). Arguments: image width (square images), Gaussian count, threads.
+// BM_GaussianForward / BM_GaussianForwardBackward (BM_GaussianStages: the latter per stage): the
+// 3DGS-branch render on an object-like scene (a shell of radius 1 seen from distance 3, scales
+// matched to the point spacing, SH degree 3, reflection on). Arguments: image width (square
+// images), Gaussian count, threads.
 #include <benchmark/benchmark.h>
 #include <omp.h>
 
@@ -56,7 +57,26 @@ void BM_GaussianForwardBackward(benchmark::State& state) {
   }
 }
 
+// The forward+backward above, timed per stage (StageCounters).
+void BM_GaussianStages(benchmark::State& state) {
+  const Fixture f = MakeFixture(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
+  omp_set_num_threads(static_cast<int>(state.range(2)));
+  mgsr::GaussianRenderer renderer;
+  mgsr::GaussianRender out;
+  mgsr::GaussianGradients grads;
+  renderer.Forward(f.model, f.options, &out);  // grows the buffers outside the timed stages
+  renderer.Backward(f.model, f.options, out, f.grad, &grads);
+  mgsr::bench::StageCounters stages;
+  for (auto _ : state) {
+    renderer.Forward(f.model, f.options, &out);
+    renderer.Backward(f.model, f.options, out, f.grad, &grads);
+    benchmark::DoNotOptimize(grads.params.means.data());
+  }
+  stages.Report(state);
+}
+
 BENCHMARK(BM_GaussianForward)->Apply(mgsr::bench::RenderBenchmarkArgs);
 BENCHMARK(BM_GaussianForwardBackward)->Apply(mgsr::bench::RenderBenchmarkArgs);
+BENCHMARK(BM_GaussianStages)->Apply(mgsr::bench::StageBenchmarkArgs);
 
 }  // namespace

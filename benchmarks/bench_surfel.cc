@@ -1,6 +1,7 @@
-// BM_SurfelForward / BM_SurfelForwardBackward: the 2DGS-branch render on an object-like scene
-// (surfels tangent to a shell of radius 1 seen from distance 3, scales matched to the spacing,
-// SH degree 3). Arguments: image width (square images), surfel count, threads.
+// BM_SurfelForward / BM_SurfelForwardBackward (BM_SurfelStages: the latter per stage): the
+// 2DGS-branch render on an object-like scene (surfels tangent to a shell of radius 1 seen from
+// distance 3, scales matched to the spacing, SH degree 3). Arguments: image width (square images),
+// surfel count, threads.
 #include <benchmark/benchmark.h>
 #include <omp.h>
 
@@ -60,7 +61,26 @@ void BM_SurfelForwardBackward(benchmark::State& state) {
   }
 }
 
+// The forward+backward above, timed per stage (StageCounters).
+void BM_SurfelStages(benchmark::State& state) {
+  const Fixture f = MakeFixture(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
+  omp_set_num_threads(static_cast<int>(state.range(2)));
+  mgsr::SurfelRenderer renderer;
+  mgsr::SurfelRender out;
+  mgsr::SurfelGradients grads;
+  renderer.Forward(f.model, f.options, &out);  // grows the buffers outside the timed stages
+  renderer.Backward(f.model, f.options, out, f.grad, &grads);
+  mgsr::bench::StageCounters stages;
+  for (auto _ : state) {
+    renderer.Forward(f.model, f.options, &out);
+    renderer.Backward(f.model, f.options, out, f.grad, &grads);
+    benchmark::DoNotOptimize(grads.params.means.data());
+  }
+  stages.Report(state);
+}
+
 BENCHMARK(BM_SurfelForward)->Apply(mgsr::bench::RenderBenchmarkArgs);
 BENCHMARK(BM_SurfelForwardBackward)->Apply(mgsr::bench::RenderBenchmarkArgs);
+BENCHMARK(BM_SurfelStages)->Apply(mgsr::bench::StageBenchmarkArgs);
 
 }  // namespace

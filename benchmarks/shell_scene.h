@@ -5,9 +5,12 @@
 #include <benchmark/benchmark.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
+#include <string>
 
 #include "mgsr/core/camera.h"
+#include "mgsr/core/profiler.h"
 #include "mgsr/core/rng.h"
 #include "mgsr/model/gaussian_model.h"
 #include "mgsr/model/surfel_model.h"
@@ -77,5 +80,41 @@ inline void RenderBenchmarkArgs(benchmark::internal::Benchmark* b) {
   }
   b->ArgNames({"width", "count", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
 }
+
+// The argument grid of the *Stages benchmarks: 256 px, 10k and 100k primitives, 1 and 2 threads.
+inline void StageBenchmarkArgs(benchmark::internal::Benchmark* b) {
+  for (int count : {10000, 100000}) {
+    for (int threads : {1, 2}) b->Args({256, count, threads});
+  }
+  b->ArgNames({"width", "count", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
+}
+
+// For the *Stages benchmarks, which run a render's forward and backward with the renderers'
+// profile scopes on: each stage's time (projection & SH, binning, raster forward and backward,
+// projection & SH backward) in ms per iteration, as counters ("projection+SH_ms", ...). The
+// headline benchmarks run without the profiler's clock reads.
+class StageCounters {
+ public:
+  StageCounters() {
+    Profiler::Take();  // whatever an earlier benchmark left
+    Profiler::SetEnabled(true);
+  }
+  void Report(benchmark::State& state) {
+    Profiler::SetEnabled(false);
+    for (const ProfileEntry& e : Profiler::Take()) {
+      std::string name;
+      for (size_t i = 0; i < e.name.size(); ++i) {
+        if (e.name.compare(i, 3, " & ") == 0) {
+          name += '+';
+          i += 2;
+        } else {
+          name += e.name[i] == ' ' ? '_' : e.name[i];
+        }
+      }
+      state.counters[name + "_ms"] =
+          1e3 * e.seconds / static_cast<double>(std::max<int64_t>(1, state.iterations()));
+    }
+  }
+};
 
 }  // namespace mgsr::bench
