@@ -61,18 +61,8 @@ void BM_GaussianForwardBackward(benchmark::State& state) {
 void BM_GaussianStages(benchmark::State& state) {
   const Fixture f = MakeFixture(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
   omp_set_num_threads(static_cast<int>(state.range(2)));
-  mgsr::GaussianRenderer renderer;
-  mgsr::GaussianRender out;
-  mgsr::GaussianGradients grads;
-  renderer.Forward(f.model, f.options, &out);  // grows the buffers outside the timed stages
-  renderer.Backward(f.model, f.options, out, f.grad, &grads);
-  mgsr::bench::StageCounters stages;
-  for (auto _ : state) {
-    renderer.Forward(f.model, f.options, &out);
-    renderer.Backward(f.model, f.options, out, f.grad, &grads);
-    benchmark::DoNotOptimize(grads.params.means.data());
-  }
-  stages.Report(state);
+  mgsr::bench::RunStages<mgsr::GaussianRenderer, mgsr::GaussianRender, mgsr::GaussianGradients>(
+      state, f);
 }
 
 BENCHMARK(BM_GaussianForward)->Apply(mgsr::bench::RenderBenchmarkArgs);

@@ -65,18 +65,7 @@ void BM_SurfelForwardBackward(benchmark::State& state) {
 void BM_SurfelStages(benchmark::State& state) {
   const Fixture f = MakeFixture(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)));
   omp_set_num_threads(static_cast<int>(state.range(2)));
-  mgsr::SurfelRenderer renderer;
-  mgsr::SurfelRender out;
-  mgsr::SurfelGradients grads;
-  renderer.Forward(f.model, f.options, &out);  // grows the buffers outside the timed stages
-  renderer.Backward(f.model, f.options, out, f.grad, &grads);
-  mgsr::bench::StageCounters stages;
-  for (auto _ : state) {
-    renderer.Forward(f.model, f.options, &out);
-    renderer.Backward(f.model, f.options, out, f.grad, &grads);
-    benchmark::DoNotOptimize(grads.params.means.data());
-  }
-  stages.Report(state);
+  mgsr::bench::RunStages<mgsr::SurfelRenderer, mgsr::SurfelRender, mgsr::SurfelGradients>(state, f);
 }
 
 BENCHMARK(BM_SurfelForward)->Apply(mgsr::bench::RenderBenchmarkArgs);

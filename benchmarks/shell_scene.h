@@ -117,4 +117,22 @@ class StageCounters {
   }
 };
 
+// The body of a *Stages benchmark: one untimed forward+backward (it grows the buffers), then the
+// timed loop with StageCounters. `Fixture` has model, options and grad (the upstream gradient).
+template <class Renderer, class Render, class Gradients, class Fixture>
+void RunStages(benchmark::State& state, const Fixture& f) {
+  Renderer renderer;
+  Render out;
+  Gradients grads;
+  renderer.Forward(f.model, f.options, &out);
+  renderer.Backward(f.model, f.options, out, f.grad, &grads);
+  StageCounters stages;
+  for (auto _ : state) {
+    renderer.Forward(f.model, f.options, &out);
+    renderer.Backward(f.model, f.options, out, f.grad, &grads);
+    benchmark::DoNotOptimize(grads.params.means.data());
+  }
+  stages.Report(state);
+}
+
 }  // namespace mgsr::bench
