@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <vector>
 
 #include "mgsr/core/image.h"
@@ -46,6 +47,22 @@ inline void EnsureScratch(RasterScratch* s, int threads, const TileBins& bins, i
   const size_t need = static_cast<size_t>(largest) * fields;
   for (std::vector<float>& buffer : s->tile_data)
     if (buffer.capacity() < need) buffer.reserve(need + need / 2);
+}
+
+// Copies the packed rows (kFields floats each) of a tile's primitives [begin, end) of its n into
+// one contiguous buffer (sized for all n) before the pixel loops read them: the independent loads
+// overlap their cache misses, which the compute-heavy pixel loop would otherwise serialise. The
+// passes gather only the entries they reach: the forward 32 at a time, as it stops once the tile
+// is saturated; the backward those in front of the last blended one.
+template <int kFields>
+inline void GatherTile(const float* packed, const uint32_t* ids, int n, int begin, int end,
+                       std::vector<float>* buffer) {
+  buffer->resize(static_cast<size_t>(n) * kFields);
+  float* out = buffer->data();
+  for (int j = begin; j < end; ++j) {
+    std::memcpy(out + static_cast<size_t>(j) * kFields,
+                packed + static_cast<size_t>(ids[j]) * kFields, kFields * sizeof(float));
+  }
 }
 
 inline void EnsureImage(Image* im, int w, int h, int c) {

@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 
 #include "mgsr/render/simd16.h"
 
@@ -82,25 +81,11 @@ void PackGaussians(const ProjectedGaussians& p, std::vector<float>* packed) {
   }
 }
 
-// Copies the packed rows of a tile's Gaussians [begin, end) into one contiguous buffer (sized for
-// all `n`) before the pixel loops read them: the independent loads overlap their cache misses,
-// which the compute-heavy pixel loop would otherwise serialise. The passes gather only the entries
-// they reach: the forward 32 at a time, as it stops once the tile is saturated; the backward those
-// in front of the last blended one.
-void GatherTile(const float* packed, const uint32_t* ids, int n, int begin, int end,
-                std::vector<float>* buffer) {
-  buffer->resize(static_cast<size_t>(n) * kNumFields);
-  float* out = buffer->data();
-  for (int j = begin; j < end; ++j) {
-    std::memcpy(out + static_cast<size_t>(j) * kNumFields,
-                packed + static_cast<size_t>(ids[j]) * kNumFields, kNumFields * sizeof(float));
-  }
-}
-
 using raster_internal::BoxRange;
 using raster_internal::ColumnWindow;
 using raster_internal::EnsureImage;
 using raster_internal::EnsureScratch;
+using raster_internal::GatherTile;
 using raster_internal::kTilePixels;
 using raster_internal::PixelArrays;
 using raster_internal::SumEntriesPerPrimitive;
@@ -475,7 +460,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
         for (int k = 0; k < kTilePixels; ++k) any += st[aLiveT][k] + st[aLiveR][k];
         if (any == 0) break;
       }
-      if ((j & 31) == 0) GatherTile(packed, ids, n, j, std::min(n, j + 32), &buffer);
+      if ((j & 31) == 0) GatherTile<kNumFields>(packed, ids, n, j, std::min(n, j + 32), &buffer);
       const Splat s(f + static_cast<size_t>(j) * kNumFields);
       if (!(s.min_power < 0.0f)) continue;  // too transparent to reach 1/255 anywhere
       int ya, yb;
@@ -596,7 +581,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
           max_last = std::max(max_last, std::max(lt, lr));
         }
       }
-      GatherTile(packed, ids, n, 0, max_last, &buffer);
+      GatherTile<kNumFields>(packed, ids, n, 0, max_last, &buffer);
       const float* f = buffer.data();
       for (int j = max_last - 1; j >= 0; --j) {
         const Splat s(f + static_cast<size_t>(j) * kNumFields);

@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 
 #include "mgsr/core/zero_fill.h"
 #include "mgsr/render/simd16.h"
@@ -16,6 +15,7 @@ using raster_internal::BoxRange;
 using raster_internal::ColumnWindow;
 using raster_internal::EnsureImage;
 using raster_internal::EnsureScratch;
+using raster_internal::GatherTile;
 using raster_internal::kTilePixels;
 using raster_internal::PixelArrays;
 using raster_internal::SumEntriesPerPrimitive;
@@ -96,20 +96,6 @@ void PackSurfels(const ProjectedSurfels& p, std::vector<float>* packed) {
     f[kMinPow] = p.min_power[g];
     f[kEx] = p.extent[2 * g];
     f[kEy] = p.extent[2 * g + 1];
-  }
-}
-
-// Copies the packed rows of a tile's surfels [begin, end) (of n) into one contiguous buffer before
-// the pixel loops read them (as the 3DGS rasterizer does: the independent loads overlap their
-// cache misses). The passes gather only the entries they reach: the forward 32 at a time, as it
-// stops once the tile is saturated; the backward those in front of the last blended one.
-void GatherTile(const float* packed, const uint32_t* ids, int n, int begin, int end,
-                std::vector<float>* buffer) {
-  buffer->resize(static_cast<size_t>(kNumFields) * n);
-  float* out = buffer->data();
-  for (int j = begin; j < end; ++j) {
-    std::memcpy(out + static_cast<size_t>(j) * kNumFields,
-                packed + static_cast<size_t>(ids[j]) * kNumFields, kNumFields * sizeof(float));
   }
 }
 
@@ -584,7 +570,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
         for (int k = 0; k < kTilePixels; ++k) any += st[aLive][k];
         if (any == 0) break;
       }
-      if ((j & 31) == 0) GatherTile(packed, ids, n, j, std::min(n, j + 32), &buffer);
+      if ((j & 31) == 0) GatherTile<kNumFields>(packed, ids, n, j, std::min(n, j + 32), &buffer);
       Surfel s(f + static_cast<size_t>(j) * kNumFields, inv_square);
       if (!(s.op > kMinAlpha)) continue;
       if (area_preserving) s.low_pass = low_pass[static_cast<size_t>(ids[j]) * kLowPassStride];
@@ -737,7 +723,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
           max_last = std::max(max_last, static_cast<int>(r.last[pix]));
         }
       }
-      GatherTile(packed, ids, n, 0, max_last, &buffer);
+      GatherTile<kNumFields>(packed, ids, n, 0, max_last, &buffer);
       const float* f = buffer.data();
       for (int j = max_last - 1; j >= 0; --j) {
         Surfel s(f + static_cast<size_t>(j) * kNumFields, inv_square);
