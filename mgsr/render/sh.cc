@@ -1,6 +1,7 @@
 #include "mgsr/render/sh.h"
 
 #include <cmath>
+#include <type_traits>
 
 namespace mgsr {
 namespace {
@@ -72,6 +73,22 @@ void ShBasisWithGradient(int degree, const float d[3], float b[kMaxShCoeffs],
 
 namespace {
 
+// Calls f with the coefficient count n = (degree + 1)^2 as a compile-time constant
+// (std::integral_constant), the one place that picks the counts the FromBasis loops are built for.
+template <class F>
+void WithCoefficientCount(int n, F&& f) {
+  switch (n) {
+    case 1:
+      return f(std::integral_constant<int, 1>{});
+    case 4:
+      return f(std::integral_constant<int, 4>{});
+    case 9:
+      return f(std::integral_constant<int, 9>{});
+    default:
+      return f(std::integral_constant<int, 16>{});
+  }
+}
+
 // The sums over coefficients run in four interleaved partial sums (k mod 4): sixteen dependent
 // multiply-adds per channel would otherwise be one long latency chain per primitive. The count is
 // a template argument so the loops unroll and the twelve partial sums stay in registers (with a
@@ -95,16 +112,7 @@ void EvalFromBasis(const float* __restrict b, const float* __restrict coeffs, fl
 
 void EvalShColorFromBasis(int n, const float b[kMaxShCoeffs], const float* coeffs, float rgb[3],
                           uint8_t clamped[3]) {
-  switch (n) {
-    case 1:
-      return EvalFromBasis<1>(b, coeffs, rgb, clamped);
-    case 4:
-      return EvalFromBasis<4>(b, coeffs, rgb, clamped);
-    case 9:
-      return EvalFromBasis<9>(b, coeffs, rgb, clamped);
-    default:
-      return EvalFromBasis<16>(b, coeffs, rgb, clamped);
-  }
+  WithCoefficientCount(n, [&](auto count) { EvalFromBasis<count()>(b, coeffs, rgb, clamped); });
 }
 
 void EvalShColor(int degree, const float* coeffs, const float dir[3], float rgb[3],
@@ -141,16 +149,9 @@ template <bool kWrite>
 void ShColorBackwardFromBasis(int n, const float b[kMaxShCoeffs], const float g[kMaxShCoeffs][3],
                               const float* coeffs, const uint8_t clamped[3], const float d_rgb[3],
                               float* d_coeffs, float d_dir[3]) {
-  switch (n) {
-    case 1:
-      return ShColorBackwardFromBasis<kWrite, 1>(b, g, coeffs, clamped, d_rgb, d_coeffs, d_dir);
-    case 4:
-      return ShColorBackwardFromBasis<kWrite, 4>(b, g, coeffs, clamped, d_rgb, d_coeffs, d_dir);
-    case 9:
-      return ShColorBackwardFromBasis<kWrite, 9>(b, g, coeffs, clamped, d_rgb, d_coeffs, d_dir);
-    default:
-      return ShColorBackwardFromBasis<kWrite, 16>(b, g, coeffs, clamped, d_rgb, d_coeffs, d_dir);
-  }
+  WithCoefficientCount(n, [&](auto count) {
+    ShColorBackwardFromBasis<kWrite, count()>(b, g, coeffs, clamped, d_rgb, d_coeffs, d_dir);
+  });
 }
 
 }  // namespace
