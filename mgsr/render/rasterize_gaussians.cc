@@ -387,21 +387,13 @@ void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, cons
     g_cb += -dpower * dx * dy;
     g_cc += -0.5f * dpower * dy * dy;
   }
-  dst[gMx] = simd::Sum(g_mx);
-  dst[gMy] = simd::Sum(g_my);
-  dst[gCa] = simd::Sum(g_ca);
-  dst[gCb] = simd::Sum(g_cb);
-  dst[gCc] = simd::Sum(g_cc);
-  dst[gOp] = simd::Sum(g_op);
-  dst[gRefOp] = simd::Sum(g_rop);
-  dst[gBeta] = simd::Sum(g_beta);
-  dst[gZ] = simd::Sum(g_z);
-  dst[gCt0] = simd::Sum(g_ct0);
-  dst[gCt1] = simd::Sum(g_ct1);
-  dst[gCt2] = simd::Sum(g_ct2);
-  dst[gCr0] = simd::Sum(g_cr0);
-  dst[gCr1] = simd::Sum(g_cr1);
-  dst[gCr2] = simd::Sum(g_cr2);
+  // In the order of GradField (the 16th vector pads).
+  const V acc[16] = {g_mx, g_my,  g_ca,  g_cb,  g_cc,  g_op,  g_rop, g_beta,
+                     g_z,  g_ct0, g_ct1, g_ct2, g_cr0, g_cr1, g_cr2, V{}};
+  static_assert(kGradStride == 15, "one SumEach closes the entry");
+  float sums[16];
+  simd::SumEach(acc, sums);
+  std::copy(sums, sums + kGradStride, dst);
 }
 
 }  // namespace

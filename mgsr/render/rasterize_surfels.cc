@@ -500,9 +500,13 @@ void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y
     gmx -= s.tw[0] * dk0 + s.tw[1] * dk1 + s.tw[2] * dk2;
     gmy -= s.tw[0] * dl0 + s.tw[1] * dl1 + s.tw[2] * dl2;
   }
-  const V* accs[kGradStride] = {&gTu0, &gTu1, &gTu2, &gTv0, &gTv1, &gTv2, &gTw0, &gTw1, &gTw2,
-                                &gmx,  &gmy,  &gop,  &gn0,  &gn1,  &gn2,  &gc0,  &gc1,  &gc2};
-  for (int q = 0; q < kGradStride; ++q) dst[q] = simd::Sum(*accs[q]);
+  // In the order of GradField: the first 16 sums at once, the last two alone.
+  const V acc[16] = {gTu0, gTu1, gTu2, gTv0, gTv1, gTv2, gTw0, gTw1,
+                     gTw2, gmx,  gmy,  gop,  gn0,  gn1,  gn2,  gc0};
+  static_assert(kGradStride == 18, "16 sums at once, then gC1 and gC2");
+  simd::SumEach(acc, dst);
+  dst[gC1] = simd::Sum(gc1);
+  dst[gC2] = simd::Sum(gc2);
   if (s.low_pass > 0) {  // area-preserving low-pass only
     const float gl = simd::Sum(glow);
     // The rows T_u, T_v, T_w lead the gradient stride (gTu0 = 0).
