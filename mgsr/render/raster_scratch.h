@@ -190,9 +190,11 @@ inline void SumEntriesPerPrimitive(const TileBins& bins, const std::vector<float
 
 // Sums the per-entry gradients of every tile into per-primitive rows (N x stride), in tile and
 // entry order whatever the thread count, so backward passes are bitwise reproducible. Threads own
-// disjoint primitive ranges and each scans the entry list once.
+// disjoint primitive ranges and each scans the entry list once. The row length is a compile-time
+// constant, so a row's sum is a few whole-vector adds.
+template <int stride>
 inline void ReduceEntryGradients(const TileBins& bins, const std::vector<uint32_t>& tile_used,
-                                 const std::vector<float>& entry_grads, int stride, size_t num,
+                                 const std::vector<float>& entry_grads, size_t num,
                                  std::vector<float>* out) {
   out->resize(num * stride);
   const int threads = omp_get_max_threads();

@@ -765,8 +765,8 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
     }
   }
   // Deterministic reduction (tile and entry order) into the projected-quantity gradients.
-  ReduceEntryGradients(bins, scratch->tile_used, scratch->entry_grads, kGradStride, num,
-                       &scratch->per_primitive);
+  ReduceEntryGradients<kGradStride>(bins, scratch->tile_used, scratch->entry_grads, num,
+                                    &scratch->per_primitive);
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < static_cast<int64_t>(num); ++i) {
     const float* s = scratch->per_primitive.data() + static_cast<size_t>(i) * kGradStride;
