@@ -139,8 +139,11 @@ inline V RowPower(const Splat& s, V dx, float dy, MaskOf<V> lanes_ok, MaskOf<V>*
   return power;
 }
 
-// Forward per-pixel state of a tile: T, Tr, colours, W and D sums, "still blending" flags and
-// 1 + index of the last blended Gaussian (as float, exact below 2^24).
+// Forward per-pixel state of a tile: T, Tr, colours, W and D sums and 1 + index of the last
+// blended Gaussian (as float, exact below 2^24). A chain that has stopped blending (terminated,
+// or the reflected chain of a render without reflection) keeps its transmittance negated: a
+// blending chain's T is at least kMinTransmittance > 0, so "T > 0" is its "still blending" flag,
+// and the row loops store one array less per chain (the stores bound the blend loop).
 enum ForwardArray {
   aT,
   aTr,
@@ -152,8 +155,6 @@ enum ForwardArray {
   aCr2,
   aWs,
   aDs,
-  aLiveT,
-  aLiveR,
   aLastT,
   aLastR,
   kForwardArrays
@@ -161,10 +162,10 @@ enum ForwardArray {
 
 // The arrays of one blending chain: transmitted or reflected.
 struct ChainArrays {
-  ForwardArray T, live, c0, c1, c2, last;
+  ForwardArray T, c0, c1, c2, last;
 };
-constexpr ChainArrays kTransmittedChain{aT, aLiveT, aCt0, aCt1, aCt2, aLastT};
-constexpr ChainArrays kReflectedChain{aTr, aLiveR, aCr0, aCr1, aCr2, aLastR};
+constexpr ChainArrays kTransmittedChain{aT, aCt0, aCt1, aCt2, aLastT};
+constexpr ChainArrays kReflectedChain{aTr, aCr0, aCr1, aCr2, aLastR};
 
 // Blends one chain of a Gaussian (its opacity and colour) into the pixels `in` of a row at `k`:
 // front-to-back alpha blending with early termination. Returns the blend weights.
@@ -172,9 +173,9 @@ template <class V>
 inline V BlendChain(const ChainArrays& a, const PixelArrays& st, int k, MaskOf<V> in, V G,
                     float opacity, float c0, float c1, float c2, float jp1) {
   using M = MaskOf<V>;
-  const V T = simd::Load<V>(st[a.T] + k), live = simd::Load<V>(st[a.live] + k);
+  const V T = simd::Load<V>(st[a.T] + k);
   const V alpha = simd::Min(opacity * G, simd::Splat<V>(kMaxAlpha));
-  const M valid = in & (live > 0.5f) & (alpha >= kMinAlpha);
+  const M valid = in & (T > 0.0f) & (alpha >= kMinAlpha);
   const V test = T * (1.0f - alpha);
   const M terminate = valid & (test < kMinTransmittance);
   const M blend = valid & ~terminate;
@@ -182,10 +183,8 @@ inline V BlendChain(const ChainArrays& a, const PixelArrays& st, int k, MaskOf<V
   simd::Store(st[a.c0] + k, simd::Load<V>(st[a.c0] + k) + w * c0);
   simd::Store(st[a.c1] + k, simd::Load<V>(st[a.c1] + k) + w * c1);
   simd::Store(st[a.c2] + k, simd::Load<V>(st[a.c2] + k) + w * c2);
-  simd::Store(st[a.T] + k, simd::Select(blend, test, T));
-  simd::Store(st[a.last] + k,
-              simd::Select(blend, simd::Splat<V>(jp1), simd::Load<V>(st[a.last] + k)));
-  simd::Store(st[a.live] + k, simd::Select(terminate, V{}, live));
+  simd::Store(st[a.T] + k, simd::Select(blend, test, simd::Select(terminate, -T, T)));
+  simd::StoreMasked(st[a.last] + k, blend, simd::Splat<V>(jp1));
   return w;
 }
 
@@ -219,8 +218,8 @@ float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const 
     // nothing): behind an opaque surface the reflected chain, with its lower opacities, often runs
     // on alone. (Each row is blended once per Gaussian, so its flags here are those the blend
     // sees.)
-    const M lt = lanes_ok & (simd::Load<V>(st[aLiveT] + k) > 0.5f);
-    const M lr = lanes_ok & (simd::Load<V>(st[aLiveR] + k) > 0.5f);
+    const M lt = lanes_ok & (simd::Load<V>(st[aT] + k) > 0.0f);
+    const M lr = lanes_ok & (simd::Load<V>(st[aTr] + k) > 0.0f);
     const V power = RowPower(s, dx, dy, lt | lr, &in[rows]);
     if (!simd::Any(in[rows])) continue;
     G[rows] = simd::Exp(simd::Max(power, simd::Splat<V>(-80.0f)));
@@ -440,17 +439,16 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
 
     const PixelArrays st(&scratch->pixel_state[thread], kForwardArrays);
     for (int k = 0; k < kTilePixels; ++k) {
-      st[aT][k] = st[aTr][k] = 1.0f;
+      st[aT][k] = 1.0f;
+      st[aTr][k] = refl ? 1.0f : -1.0f;  // without reflection the chain never blends
       for (int a : {aCt0, aCt1, aCt2, aCr0, aCr1, aCr2, aWs, aDs, aLastT, aLastR}) st[a][k] = 0.0f;
-      st[aLiveT][k] = 1.0f;
-      st[aLiveR][k] = refl ? 1.0f : 0.0f;
     }
     for (int j = 0; j < n; ++j) {
       // Every 32 Gaussians, stop the tile once all of its pixels are saturated.
       if ((j & 31) == 31) {
-        float any = 0;
-        for (int k = 0; k < kTilePixels; ++k) any += st[aLiveT][k] + st[aLiveR][k];
-        if (any == 0) break;
+        int live = 0;
+        for (int k = 0; k < kTilePixels; ++k) live |= (st[aT][k] > 0.0f) | (st[aTr][k] > 0.0f);
+        if (live == 0) break;
       }
       if ((j & 31) == 0) GatherTile<kNumFields>(packed, ids, n, j, std::min(n, j + 32), &buffer);
       const Splat s(f + static_cast<size_t>(j) * kNumFields);
@@ -466,7 +464,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
       for (int x = x0; x < x_end; ++x) {
         const int k = (y - y0) * kTileSize + (x - x0);
         const size_t pix = static_cast<size_t>(y) * W + x;
-        const float T = st[aT][k];
+        const float T = std::abs(st[aT][k]);  // negated where the chain terminated
         const float A = 1.0f - T;
         const float ct[3] = {st[aCt0][k], st[aCt1][k], st[aCt2][k]},
                     cr[3] = {st[aCr0][k], st[aCr1][k], st[aCr2][k]};
@@ -481,7 +479,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
         out->alpha.plane(0)[pix] = A;
         out->depth.plane(0)[pix] = A >= kMinDepthAlpha ? st[aDs][k] / A : 0.0f;
         out->final_t[pix] = T;
-        out->final_tr[pix] = st[aTr][k];
+        out->final_tr[pix] = std::abs(st[aTr][k]);
         out->depth_sum[pix] = st[aDs][k];
         out->last_t[pix] = static_cast<uint32_t>(st[aLastT][k]);
         out->last_r[pix] = static_cast<uint32_t>(st[aLastR][k]);

@@ -231,7 +231,9 @@ inline V NdcDepth(V z) {
   return (kSurfelFar / (kSurfelFar - kSurfelNear)) * (1.0f - kSurfelNear / z);
 }
 
-// Forward per-pixel state of a tile.
+// Forward per-pixel state of a tile. A pixel that has terminated keeps its transmittance negated
+// (a blending pixel's T is at least kMinTransmittance > 0): "T > 0" is its "still blending" flag,
+// one array fewer to store per row (the 3DGS rasterizer does the same).
 enum ForwardArray {
   aT,
   aC0,
@@ -242,7 +244,6 @@ enum ForwardArray {
   aN0,
   aN1,
   aN2,
-  aLive,
   aLast,
   aZmed,
   aMed,
@@ -276,7 +277,7 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
     const int k = (y - y0) * kTileSize + first;
     // A row whose pixels have all terminated costs one load, not the intersection and the exponent
     // (behind an opaque surface, most rows of a tile's later entries).
-    const M alive = lanes_ok & (simd::Load<V>(st[aLive] + k) > 0.5f);
+    const M alive = lanes_ok & (simd::Load<V>(st[aT] + k) > 0.0f);
     if (!simd::Any(alive)) continue;
     RowHit<V> h;
     IntersectRow(s, px, py, min_power, alive, &h);
@@ -290,7 +291,6 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
     const V G = G_row[r], z = z_row[r];
     const M in = in_row[r];
     const int k = row_k[r];
-    const V live = simd::Load<V>(st[aLive] + k);
     const V T = simd::Load<V>(st[aT] + k);
     const V a = simd::Min(s.op * G, simd::Splat<V>(kMaxAlpha));
     const M valid = in & (a >= kMinAlpha);
@@ -308,8 +308,8 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
     simd::Store(st[aN2] + k, simd::Load<V>(st[aN2] + k) + w * s.n[2]);
     // Median: the last surfel blended while the incoming transmittance is above one half.
     const M med = blend & (T > 0.5f);
-    simd::Store(st[aZmed] + k, simd::Select(med, z, simd::Load<V>(st[aZmed] + k)));
-    simd::Store(st[aMed] + k, simd::Select(med, simd::Splat<V>(jp1), simd::Load<V>(st[aMed] + k)));
+    simd::StoreMasked(st[aZmed] + k, med, z);
+    simd::StoreMasked(st[aMed] + k, med, simd::Splat<V>(jp1));
     if constexpr (kDistortion) {
       // Distortion: w_i (m_i^2 A_i + M2_i - 2 m_i M1_i), A_i = 1 - T_i, M1/M2 over the surfels in
       // front. It only depends on differences of m, so m is taken relative to the pixel's first
@@ -326,10 +326,8 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
       simd::Store(st[aM1] + k, M1 + w * m);
       simd::Store(st[aM2] + k, M2 + w * m * m);
     }
-    simd::Store(st[aT] + k, simd::Select(blend, test, T));
-    simd::Store(st[aLast] + k,
-                simd::Select(blend, simd::Splat<V>(jp1), simd::Load<V>(st[aLast] + k)));
-    simd::Store(st[aLive] + k, simd::Select(term, V{}, live));
+    simd::Store(st[aT] + k, simd::Select(blend, test, simd::Select(term, -T, T)));
+    simd::StoreMasked(st[aLast] + k, blend, simd::Splat<V>(jp1));
     weight_sum += w;
   }
   return simd::Sum(weight_sum);
@@ -567,12 +565,11 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
     const PixelArrays st(&scratch->pixel_state[thread], kForwardArrays);
     for (int a = 0; a < kForwardArrays; ++a) std::fill(st[a], st[a] + kTilePixels, 0.0f);
     std::fill(st[aT], st[aT] + kTilePixels, 1.0f);
-    std::fill(st[aLive], st[aLive] + kTilePixels, 1.0f);
     for (int j = 0; j < n; ++j) {
-      if ((j & 31) == 31) {
-        float any = 0;
-        for (int k = 0; k < kTilePixels; ++k) any += st[aLive][k];
-        if (any == 0) break;
+      if ((j & 31) == 31) {  // every 32 surfels, stop once all of the tile's pixels terminated
+        int live = 0;
+        for (int k = 0; k < kTilePixels; ++k) live |= st[aT][k] > 0.0f;
+        if (live == 0) break;
       }
       if ((j & 31) == 0) GatherTile<kNumFields>(packed, ids, n, j, std::min(n, j + 32), &buffer);
       Surfel s(f + static_cast<size_t>(j) * kNumFields, inv_square);
@@ -596,7 +593,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
       for (int x = x0; x < x_end; ++x) {
         const int k = (y - y0) * kTileSize + (x - x0);
         const size_t pix = static_cast<size_t>(y) * W + x;
-        const float T = st[aT][k], A = 1.0f - T;
+        const float T = std::abs(st[aT][k]), A = 1.0f - T;  // negated where it terminated
         const float cs[3] = {st[aC0][k], st[aC1][k], st[aC2][k]};
         const Eigen::Vector3f nv(st[aN0][k], st[aN1][k], st[aN2][k]);
         const Eigen::Vector3f nw = Rt * nv;

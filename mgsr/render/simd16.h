@@ -39,6 +39,31 @@ template <class V>
 inline void Store(float* p, V v) {
   std::memcpy(p, &v, sizeof(V));
 }
+// Stores the lanes of `v` where `mask` is set, leaving the others in memory as they are: one
+// masked store where the build targets AVX-512 (no load of the old values), a blend otherwise.
+inline void StoreMasked(float* p, I16 mask, F16 v) {
+#if defined(__AVX512F__)
+  __m512i m;
+  __m512 x;
+  std::memcpy(&m, &mask, sizeof(m));
+  std::memcpy(&x, &v, sizeof(x));
+  _mm512_mask_storeu_ps(p, _mm512_test_epi32_mask(m, m), x);
+#else
+  Store(p, mask ? v : Load<F16>(p));
+#endif
+}
+inline void StoreMasked(float* p, I8 mask, F8 v) {
+#if defined(__AVX512F__) && defined(__AVX512VL__)
+  __m256i m;
+  __m256 x;
+  std::memcpy(&m, &mask, sizeof(m));
+  std::memcpy(&x, &v, sizeof(x));
+  _mm256_mask_storeu_ps(p, _mm256_test_epi32_mask(m, m), x);
+#else
+  Store(p, mask ? v : Load<F8>(p));
+#endif
+}
+
 template <class V = F16>
 inline V Splat(float v) {
   return V{} + v;

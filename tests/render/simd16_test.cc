@@ -39,6 +39,30 @@ TEST(Simd16, SumEachIsSumToTheBit8Lanes) {
   for (uint32_t seed = 1; seed <= 50; ++seed) ExpectSumEachMatchesSum<F8>(seed);
 }
 
+// StoreMasked writes the masked lanes and leaves the others (and the memory around) untouched.
+template <class V>
+void ExpectStoreMaskedWritesOnlyMaskedLanes() {
+  constexpr int L = kLanesOf<V>;
+  float memory[L + 2];
+  for (int i = 0; i < L + 2; ++i) memory[i] = -1.0f - i;
+  V v;
+  MaskOf<V> mask;
+  for (int l = 0; l < L; ++l) {
+    v[l] = 100.0f + l;
+    mask[l] = (l % 3 == 1) ? -1 : 0;
+  }
+  StoreMasked(memory + 1, mask, v);
+  EXPECT_EQ(memory[0], -1.0f);
+  EXPECT_EQ(memory[L + 1], -2.0f - L);
+  for (int l = 0; l < L; ++l)
+    EXPECT_EQ(memory[1 + l], l % 3 == 1 ? 100.0f + l : -2.0f - l) << "lane " << l;
+}
+
+TEST(Simd16, StoreMaskedWritesOnlyMaskedLanes) {
+  ExpectStoreMaskedWritesOnlyMaskedLanes<F16>();
+  ExpectStoreMaskedWritesOnlyMaskedLanes<F8>();
+}
+
 // And a different pairing would be caught: the sum of the lanes in index order differs from Sum
 // for some of these inputs (else the test above could not fail).
 TEST(Simd16, PairingMattersForTheseInputs) {
