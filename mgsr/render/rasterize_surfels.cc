@@ -184,20 +184,33 @@ struct RowHit {
   M in, splat_branch;  // may contribute; rho3d <= rho2d
 };
 
+// The parts of the pixel offsets that depend only on the column (the same for every row of a
+// surfel: computed once per tile entry) and only on the row. Pixel offsets from the centre m; the
+// stored rows are T_u - m_x T_w and T_v - m_y T_w (see project_surfels.h), so k and l stay small
+// and float keeps its precision.
 template <class V>
-inline void IntersectRow(const Surfel& s, V px, float py, float min_power, simd::MaskOf<V> lanes_ok,
-                         RowHit<V>* h) {
-  using M = simd::MaskOf<V>;
-  // Pixel offsets from the centre m; the stored rows are T_u - m_x T_w and T_v - m_y T_w (see
-  // project_surfels.h), so k and l stay small and float keeps its precision.
+inline void ColumnOffsets(const Surfel& s, V px, RowHit<V>* h) {
   h->dxp = px - s.mx;
-  h->dyp = py - s.my;
   h->k0 = h->dxp * s.tw[0] - s.tu[0];
   h->k1 = h->dxp * s.tw[1] - s.tu[1];
   h->k2 = h->dxp * s.tw[2] - s.tu[2];
+  h->dxm = s.mx - px;
+}
+template <class V>
+inline void RowOffsets(const Surfel& s, float py, RowHit<V>* h) {
+  h->dyp = py - s.my;
   h->l0 = h->dyp * s.tw[0] - s.tv[0];
   h->l1 = h->dyp * s.tw[1] - s.tv[1];
   h->l2 = h->dyp * s.tw[2] - s.tv[2];
+  h->dym = simd::Splat<V>(s.my - py);
+}
+
+// The intersection of row py; `h` holds the surfel's ColumnOffsets.
+template <class V>
+inline void IntersectRow(const Surfel& s, float py, float min_power, simd::MaskOf<V> lanes_ok,
+                         RowHit<V>* h) {
+  using M = simd::MaskOf<V>;
+  RowOffsets(s, py, h);
   const V p0 = h->k1 * h->l2 - h->k2 * h->l1;
   const V p1 = h->k2 * h->l0 - h->k0 * h->l2;
   h->p2 = h->k0 * h->l1 - h->k1 * h->l0;
@@ -205,8 +218,6 @@ inline void IntersectRow(const Surfel& s, V px, float py, float min_power, simd:
   const V safe_p2 = simd::Select(ok, h->p2, simd::Splat<V>(1.0f));
   h->u = p0 / safe_p2;
   h->v = p1 / safe_p2;
-  h->dxm = s.mx - px;
-  h->dym = simd::Splat<V>(s.my - py);
   h->rho3d = h->u * h->u + h->v * h->v;
   h->rho2d = s.inv_square * (h->dxm * h->dxm + h->dym * h->dym) + s.low_pass;
   h->splat_branch = h->rho3d <= h->rho2d;
@@ -260,8 +271,9 @@ template <class V, bool kDistortion>
 float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0, int first,
                 const TileLanes& tl, const PixelArrays& st) {
   using M = simd::MaskOf<V>;
-  const V px = tl.Px<V>(first);
   const M lanes_ok = tl.Ok<V>(first);
+  RowHit<V> cols;
+  ColumnOffsets(s, tl.Px<V>(first), &cols);
   V weight_sum{};
   const float jp1 = static_cast<float>(j + 1);
   // In two loops (see the 3DGS BlendRows): first the rows' intersections and exponents, which
@@ -279,8 +291,8 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
     // (behind an opaque surface, most rows of a tile's later entries).
     const M alive = lanes_ok & (simd::Load<V>(st[aT] + k) > 0.0f);
     if (!simd::Any(alive)) continue;
-    RowHit<V> h;
-    IntersectRow(s, px, py, min_power, alive, &h);
+    RowHit<V> h = cols;
+    IntersectRow(s, py, min_power, alive, &h);
     if (!simd::Any(h.in)) continue;
     G_row[rows] = h.G;
     z_row[rows] = h.z;
@@ -374,15 +386,24 @@ template <class V, bool kDistortion>
 void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0, int first,
                   const TileLanes& tl, const PixelArrays& st, const float dlow[9], float* dst) {
   using M = simd::MaskOf<V>;
-  const V px = tl.Px<V>(first);
   const M lanes_ok = tl.Ok<V>(first);
+  RowHit<V> cols;
+  ColumnOffsets(s, tl.Px<V>(first), &cols);
   const float jf = static_cast<float>(j);
   V glow{};  // d loss / d c (the low-pass offset)
   V gTu0{}, gTu1{}, gTu2{}, gTv0{}, gTv1{}, gTv2{}, gTw0{}, gTw1{}, gTw2{}, gmx{}, gmy{}, gop{};
   V gn0{}, gn1{}, gn2{}, gc0{}, gc1{}, gc2{};
   // In two loops (see BlendRows): the rows' intersections and exponents (which read only the
   // last-blended indices, which this pass does not write), then the un-blending and gradients.
-  RowHit<V> hit[kTileSize];
+  // Between them each row keeps only what its offsets do not give back cheaply (the column
+  // offsets are the surfel's, the row offsets a few scalar products): a third of a RowHit, so
+  // the rows cross the stack in a third of the stores (they bounded this loop).
+  struct RowSample {
+    V G, z, u, v, p2;
+    M in, splat_branch;
+    float py;
+  };
+  RowSample hit[kTileSize];
   int row_k[kTileSize];
   int rows = 0;
   for (int y = ya; y <= yb; ++y) {
@@ -393,12 +414,23 @@ void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y
     // intersection.
     const M blended = lanes_ok & (jf < simd::Load<V>(st[bLast] + k));
     if (!simd::Any(blended)) continue;
-    IntersectRow(s, px, py, min_power, blended, &hit[rows]);
-    if (!simd::Any(hit[rows].in)) continue;
+    RowHit<V> h = cols;
+    IntersectRow(s, py, min_power, blended, &h);
+    if (!simd::Any(h.in)) continue;
+    hit[rows] = {h.G, h.z, h.u, h.v, h.p2, h.in, h.splat_branch, py};
     row_k[rows++] = k;
   }
   for (int r = 0; r < rows; ++r) {
-    const RowHit<V>& h = hit[r];
+    const RowSample& sample = hit[r];
+    RowHit<V> h = cols;
+    RowOffsets(s, sample.py, &h);
+    h.G = sample.G;
+    h.z = sample.z;
+    h.u = sample.u;
+    h.v = sample.v;
+    h.p2 = sample.p2;
+    h.in = sample.in;
+    h.splat_branch = sample.splat_branch;
     const int k = row_k[r];
     const V raw = s.op * h.G;
     const V a = simd::Min(raw, simd::Splat<V>(kMaxAlpha));
