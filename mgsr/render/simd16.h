@@ -187,14 +187,76 @@ inline bool Any(I16 mask) {
 #endif
 }
 
+// floor(f), exact for |f| < 2^31: one rounding instruction where the build has one (AVX / AVX-512),
+// else truncation through int32 and a correction for negative non-integers.
+template <class V>
+inline V Floor(V f) {
+  using I = MaskOf<V>;
+  V t = __builtin_convertvector(__builtin_convertvector(f, I), V);  // truncates toward 0
+  return t > f ? t - 1.0f : t;
+}
+#if defined(__AVX512F__)
+template <>
+inline F16 Floor(F16 f) {
+  __m512 x;
+  std::memcpy(&x, &f, sizeof(x));
+  // (The all-lanes masked forms: GCC 12 warns of an uninitialised source in the plain ones.)
+  x = _mm512_mask_roundscale_ps(x, 0xffff, x, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
+  std::memcpy(&f, &x, sizeof(f));
+  return f;
+}
+#endif
+#if defined(__AVX__)
+template <>
+inline F8 Floor(F8 f) {
+  __m256 x;
+  std::memcpy(&x, &f, sizeof(x));
+  x = _mm256_floor_ps(x);
+  std::memcpy(&f, &x, sizeof(f));
+  return f;
+}
+#endif
+
+// y * 2^t for integer-valued t in [-126, 127] (a power of two built in the exponent bits; exact,
+// as long as the product is a normal float): one scale instruction with AVX-512.
+template <class V>
+inline V ScaleByPowerOfTwo(V y, V t) {
+  using I = MaskOf<V>;
+  const I e = (__builtin_convertvector(t, I) + 127) << 23;
+  V scale;
+  std::memcpy(&scale, &e, sizeof(scale));
+  return y * scale;
+}
+#if defined(__AVX512F__)
+template <>
+inline F16 ScaleByPowerOfTwo(F16 y, F16 t) {
+  __m512 a, b;
+  std::memcpy(&a, &y, sizeof(a));
+  std::memcpy(&b, &t, sizeof(b));
+  a = _mm512_mask_scalef_ps(a, 0xffff, a, b);
+  std::memcpy(&y, &a, sizeof(y));
+  return y;
+}
+#endif
+#if defined(__AVX512F__) && defined(__AVX512VL__)
+template <>
+inline F8 ScaleByPowerOfTwo(F8 y, F8 t) {
+  __m256 a, b;
+  std::memcpy(&a, &y, sizeof(a));
+  std::memcpy(&b, &t, sizeof(b));
+  a = _mm256_mask_scalef_ps(a, 0xff, a, b);
+  std::memcpy(&y, &a, sizeof(y));
+  return y;
+}
+#endif
+
 // exp(x) for x in [-88, 0], lane by lane (Cephes' expf: range reduction by ln 2 and a degree-6
-// polynomial; relative error about 1e-7). Callers clamp the argument.
+// polynomial; relative error about 1e-7). Callers clamp the argument. The same bits at every
+// width and instruction set: Floor and ScaleByPowerOfTwo are exact.
 template <class V>
 inline V Exp(V x) {
-  using I = MaskOf<V>;
   const V f = x * 1.44269504088896341f + 0.5f;
-  V t = __builtin_convertvector(__builtin_convertvector(f, I), V);  // truncates toward 0
-  t = t > f ? t - 1.0f : t;                                         // floor
+  const V t = Floor(f);
   V r = x - t * 0.693359375f;
   r = r + t * 2.12194440e-4f;
   const V z = r * r;
@@ -205,10 +267,7 @@ inline V Exp(V x) {
   y = y * r + 1.6666665459e-1f;
   y = y * r + 5.0000001201e-1f;
   y = y * z + r + 1.0f;
-  const I e = (__builtin_convertvector(t, I) + 127) << 23;
-  V scale;
-  std::memcpy(&scale, &e, sizeof(scale));
-  return y * scale;
+  return ScaleByPowerOfTwo(y, t);
 }
 
 }  // namespace mgsr::simd

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <random>
+#include <vector>
 
 namespace mgsr::simd {
 namespace {
@@ -61,6 +62,58 @@ void ExpectStoreMaskedWritesOnlyMaskedLanes() {
 TEST(Simd16, StoreMaskedWritesOnlyMaskedLanes) {
   ExpectStoreMaskedWritesOnlyMaskedLanes<F16>();
   ExpectStoreMaskedWritesOnlyMaskedLanes<F8>();
+}
+
+// Exp gives the same bits at every width: the 16- and 8-lane forms use the instruction set's floor
+// and scale instructions where the build has them, the 4-lane form the portable ones. Over a dense
+// sweep of the rasterizers' argument range [-80, 0] plus the range ends.
+TEST(Simd16, ExpIsTheSameAtEveryWidth) {
+  std::vector<float> xs = {0.0f, -0.0f, -80.0f, -1e-30f, -0.5f, -1.0f, -69.31472f};
+  for (int i = 0; i <= 400000; ++i) xs.push_back(-80.0f * i / 400000.0f);
+  int checked = 0;
+  for (size_t i = 0; i + 16 <= xs.size(); i += 16) {
+    F16 x16;
+    for (int l = 0; l < 16; ++l) x16[l] = xs[i + l];
+    const F16 e16 = Exp(x16);
+    F8 a8, b8;
+    F4 q4[4];
+    for (int l = 0; l < 8; ++l) {
+      a8[l] = xs[i + l];
+      b8[l] = xs[i + 8 + l];
+    }
+    for (int q = 0; q < 4; ++q)
+      for (int l = 0; l < 4; ++l) q4[q][l] = xs[i + 4 * q + l];
+    const F8 ea = Exp(a8), eb = Exp(b8);
+    for (int l = 0; l < 16; ++l) {
+      const float want = Exp(q4[l / 4])[l % 4];
+      const float got8 = l < 8 ? ea[l] : eb[l - 8];
+      ASSERT_EQ(std::memcmp(&e16[l], &want, 4), 0) << "x " << xs[i + l];
+      ASSERT_EQ(std::memcmp(&got8, &want, 4), 0) << "x " << xs[i + l];
+      // And it is exp: within a few units in the last place.
+      ASSERT_NEAR(want, std::exp(xs[i + l]), 4e-7f * std::exp(xs[i + l])) << "x " << xs[i + l];
+      ++checked;
+    }
+  }
+  EXPECT_GE(checked, 400000);
+}
+
+TEST(Simd16, FloorAndScaleAreExact) {
+  for (int i = -2000; i <= 2000; ++i) {
+    const float f = i * 0.0625f - 0.03125f * (i % 3);
+    F16 v16 = Splat<F16>(f);
+    F8 v8 = Splat<F8>(f);
+    EXPECT_EQ(Floor(v16)[3], std::floor(f)) << f;
+    EXPECT_EQ(Floor(v8)[5], std::floor(f)) << f;
+  }
+  for (int t = -126; t <= 127; ++t) {
+    const float y = 1.2345678f;
+    EXPECT_EQ(ScaleByPowerOfTwo(Splat<F16>(y), Splat<F16>(static_cast<float>(t)))[7],
+              std::ldexp(y, t))
+        << t;
+    EXPECT_EQ(ScaleByPowerOfTwo(Splat<F8>(y), Splat<F8>(static_cast<float>(t)))[2],
+              std::ldexp(y, t))
+        << t;
+  }
 }
 
 // And a different pairing would be caught: the sum of the lanes in index order differs from Sum
