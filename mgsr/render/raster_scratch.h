@@ -136,6 +136,32 @@ inline simd::MaskOf<simd::F8> TileLanes::Ok<simd::F8>(int first) const {
   return simd::Lanes<simd::F8>() < static_cast<float>(valid - first);
 }
 
+// The first `n` (1..16) floats at p as a 16-lane row and back: a tile row's pixels in an image
+// row, where a tile cut by the image's right edge has fewer than 16 (lanes past n read as 0 and
+// are not written).
+inline simd::F16 LoadRow(const float* p, int n) {
+  if (n == kTileSize) return simd::Load<simd::F16>(p);
+  simd::F16 v{};
+  std::memcpy(&v, p, sizeof(float) * n);
+  return v;
+}
+inline void StoreRow(float* p, simd::F16 v, int n) {
+  if (n == kTileSize) return simd::Store(p, v);
+  std::memcpy(p, &v, sizeof(float) * n);
+}
+// Unsigned integers (below 2^24, so exact as floats) to and from such rows.
+inline simd::F16 LoadRowOfUint(const uint32_t* p, int n) {
+  typedef uint32_t U16 __attribute__((vector_size(64)));
+  U16 u{};
+  std::memcpy(&u, p, sizeof(uint32_t) * n);
+  return __builtin_convertvector(u, simd::F16);
+}
+inline void StoreRowAsUint(uint32_t* p, simd::F16 v, int n) {
+  typedef uint32_t U16 __attribute__((vector_size(64)));
+  const U16 u = __builtin_convertvector(v, U16);
+  std::memcpy(p, &u, sizeof(uint32_t) * n);
+}
+
 // Per-pixel arrays of a tile (index k = row * 16 + column) carved out of one per-thread buffer,
 // without allocating per tile.
 class PixelArrays {

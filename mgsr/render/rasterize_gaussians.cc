@@ -460,30 +460,33 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
                                : BlendRows<F16>(s, j, ya, yb, y0, 0, tl, refl, st);
       if (weights != nullptr) weights[j] += sum;
     }
+    // The outputs, a tile row at a time (the same operations per pixel as a scalar loop).
+    const int cols = x_end - x0;
     for (int y = y0; y < y_end; ++y) {
-      for (int x = x0; x < x_end; ++x) {
-        const int k = (y - y0) * kTileSize + (x - x0);
-        const size_t pix = static_cast<size_t>(y) * W + x;
-        const float T = std::abs(st[aT][k]);  // negated where the chain terminated
-        const float A = 1.0f - T;
-        const float ct[3] = {st[aCt0][k], st[aCt1][k], st[aCt2][k]},
-                    cr[3] = {st[aCr0][k], st[aCr1][k], st[aCr2][k]};
-        for (int c = 0; c < 3; ++c) {
-          const float bg = bg_image != nullptr ? bg_image->plane(c)[pix] : o.background[c];
-          const float tran = ct[c] + T * bg;
-          out->tran.plane(c)[pix] = tran;
-          out->ref.plane(c)[pix] = cr[c];
-          out->color.plane(c)[pix] = tran + st[aWs][k] * cr[c];
-        }
-        out->weight.plane(0)[pix] = st[aWs][k];
-        out->alpha.plane(0)[pix] = A;
-        out->depth.plane(0)[pix] = A >= kMinDepthAlpha ? st[aDs][k] / A : 0.0f;
-        out->final_t[pix] = T;
-        out->final_tr[pix] = std::abs(st[aTr][k]);
-        out->depth_sum[pix] = st[aDs][k];
-        out->last_t[pix] = static_cast<uint32_t>(st[aLastT][k]);
-        out->last_r[pix] = static_cast<uint32_t>(st[aLastR][k]);
+      const int k = (y - y0) * kTileSize;
+      const size_t pix = static_cast<size_t>(y) * W + x0;
+      using raster_internal::LoadRow;
+      using raster_internal::StoreRow;
+      const F16 T = simd::Abs(simd::Load(st[aT] + k));  // negated where the chain terminated
+      const F16 A = 1.0f - T;
+      const F16 Ws = simd::Load(st[aWs] + k), Ds = simd::Load(st[aDs] + k);
+      for (int c = 0; c < 3; ++c) {
+        const F16 bg = bg_image != nullptr ? LoadRow(bg_image->plane(c) + pix, cols)
+                                           : simd::Splat(o.background[c]);
+        const F16 cr = simd::Load(st[aCr0 + c] + k);
+        const F16 tran = simd::Load(st[aCt0 + c] + k) + T * bg;
+        StoreRow(out->tran.plane(c) + pix, tran, cols);
+        StoreRow(out->ref.plane(c) + pix, cr, cols);
+        StoreRow(out->color.plane(c) + pix, tran + Ws * cr, cols);
       }
+      StoreRow(out->weight.plane(0) + pix, Ws, cols);
+      StoreRow(out->alpha.plane(0) + pix, A, cols);
+      StoreRow(out->depth.plane(0) + pix, simd::Masked(A >= kMinDepthAlpha, Ds / A), cols);
+      StoreRow(out->final_t.data() + pix, T, cols);
+      StoreRow(out->final_tr.data() + pix, simd::Abs(simd::Load(st[aTr] + k)), cols);
+      StoreRow(out->depth_sum.data() + pix, Ds, cols);
+      raster_internal::StoreRowAsUint(out->last_t.data() + pix, simd::Load(st[aLastT] + k), cols);
+      raster_internal::StoreRowAsUint(out->last_r.data() + pix, simd::Load(st[aLastR] + k), cols);
     }
   }
   if (o.record_contribution) {
@@ -533,44 +536,59 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
       const PixelArrays st(&scratch->pixel_state[thread], kBackwardArrays);
       raster_internal::ClearBackwardState(st, kBackwardArrays, bSt0, bSz + 1,
                                           x_end - x0 < kTileSize || y_end - y0 < kTileSize);
-      int max_last = 0;
+      // The upstream gradients folded onto the chains, a tile row at a time (the same operations
+      // per pixel as a scalar loop; an output without a gradient reads as zeros and is added all
+      // the same, as the scalar sums did).
+      using raster_internal::LoadRow;
+      using raster_internal::LoadRowOfUint;
+      const int cols = x_end - x0;
+      F16 last_max{};
       for (int y = y0; y < y_end; ++y) {
-        for (int x = x0; x < x_end; ++x) {
-          const int k = (y - y0) * kTileSize + (x - x0);
-          const size_t pix = static_cast<size_t>(y) * W + x;
-          const float Wv = r.weight.plane(0)[pix];
-          float gtc[3], w_grad = 0;
-          for (int c = 0; c < 3; ++c) {
-            const float gc = g.color.empty() ? 0.0f : g.color.plane(c)[pix];
-            gtc[c] = gc + (g.tran.empty() ? 0.0f : g.tran.plane(c)[pix]);
-            st[bGr0 + c][k] = Wv * gc + (g.ref.empty() ? 0.0f : g.ref.plane(c)[pix]);
-            st[bGt0 + c][k] = gtc[c];
-            w_grad += gc * r.ref.plane(c)[pix];
-          }
-          st[bGW][k] = w_grad + (g.weight.empty() ? 0.0f : g.weight.plane(0)[pix]);
-          float a_grad = g.alpha.empty() ? 0.0f : g.alpha.plane(0)[pix];
-          float n_grad = 0;
-          const float A = 1.0f - r.final_t[pix];
-          if (!g.depth.empty() && A >= kMinDepthAlpha) {
-            const float gD = g.depth.plane(0)[pix];
-            n_grad = gD / A;
-            a_grad -= gD * r.depth_sum[pix] / (A * A);
-          }
-          // The background and A terms share d T_N / d a_i = -T_N / (1 - a_i).
-          float bg_dot = 0;
-          for (int c = 0; c < 3; ++c)
-            bg_dot += (bg_image != nullptr ? bg_image->plane(c)[pix] : o.background[c]) * gtc[c];
-          st[bGA][k] = a_grad - bg_dot;
-          st[bGN][k] = n_grad;
-          st[bT][k] = st[bTfin][k] = r.final_t[pix];
-          st[bTr][k] = r.final_tr[pix];
-          const int lt = static_cast<int>(r.last_t[pix]),
-                    lr = refl ? static_cast<int>(r.last_r[pix]) : 0;
-          st[bLastT][k] = static_cast<float>(lt);
-          st[bLastR][k] = static_cast<float>(lr);
-          max_last = std::max(max_last, std::max(lt, lr));
+        const int k = (y - y0) * kTileSize;
+        const size_t pix = static_cast<size_t>(y) * W + x0;
+        const auto row_of = [&](const Image& im, int c) {
+          return im.empty() ? F16{} : LoadRow(im.plane(c) + pix, cols);
+        };
+        const F16 Wv = LoadRow(r.weight.plane(0) + pix, cols);
+        F16 gtc[3], w_grad{};
+        for (int c = 0; c < 3; ++c) {
+          const F16 gc = row_of(g.color, c);
+          gtc[c] = gc + row_of(g.tran, c);
+          simd::Store(st[bGr0 + c] + k, Wv * gc + row_of(g.ref, c));
+          simd::Store(st[bGt0 + c] + k, gtc[c]);
+          w_grad += gc * LoadRow(r.ref.plane(c) + pix, cols);
         }
+        simd::Store(st[bGW] + k, w_grad + row_of(g.weight, 0));
+        F16 a_grad = row_of(g.alpha, 0), n_grad{};
+        const F16 T_final = LoadRow(r.final_t.data() + pix, cols);
+        const F16 A = 1.0f - T_final;
+        if (!g.depth.empty()) {
+          const simd::MaskOf<F16> has_depth = A >= kMinDepthAlpha;
+          const F16 gD = LoadRow(g.depth.plane(0) + pix, cols);
+          n_grad = simd::Masked(has_depth, gD / A);
+          a_grad = simd::Select(
+              has_depth, a_grad - gD * LoadRow(r.depth_sum.data() + pix, cols) / (A * A), a_grad);
+        }
+        // The background and A terms share d T_N / d a_i = -T_N / (1 - a_i).
+        F16 bg_dot{};
+        for (int c = 0; c < 3; ++c)
+          bg_dot += (bg_image != nullptr ? LoadRow(bg_image->plane(c) + pix, cols)
+                                         : simd::Splat(o.background[c])) *
+                    gtc[c];
+        simd::Store(st[bGA] + k, a_grad - bg_dot);
+        simd::Store(st[bGN] + k, n_grad);
+        simd::Store(st[bT] + k, T_final);
+        simd::Store(st[bTfin] + k, T_final);
+        simd::Store(st[bTr] + k, LoadRow(r.final_tr.data() + pix, cols));
+        const F16 lt = LoadRowOfUint(r.last_t.data() + pix, cols);
+        const F16 lr = refl ? LoadRowOfUint(r.last_r.data() + pix, cols) : F16{};
+        simd::Store(st[bLastT] + k, lt);
+        simd::Store(st[bLastR] + k, lr);
+        last_max = simd::Max(last_max, simd::Max(lt, lr));
       }
+      int max_last = 0;
+      for (int l = 0; l < kTileSize; ++l)
+        max_last = std::max(max_last, static_cast<int>(last_max[l]));
       GatherTile<kNumFields>(packed, ids, n, 0, max_last, &buffer);
       const float* f = buffer.data();
       for (int j = max_last - 1; j >= 0; --j) {
