@@ -621,38 +621,46 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
       }
       if (weights != nullptr) weights[j] += sum;
     }
+    // The outputs, a tile row at a time (the same operations per pixel as a scalar loop; the
+    // world normals per pixel, as before).
+    using raster_internal::StoreRow;
+    using raster_internal::StoreRowAsUint;
+    const int cols = x_end - x0;
     for (int y = y0; y < y_end; ++y) {
-      for (int x = x0; x < x_end; ++x) {
-        const int k = (y - y0) * kTileSize + (x - x0);
-        const size_t pix = static_cast<size_t>(y) * W + x;
-        const float T = std::abs(st[aT][k]), A = 1.0f - T;  // negated where it terminated
-        const float cs[3] = {st[aC0][k], st[aC1][k], st[aC2][k]};
-        const Eigen::Vector3f nv(st[aN0][k], st[aN1][k], st[aN2][k]);
-        const Eigen::Vector3f nw = Rt * nv;
-        for (int c = 0; c < 3; ++c) {
-          out->color.plane(c)[pix] =
-              cs[c] + T * (bg_image != nullptr ? bg_image->plane(c)[pix] : o.background[c]);
-          out->normal.plane(c)[pix] = nv[c];
-          out->normal_world.plane(c)[pix] = nw[c];
-        }
-        out->alpha.plane(0)[pix] = A;
-        // Normalised by the summed weights rather than 1 - T: equal in exact arithmetic, but a
-        // faint pixel's 1 - T loses most of its digits (alpha 0.005: 2e-5 relative), which would
-        // put one surfel's depth off its own z.
-        out->depth.plane(0)[pix] = A >= kMinDepthAlpha ? st[aDs][k] / st[aWs][k] : 0.0f;
-        out->median_depth.plane(0)[pix] = st[aZmed][k];
-        out->final_t[pix] = T;
-        out->depth_sum[pix] = st[aDs][k];
-        out->weight_sum[pix] = st[aWs][k];
-        if (distortion) {
-          out->distortion.plane(0)[pix] = st[aDist][k];
-          out->m1[pix] = st[aM1][k];
-          out->m2[pix] = st[aM2][k];
-          out->m_ref[pix] = st[aMref][k];
-        }
-        out->last[pix] = static_cast<uint32_t>(st[aLast][k]);
-        out->median_index[pix] = static_cast<uint32_t>(st[aMed][k]);
+      const int k = (y - y0) * kTileSize;
+      const size_t pix = static_cast<size_t>(y) * W + x0;
+      const F16 T = simd::Abs(simd::Load(st[aT] + k));  // negated where it terminated
+      const F16 A = 1.0f - T;
+      for (int c = 0; c < 3; ++c) {
+        const F16 bg = bg_image != nullptr
+                           ? raster_internal::LoadRow(bg_image->plane(c) + pix, cols)
+                           : simd::Splat(o.background[c]);
+        StoreRow(out->color.plane(c) + pix, simd::Load(st[aC0 + c] + k) + T * bg, cols);
+        StoreRow(out->normal.plane(c) + pix, simd::Load(st[aN0 + c] + k), cols);
       }
+      for (int l = 0; l < cols; ++l) {
+        const Eigen::Vector3f nv(st[aN0][k + l], st[aN1][k + l], st[aN2][k + l]);
+        const Eigen::Vector3f nw = Rt * nv;
+        for (int c = 0; c < 3; ++c) out->normal_world.plane(c)[pix + l] = nw[c];
+      }
+      StoreRow(out->alpha.plane(0) + pix, A, cols);
+      // Normalised by the summed weights rather than 1 - T: equal in exact arithmetic, but a
+      // faint pixel's 1 - T loses most of its digits (alpha 0.005: 2e-5 relative), which would
+      // put one surfel's depth off its own z.
+      const F16 Ds = simd::Load(st[aDs] + k), Ws = simd::Load(st[aWs] + k);
+      StoreRow(out->depth.plane(0) + pix, simd::Masked(A >= kMinDepthAlpha, Ds / Ws), cols);
+      StoreRow(out->median_depth.plane(0) + pix, simd::Load(st[aZmed] + k), cols);
+      StoreRow(out->final_t.data() + pix, T, cols);
+      StoreRow(out->depth_sum.data() + pix, Ds, cols);
+      StoreRow(out->weight_sum.data() + pix, Ws, cols);
+      if (distortion) {
+        StoreRow(out->distortion.plane(0) + pix, simd::Load(st[aDist] + k), cols);
+        StoreRow(out->m1.data() + pix, simd::Load(st[aM1] + k), cols);
+        StoreRow(out->m2.data() + pix, simd::Load(st[aM2] + k), cols);
+        StoreRow(out->m_ref.data() + pix, simd::Load(st[aMref] + k), cols);
+      }
+      StoreRowAsUint(out->last.data() + pix, simd::Load(st[aLast] + k), cols);
+      StoreRowAsUint(out->median_index.data() + pix, simd::Load(st[aMed] + k), cols);
     }
   }
   if (o.record_contribution) {
@@ -708,54 +716,73 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
       const PixelArrays st(&scratch->pixel_state[thread], kBackwardArrays);
       raster_internal::ClearBackwardState(st, kBackwardArrays, bSc0, bSw + 1,
                                           x_end - x0 < kTileSize || y_end - y0 < kTileSize);
-      int max_last = 0;
+      // The upstream gradients, a tile row at a time (the same operations per pixel as a scalar
+      // loop; an output without a gradient reads as zeros; the normals per pixel, as before).
+      using raster_internal::LoadRow;
+      using raster_internal::LoadRowOfUint;
+      const int cols = x_end - x0;
+      F16 last_max{};
       for (int y = y0; y < y_end; ++y) {
-        for (int x = x0; x < x_end; ++x) {
-          const int k = (y - y0) * kTileSize + (x - x0);
-          const size_t pix = static_cast<size_t>(y) * W + x;
-          float gc[3];
-          for (int c = 0; c < 3; ++c) gc[c] = g.color.empty() ? 0.0f : g.color.plane(c)[pix];
-          Eigen::Vector3f gn = Eigen::Vector3f::Zero();
-          if (!g.normal.empty())
-            gn += Eigen::Vector3f(g.normal.plane(0)[pix], g.normal.plane(1)[pix],
-                                  g.normal.plane(2)[pix]);
-          if (!g.normal_world.empty()) {
-            gn += Rc * Eigen::Vector3f(g.normal_world.plane(0)[pix], g.normal_world.plane(1)[pix],
-                                       g.normal_world.plane(2)[pix]);
+        const int k = (y - y0) * kTileSize;
+        const size_t pix = static_cast<size_t>(y) * W + x0;
+        // The camera-space normal gradient plus the world one rotated back (per pixel, as before).
+        for (int c = 0; c < 3; ++c)
+          simd::Store(st[bGn0 + c] + k,
+                      F16{} + (g.normal.empty() ? F16{} : LoadRow(g.normal.plane(c) + pix, cols)));
+        if (!g.normal_world.empty()) {
+          for (int l = 0; l < cols; ++l) {
+            Eigen::Vector3f gn(st[bGn0][k + l], st[bGn1][k + l], st[bGn2][k + l]);
+            gn += Rc * Eigen::Vector3f(g.normal_world.plane(0)[pix + l],
+                                       g.normal_world.plane(1)[pix + l],
+                                       g.normal_world.plane(2)[pix + l]);
+            for (int c = 0; c < 3; ++c) st[bGn0 + c][k + l] = gn[c];
           }
-          float a_grad = g.alpha.empty() ? 0.0f : g.alpha.plane(0)[pix];
-          float ds_grad = 0;
-          const float A = 1.0f - r.final_t[pix];
-          if (!g.depth.empty() && A >= kMinDepthAlpha) {
-            // Depth = D / sum w (= D / A, see the forward pass).
-            const float gD = g.depth.plane(0)[pix], ws = r.weight_sum[pix];
-            ds_grad = gD / ws;
-            a_grad -= gD * r.depth_sum[pix] / (ws * ws);
-          }
-          for (int c = 0; c < 3; ++c) {
-            st[bGc0 + c][k] = gc[c];
-            st[bGn0 + c][k] = gn[c];
-          }
-          st[bGDs][k] = ds_grad;
-          // The background and A terms share d T_N / d a_i = -T_N / (1 - a_i).
-          float bg_dot = 0;
-          for (int c = 0; c < 3; ++c)
-            bg_dot += (bg_image != nullptr ? bg_image->plane(c)[pix] : o.background[c]) * gc[c];
-          st[bGA][k] = a_grad - bg_dot;
-          st[bGZmed][k] = g.median_depth.empty() ? 0.0f : g.median_depth.plane(0)[pix];
-          st[bT][k] = st[bTfin][k] = r.final_t[pix];
-          if (distortion) {
-            st[bGDist][k] = g.distortion.plane(0)[pix];
-            st[bAN][k] = A;
-            st[bM1N][k] = r.m1[pix];
-            st[bM2N][k] = r.m2[pix];
-            st[bMref][k] = r.m_ref[pix];
-          }
-          st[bLast][k] = static_cast<float>(r.last[pix]);
-          st[bMed][k] = static_cast<float>(r.median_index[pix]);
-          max_last = std::max(max_last, static_cast<int>(r.last[pix]));
         }
+        F16 gc[3];
+        for (int c = 0; c < 3; ++c) {
+          gc[c] = g.color.empty() ? F16{} : LoadRow(g.color.plane(c) + pix, cols);
+          simd::Store(st[bGc0 + c] + k, gc[c]);
+        }
+        F16 a_grad = g.alpha.empty() ? F16{} : LoadRow(g.alpha.plane(0) + pix, cols), ds_grad{};
+        const F16 T_final = LoadRow(r.final_t.data() + pix, cols);
+        const F16 A = 1.0f - T_final;
+        if (!g.depth.empty()) {
+          // Depth = D / sum w (= D / A, see the forward pass). (Lanes past the image's edge read
+          // zeros, 0 / 0 here: kept out, as every lane of the state must stay finite.)
+          const simd::MaskOf<F16> has_depth = tl.Ok<F16>(0) & (A >= kMinDepthAlpha);
+          const F16 gD = LoadRow(g.depth.plane(0) + pix, cols);
+          const F16 ws = LoadRow(r.weight_sum.data() + pix, cols);
+          ds_grad = simd::Masked(has_depth, gD / ws);
+          a_grad = simd::Select(
+              has_depth, a_grad - gD * LoadRow(r.depth_sum.data() + pix, cols) / (ws * ws), a_grad);
+        }
+        simd::Store(st[bGDs] + k, ds_grad);
+        // The background and A terms share d T_N / d a_i = -T_N / (1 - a_i).
+        F16 bg_dot{};
+        for (int c = 0; c < 3; ++c)
+          bg_dot += (bg_image != nullptr ? LoadRow(bg_image->plane(c) + pix, cols)
+                                         : simd::Splat(o.background[c])) *
+                    gc[c];
+        simd::Store(st[bGA] + k, a_grad - bg_dot);
+        simd::Store(st[bGZmed] + k,
+                    g.median_depth.empty() ? F16{} : LoadRow(g.median_depth.plane(0) + pix, cols));
+        simd::Store(st[bT] + k, T_final);
+        simd::Store(st[bTfin] + k, T_final);
+        if (distortion) {
+          simd::Store(st[bGDist] + k, LoadRow(g.distortion.plane(0) + pix, cols));
+          simd::Store(st[bAN] + k, A);
+          simd::Store(st[bM1N] + k, LoadRow(r.m1.data() + pix, cols));
+          simd::Store(st[bM2N] + k, LoadRow(r.m2.data() + pix, cols));
+          simd::Store(st[bMref] + k, LoadRow(r.m_ref.data() + pix, cols));
+        }
+        const F16 last = LoadRowOfUint(r.last.data() + pix, cols);
+        simd::Store(st[bLast] + k, last);
+        simd::Store(st[bMed] + k, LoadRowOfUint(r.median_index.data() + pix, cols));
+        last_max = simd::Max(last_max, last);
       }
+      int max_last = 0;
+      for (int l = 0; l < kTileSize; ++l)
+        max_last = std::max(max_last, static_cast<int>(last_max[l]));
       GatherTile<kNumFields>(packed, ids, n, 0, max_last, &buffer);
       const float* f = buffer.data();
       for (int j = max_last - 1; j >= 0; --j) {
