@@ -96,6 +96,62 @@ inline V Masked(MaskOf<V> mask, V a) {
   return mask ? a : V{};
 }
 
+// a * b + c and a * b - c with one rounding, wherever they stand: the compiler fuses a multiply
+// and an add only as the code around lets it, so where two passes must compute the same value to
+// the bit, the fusing is spelled out. (Without FMA instructions: unfused, as the compiler does.)
+inline F16 Fma(F16 a, F16 b, F16 c) {
+#if defined(__AVX512F__)
+  __m512 x, y, z;
+  std::memcpy(&x, &a, sizeof(x));
+  std::memcpy(&y, &b, sizeof(y));
+  std::memcpy(&z, &c, sizeof(z));
+  x = _mm512_fmadd_ps(x, y, z);
+  std::memcpy(&a, &x, sizeof(a));
+  return a;
+#else
+  return a * b + c;
+#endif
+}
+inline F16 Fms(F16 a, F16 b, F16 c) {
+#if defined(__AVX512F__)
+  __m512 x, y, z;
+  std::memcpy(&x, &a, sizeof(x));
+  std::memcpy(&y, &b, sizeof(y));
+  std::memcpy(&z, &c, sizeof(z));
+  x = _mm512_fmsub_ps(x, y, z);
+  std::memcpy(&a, &x, sizeof(a));
+  return a;
+#else
+  return a * b - c;
+#endif
+}
+inline F8 Fma(F8 a, F8 b, F8 c) {
+#if defined(__FMA__)
+  __m256 x, y, z;
+  std::memcpy(&x, &a, sizeof(x));
+  std::memcpy(&y, &b, sizeof(y));
+  std::memcpy(&z, &c, sizeof(z));
+  x = _mm256_fmadd_ps(x, y, z);
+  std::memcpy(&a, &x, sizeof(a));
+  return a;
+#else
+  return a * b + c;
+#endif
+}
+inline F8 Fms(F8 a, F8 b, F8 c) {
+#if defined(__FMA__)
+  __m256 x, y, z;
+  std::memcpy(&x, &a, sizeof(x));
+  std::memcpy(&y, &b, sizeof(y));
+  std::memcpy(&z, &c, sizeof(z));
+  x = _mm256_fmsub_ps(x, y, z);
+  std::memcpy(&a, &x, sizeof(a));
+  return a;
+#else
+  return a * b - c;
+#endif
+}
+
 // Horizontal reductions by halving (a few shuffles instead of dependent scalar adds).
 inline float Sum(F4 v) { return (v[0] + v[2]) + (v[1] + v[3]); }
 inline float Sum(F8 v) {

@@ -116,6 +116,47 @@ TEST(Simd16, FloorAndScaleAreExact) {
   }
 }
 
+// Fma / Fms round once where the build has FMA instructions (the rasterizers' two passes rely on
+// the same fusing), and are the plain expression otherwise.
+TEST(Simd16, FmaAndFmsRoundOnce) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(-2.0f, 2.0f);
+  for (int trial = 0; trial < 200; ++trial) {
+    F16 a, b, c;
+    F8 a8, b8, c8;
+    for (int l = 0; l < 16; ++l) {
+      a[l] = u(rng);
+      b[l] = u(rng);
+      c[l] = u(rng);
+    }
+    for (int l = 0; l < 8; ++l) {
+      a8[l] = a[l];
+      b8[l] = b[l];
+      c8[l] = c[l];
+    }
+    const F16 f = Fma(a, b, c), g = Fms(a, b, c);
+    const F8 f8 = Fma(a8, b8, c8), g8 = Fms(a8, b8, c8);
+    for (int l = 0; l < 16; ++l) {
+#if defined(__AVX512F__)
+      EXPECT_EQ(f[l], std::fma(a[l], b[l], c[l]));
+      EXPECT_EQ(g[l], std::fma(a[l], b[l], -c[l]));
+#else
+      EXPECT_NEAR(f[l], a[l] * b[l] + c[l], 1e-6f);
+      EXPECT_NEAR(g[l], a[l] * b[l] - c[l], 1e-6f);
+#endif
+    }
+    for (int l = 0; l < 8; ++l) {
+#if defined(__FMA__)
+      EXPECT_EQ(f8[l], std::fma(a8[l], b8[l], c8[l]));
+      EXPECT_EQ(g8[l], std::fma(a8[l], b8[l], -c8[l]));
+#else
+      EXPECT_NEAR(f8[l], a8[l] * b8[l] + c8[l], 1e-6f);
+      EXPECT_NEAR(g8[l], a8[l] * b8[l] - c8[l], 1e-6f);
+#endif
+    }
+  }
+}
+
 // And a different pairing would be caught: the sum of the lanes in index order differs from Sum
 // for some of these inputs (else the test above could not fail).
 TEST(Simd16, PairingMattersForTheseInputs) {
