@@ -41,24 +41,17 @@ inline void Store(float* p, V v) {
 }
 // Stores the lanes of `v` where `mask` is set, leaving the others in memory as they are: one
 // masked store where the build targets AVX-512 (no load of the old values), a blend otherwise.
+// (The intrinsics take these vector types as they are: same size, same element type.)
 inline void StoreMasked(float* p, I16 mask, F16 v) {
 #if defined(__AVX512F__)
-  __m512i m;
-  __m512 x;
-  std::memcpy(&m, &mask, sizeof(m));
-  std::memcpy(&x, &v, sizeof(x));
-  _mm512_mask_storeu_ps(p, _mm512_test_epi32_mask(m, m), x);
+  _mm512_mask_storeu_ps(p, _mm512_test_epi32_mask((__m512i)mask, (__m512i)mask), v);
 #else
   Store(p, mask ? v : Load<F16>(p));
 #endif
 }
 inline void StoreMasked(float* p, I8 mask, F8 v) {
 #if defined(__AVX512F__) && defined(__AVX512VL__)
-  __m256i m;
-  __m256 x;
-  std::memcpy(&m, &mask, sizeof(m));
-  std::memcpy(&x, &v, sizeof(x));
-  _mm256_mask_storeu_ps(p, _mm256_test_epi32_mask(m, m), x);
+  _mm256_mask_storeu_ps(p, _mm256_test_epi32_mask((__m256i)mask, (__m256i)mask), v);
 #else
   Store(p, mask ? v : Load<F8>(p));
 #endif
@@ -101,52 +94,28 @@ inline V Masked(MaskOf<V> mask, V a) {
 // the bit, the fusing is spelled out. (Without FMA instructions: unfused, as the compiler does.)
 inline F16 Fma(F16 a, F16 b, F16 c) {
 #if defined(__AVX512F__)
-  __m512 x, y, z;
-  std::memcpy(&x, &a, sizeof(x));
-  std::memcpy(&y, &b, sizeof(y));
-  std::memcpy(&z, &c, sizeof(z));
-  x = _mm512_fmadd_ps(x, y, z);
-  std::memcpy(&a, &x, sizeof(a));
-  return a;
+  return _mm512_fmadd_ps(a, b, c);
 #else
   return a * b + c;
 #endif
 }
 inline F16 Fms(F16 a, F16 b, F16 c) {
 #if defined(__AVX512F__)
-  __m512 x, y, z;
-  std::memcpy(&x, &a, sizeof(x));
-  std::memcpy(&y, &b, sizeof(y));
-  std::memcpy(&z, &c, sizeof(z));
-  x = _mm512_fmsub_ps(x, y, z);
-  std::memcpy(&a, &x, sizeof(a));
-  return a;
+  return _mm512_fmsub_ps(a, b, c);
 #else
   return a * b - c;
 #endif
 }
 inline F8 Fma(F8 a, F8 b, F8 c) {
 #if defined(__FMA__)
-  __m256 x, y, z;
-  std::memcpy(&x, &a, sizeof(x));
-  std::memcpy(&y, &b, sizeof(y));
-  std::memcpy(&z, &c, sizeof(z));
-  x = _mm256_fmadd_ps(x, y, z);
-  std::memcpy(&a, &x, sizeof(a));
-  return a;
+  return _mm256_fmadd_ps(a, b, c);
 #else
   return a * b + c;
 #endif
 }
 inline F8 Fms(F8 a, F8 b, F8 c) {
 #if defined(__FMA__)
-  __m256 x, y, z;
-  std::memcpy(&x, &a, sizeof(x));
-  std::memcpy(&y, &b, sizeof(y));
-  std::memcpy(&z, &c, sizeof(z));
-  x = _mm256_fmsub_ps(x, y, z);
-  std::memcpy(&a, &x, sizeof(a));
-  return a;
+  return _mm256_fmsub_ps(a, b, c);
 #else
   return a * b - c;
 #endif
@@ -254,22 +223,14 @@ inline V Floor(V f) {
 #if defined(__AVX512F__)
 template <>
 inline F16 Floor(F16 f) {
-  __m512 x;
-  std::memcpy(&x, &f, sizeof(x));
-  // (The all-lanes masked forms: GCC 12 warns of an uninitialised source in the plain ones.)
-  x = _mm512_mask_roundscale_ps(x, 0xffff, x, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
-  std::memcpy(&f, &x, sizeof(f));
-  return f;
+  // (The all-lanes masked form: GCC 12 warns of an uninitialised source in the plain one.)
+  return _mm512_mask_roundscale_ps(f, 0xffff, f, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
 }
 #endif
 #if defined(__AVX__)
 template <>
 inline F8 Floor(F8 f) {
-  __m256 x;
-  std::memcpy(&x, &f, sizeof(x));
-  x = _mm256_floor_ps(x);
-  std::memcpy(&f, &x, sizeof(f));
-  return f;
+  return _mm256_floor_ps(f);
 }
 #endif
 
@@ -286,23 +247,13 @@ inline V ScaleByPowerOfTwo(V y, V t) {
 #if defined(__AVX512F__)
 template <>
 inline F16 ScaleByPowerOfTwo(F16 y, F16 t) {
-  __m512 a, b;
-  std::memcpy(&a, &y, sizeof(a));
-  std::memcpy(&b, &t, sizeof(b));
-  a = _mm512_mask_scalef_ps(a, 0xffff, a, b);
-  std::memcpy(&y, &a, sizeof(y));
-  return y;
+  return _mm512_mask_scalef_ps(y, 0xffff, y, t);
 }
 #endif
 #if defined(__AVX512F__) && defined(__AVX512VL__)
 template <>
 inline F8 ScaleByPowerOfTwo(F8 y, F8 t) {
-  __m256 a, b;
-  std::memcpy(&a, &y, sizeof(a));
-  std::memcpy(&b, &t, sizeof(b));
-  a = _mm256_mask_scalef_ps(a, 0xff, a, b);
-  std::memcpy(&y, &a, sizeof(y));
-  return y;
+  return _mm256_mask_scalef_ps(y, 0xff, y, t);
 }
 #endif
 
