@@ -151,15 +151,19 @@ inline void StoreRow(float* p, simd::F16 v, int n) {
 }
 // Unsigned integers (below 2^24, so exact as floats) to and from such rows.
 inline simd::F16 LoadRowOfUint(const uint32_t* p, int n) {
-  typedef uint32_t U16 __attribute__((vector_size(64)));
-  U16 u{};
+  simd::U16 u{};
   std::memcpy(&u, p, sizeof(uint32_t) * n);
   return __builtin_convertvector(u, simd::F16);
 }
 inline void StoreRowAsUint(uint32_t* p, simd::F16 v, int n) {
-  typedef uint32_t U16 __attribute__((vector_size(64)));
-  const U16 u = __builtin_convertvector(v, U16);
+  const simd::U16 u = __builtin_convertvector(v, simd::U16);
   std::memcpy(p, &u, sizeof(uint32_t) * n);
+}
+// The largest lane of a row of such integers (a tile's largest last-blended count).
+inline int LargestLane(simd::F16 v) {
+  int largest = 0;
+  for (int l = 0; l < kTileSize; ++l) largest = std::max(largest, static_cast<int>(v[l]));
+  return largest;
 }
 
 // Per-pixel arrays of a tile (index k = row * 16 + column) carved out of one per-thread buffer,

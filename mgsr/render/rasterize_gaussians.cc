@@ -592,9 +592,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
         simd::Store(st[bLastR] + k, lr);
         last_max = simd::Max(last_max, simd::Max(lt, lr));
       }
-      int max_last = 0;
-      for (int l = 0; l < kTileSize; ++l)
-        max_last = std::max(max_last, static_cast<int>(last_max[l]));
+      const int max_last = raster_internal::LargestLane(last_max);
       GatherTile<kNumFields>(packed, ids, n, 0, max_last, &buffer);
       const float* f = buffer.data();
       for (int j = max_last - 1; j >= 0; --j) {

@@ -780,9 +780,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
         simd::Store(st[bMed] + k, LoadRowOfUint(r.median_index.data() + pix, cols));
         last_max = simd::Max(last_max, last);
       }
-      int max_last = 0;
-      for (int l = 0; l < kTileSize; ++l)
-        max_last = std::max(max_last, static_cast<int>(last_max[l]));
+      const int max_last = raster_internal::LargestLane(last_max);
       GatherTile<kNumFields>(packed, ids, n, 0, max_last, &buffer);
       const float* f = buffer.data();
       for (int j = max_last - 1; j >= 0; --j) {
