@@ -159,6 +159,20 @@ inline void StoreRowAsUint(uint32_t* p, simd::F16 v, int n) {
   const simd::U16 u = __builtin_convertvector(v, simd::U16);
   std::memcpy(p, &u, sizeof(uint32_t) * n);
 }
+// Channel c of the background behind a tile row: the per-pixel image where there is one, else
+// the constant colour.
+inline simd::F16 BackgroundRow(const Image* image, const float background[3], int c, size_t pix,
+                               int n) {
+  return image != nullptr ? LoadRow(image->plane(c) + pix, n) : simd::Splat(background[c]);
+}
+// sum_c background_c g_c over a tile row (the background's share of d loss / d alpha).
+inline simd::F16 BackgroundDot(const Image* image, const float background[3], const simd::F16 g[3],
+                               size_t pix, int n) {
+  simd::F16 dot{};
+  for (int c = 0; c < 3; ++c) dot += BackgroundRow(image, background, c, pix, n) * g[c];
+  return dot;
+}
+
 // The largest lane of a row of such integers (a tile's largest last-blended count).
 inline int LargestLane(simd::F16 v) {
   int largest = 0;

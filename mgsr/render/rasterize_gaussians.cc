@@ -477,8 +477,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
       const F16 A = 1.0f - T;
       const F16 Ws = simd::Load(st[aWs] + k), Ds = simd::Load(st[aDs] + k);
       for (int c = 0; c < 3; ++c) {
-        const F16 bg = bg_image != nullptr ? LoadRow(bg_image->plane(c) + pix, cols)
-                                           : simd::Splat(o.background[c]);
+        const F16 bg = raster_internal::BackgroundRow(bg_image, o.background, c, pix, cols);
         const F16 cr = simd::Load(st[aCr0 + c] + k);
         const F16 tran = simd::Load(st[aCt0 + c] + k) + T * bg;
         StoreRow(out->tran.plane(c) + pix, tran, cols);
@@ -576,11 +575,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
               has_depth, a_grad - gD * LoadRow(r.depth_sum.data() + pix, cols) / (A * A), a_grad);
         }
         // The background and A terms share d T_N / d a_i = -T_N / (1 - a_i).
-        F16 bg_dot{};
-        for (int c = 0; c < 3; ++c)
-          bg_dot += (bg_image != nullptr ? LoadRow(bg_image->plane(c) + pix, cols)
-                                         : simd::Splat(o.background[c])) *
-                    gtc[c];
+        const F16 bg_dot = raster_internal::BackgroundDot(bg_image, o.background, gtc, pix, cols);
         simd::Store(st[bGA] + k, a_grad - bg_dot);
         simd::Store(st[bGN] + k, n_grad);
         simd::Store(st[bT] + k, T_final);

@@ -632,9 +632,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
       const F16 T = simd::Abs(simd::Load(st[aT] + k));  // negated where it terminated
       const F16 A = 1.0f - T;
       for (int c = 0; c < 3; ++c) {
-        const F16 bg = bg_image != nullptr
-                           ? raster_internal::LoadRow(bg_image->plane(c) + pix, cols)
-                           : simd::Splat(o.background[c]);
+        const F16 bg = raster_internal::BackgroundRow(bg_image, o.background, c, pix, cols);
         StoreRow(out->color.plane(c) + pix, simd::Load(st[aC0 + c] + k) + T * bg, cols);
         StoreRow(out->normal.plane(c) + pix, simd::Load(st[aN0 + c] + k), cols);
       }
@@ -758,11 +756,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
         }
         simd::Store(st[bGDs] + k, ds_grad);
         // The background and A terms share d T_N / d a_i = -T_N / (1 - a_i).
-        F16 bg_dot{};
-        for (int c = 0; c < 3; ++c)
-          bg_dot += (bg_image != nullptr ? LoadRow(bg_image->plane(c) + pix, cols)
-                                         : simd::Splat(o.background[c])) *
-                    gc[c];
+        const F16 bg_dot = raster_internal::BackgroundDot(bg_image, o.background, gc, pix, cols);
         simd::Store(st[bGA] + k, a_grad - bg_dot);
         simd::Store(st[bGZmed] + k,
                     g.median_depth.empty() ? F16{} : LoadRow(g.median_depth.plane(0) + pix, cols));
