@@ -297,6 +297,9 @@ void MutualBoostedSolver::Notify(Stage stage, int iteration, const BranchTrainer
   info.num_surfels = surfels_->size();
   info.seconds = Now() - start_time_;
   info.terms = t.LastTerms();
+  // The caller's work (progress lines, diagnostics such as the depth check after the warm-up),
+  // not the step's: its own profile row, as at the end of the iteration.
+  ProfileScope scope("callbacks");
   for (IterationCallback* c : callbacks_) Request((*c)(info), &callback_request_);
 }
 

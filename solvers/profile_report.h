@@ -14,6 +14,9 @@ namespace mgsr {
 // The scopes that are the rasterizers' work (tile binning, forward and backward rasterization);
 // everything else of an iteration is what issue #20 calls "the rest".
 bool IsRasterizerScope(const std::string& name);
+// The scope of the solver's callbacks (the caller's progress lines, diagnostics and checkpoints):
+// part of the rest, reported apart as well.
+bool IsCallbackScope(const std::string& name);
 
 // One table per stage: rows are scopes (in the order first seen), columns the 2DGS branch, the
 // 3DGS branch, the solver (scopes outside any branch) and their sum, in ms per iteration.

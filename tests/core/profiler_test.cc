@@ -110,6 +110,18 @@ TEST(ProfileReportTest, TableAndJsonPerIteration) {
   EXPECT_NE(table.find("rasterizers (binning, forward, backward) 50.00 ms, the rest 50.00 ms"),
             std::string::npos)
       << table;
+  // No callbacks scope: no line for the share without it.
+  EXPECT_EQ(table.find("without the callbacks"), std::string::npos) << table;
+  // With one (20 ms per iteration, taken from "other"): the rest stays 50 ms, 30 ms of it the
+  // training's own, of an 80 ms training iteration.
+  StageProfile with = p;
+  with.entries.push_back({"", "callbacks", 0.2, 10});
+  const std::string table2 = FormatProfile({with});
+  EXPECT_NE(table2.find("the rest 50.00 ms"), std::string::npos) << table2;
+  EXPECT_NE(table2.find("without the callbacks (20.00 ms: progress lines, diagnostics, "
+                        "checkpoints) the rest 30.00 ms (37.5% of the training iteration)"),
+            std::string::npos)
+      << table2;
   const nlohmann::json j = ProfileToJson({p});
   EXPECT_EQ(j["warmup"]["iterations"], 10);
   EXPECT_NEAR(j["warmup"]["ms_per_iteration"].get<double>(), 100.0, 1e-9);

@@ -289,6 +289,8 @@ TEST(MutualBoostedSolverTest, ProfileAccountsForEachStage) {
       EXPECT_EQ(calls["3DGS/raster backward"], 30);
       EXPECT_EQ(calls["3DGS/loss: photo"], 30);
       EXPECT_EQ(calls["2DGS/adam"], 30);
+      // The callbacks, the caller's work: after each branch's step and at the iteration's end.
+      EXPECT_EQ(calls["/callbacks"], 30 * 3);
     } else {
       // Alternate: each branch learns on every other iteration and supervises on the others.
       // A round (2DGS step, 3DGS step) takes one view, and each branch renders it once: the
@@ -300,6 +302,7 @@ TEST(MutualBoostedSolverTest, ProfileAccountsForEachStage) {
       EXPECT_EQ(calls["3DGS/raster forward"], 5);
       EXPECT_EQ(calls["/mutual targets"], 10);
       EXPECT_EQ(calls["/exposure fit"], 1);
+      EXPECT_EQ(calls["/callbacks"], 10 * 2);
     }
   }
   // Off again: the next solve records nothing.
