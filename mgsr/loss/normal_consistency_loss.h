@@ -13,6 +13,7 @@
 
 #include "mgsr/loss/loss_term.h"
 #include "mgsr/loss/loss_util.h"
+#include "mgsr/loss/normal_consistency_plane.h"
 
 namespace mgsr {
 
@@ -79,75 +80,45 @@ ImageT<T> DepthToNormal(const ImageT<T>& depth, const Camera& cam) {
 template <typename T>
 double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t,
                                       double scale, RenderGradientsT<T>* grad) const {
-  using V = internal::Vec3<T>;
   const ImageT<T>& D = *in.Get(Buffer::kDepth);
   const ImageT<T>& N = *in.Get(Buffer::kNormal);
   const ImageT<T>& A = *in.Get(Buffer::kAlpha);
   const Camera& cam = *in.camera;
   const int w = D.width(), h = D.height();
-  const double inv_n = 1.0 / (static_cast<double>(w) * h);
-  const V C = cam.Center().template cast<T>();
-  // World rays of every pixel, once per call, and per-row sums: scratch kept per thread between
-  // calls (no allocation once sized). Only pointers go into the parallel region below (a worker
-  // thread naming a thread_local would get its own).
-  static thread_local std::vector<V> ray_storage;
-  static thread_local std::vector<double> row_storage;
-  ray_storage.resize(static_cast<size_t>(w) * h);
-  row_storage.assign(h, 0.0);
-  V* const rays = ray_storage.data();
-  double* const row_total = row_storage.data();
+  const size_t n = static_cast<size_t>(w) * h;
+  const double inv_n = 1.0 / static_cast<double>(n);
+  // World rays of every pixel (three planes), once per call: scratch kept between calls (no
+  // allocation once sized). The pixel loop is NormalConsistencySum (normal_consistency_plane.h).
+  static thread_local std::vector<T> ray_storage;
+  ray_storage.resize(3 * n);
+  T* const rays = ray_storage.data();
+#pragma omp parallel for schedule(static) if (static_cast <int64_t>(n) >= 16384)
   for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x)
-      rays[static_cast<size_t>(y) * w + x] = internal::PixelRay<T>(cam, x, y);
-  }
-  auto ray = [&](int x, int y) -> const V& { return rays[static_cast<size_t>(y) * w + x]; };
-  auto P = [&](int x, int y) -> V { return C + D.at(0, y, x) * ray(x, y); };
-  ImageT<T>* gN = grad ? &grad->Get(Buffer::kNormal, N) : nullptr;
-  ImageT<T>* gD = grad ? &grad->Get(Buffer::kDepth, D) : nullptr;
-  // Pixel (x, y) writes the depth gradient of rows y - 1 .. y + 1: rows are processed in three
-  // interleaved phases (y mod 3), each in parallel, so no two threads touch one row; per-row sums
-  // are added in row order (deterministic for any thread count).
-  for (int phase = 0; phase < 3; ++phase) {
-#pragma omp parallel for schedule(static) if (static_cast <int64_t>(w) * h >= 16384)
-    for (int y = phase; y < h; y += 3) {
-      double total = 0;
-      for (int x = 0; x < w; ++x) {
-        const T gamma = t.mask != nullptr ? t.mask->at(0, y, x) : T(1);
-        const V n_rend(N.at(0, y, x), N.at(1, y, x), N.at(2, y, x));
-        const bool interior = x > 0 && y > 0 && x + 1 < w && y + 1 < h;
-        V dy = V::Zero(), dx = V::Zero(), c = V::Zero();
-        T len = 0;
-        if (interior) {
-          dy = P(x, y + 1) - P(x, y - 1);
-          dx = P(x + 1, y) - P(x - 1, y);
-          c = dy.cross(dx);
-          len = c.norm();
-        }
-        const bool defined = interior && len > T(0);
-        const V n_surf = defined ? V(c / len) : V::Zero();
-        const T a = A.at(0, y, x);  // held constant (stop-gradient)
-        total += gamma * (1 - n_rend.dot(n_surf) * a);
-        if (!grad || gamma == T(0)) continue;
-        const T s = static_cast<T>(-scale * inv_n) * gamma * a;
-        for (int k = 0; k < 3; ++k) gN->at(k, y, x) += s * n_surf[k];
-        if (!defined) continue;
-        // d/d n_surf = s n_rend -> through the normalisation -> the cross product -> the four
-        // depths.
-        const V dn = s * n_rend;
-        const V dc = (dn - n_surf * n_surf.dot(dn)) / len;
-        const V d_dy = dx.cross(dc);  // c = dy x dx
-        const V d_dx = dc.cross(dy);
-        gD->at(0, y + 1, x) += d_dy.dot(ray(x, y + 1));
-        gD->at(0, y - 1, x) -= d_dy.dot(ray(x, y - 1));
-        gD->at(0, y, x + 1) += d_dx.dot(ray(x + 1, y));
-        gD->at(0, y, x - 1) -= d_dx.dot(ray(x - 1, y));
-      }
-      row_total[y] = total;
+    for (int x = 0; x < w; ++x) {
+      const internal::Vec3<T> r = internal::PixelRay<T>(cam, x, y);
+      const size_t i = static_cast<size_t>(y) * w + x;
+      for (int k = 0; k < 3; ++k) rays[k * n + i] = r[k];
     }
   }
-  double total = 0;
-  for (int y = 0; y < h; ++y) total += row_total[y];
-  return total * inv_n;
+  NormalConsistencyPlanes<T> p;
+  p.width = w;
+  p.height = h;
+  p.depth = D.data();
+  p.alpha = A.data();
+  p.mask = t.mask != nullptr ? t.mask->data() : nullptr;
+  const internal::Vec3<T> C = cam.Center().template cast<T>();
+  for (int k = 0; k < 3; ++k) {
+    p.normal[k] = N.plane(k);
+    p.ray[k] = rays + k * n;
+    p.center[k] = C[k];
+  }
+  if (grad != nullptr) {
+    ImageT<T>& gN = grad->Get(Buffer::kNormal, N);
+    for (int k = 0; k < 3; ++k) p.d_normal[k] = gN.plane(k);
+    p.d_depth = grad->Get(Buffer::kDepth, D).data();
+    p.gain = static_cast<T>(-scale * inv_n);
+  }
+  return NormalConsistencySum(p) * inv_n;
 }
 
 }  // namespace mgsr

@@ -20,6 +20,7 @@
 #include "mgsr/loss/loss_registry.h"
 #include "mgsr/loss/mutual_depth_loss.h"
 #include "mgsr/loss/normal_consistency_loss.h"
+#include "mgsr/loss/normal_consistency_plane.h"
 #include "mgsr/loss/problem.h"
 #include "mgsr/loss/render_loss.h"
 #include "test_util.h"
@@ -527,6 +528,130 @@ TEST(EdgeAwareTvPlaneTest, MatchesTheDefinitionOnAnyThreadCount) {
     EXPECT_EQ(vf1, vf);
     EXPECT_EQ(hf1, hf);
     EXPECT_EQ(gf1, gf);
+  }
+}
+
+// The depth-normal consistency's pixel loop as it was written before its vectorised kernel
+// (NormalConsistencySum): Eigen 3-vectors, one pixel at a time, rows in three phases. The kernel
+// must give its values and gradients to the bit.
+double ScalarNormalConsistency(const NormalConsistencyPlanes<float>& p) {
+  using V = Eigen::Vector3f;
+  const int w = p.width, h = p.height;
+  const size_t n = static_cast<size_t>(w) * h;
+  auto at = [&](const float* plane, int x, int y) { return plane[static_cast<size_t>(y) * w + x]; };
+  auto ray = [&](int x, int y) {
+    return V(at(p.ray[0], x, y), at(p.ray[1], x, y), at(p.ray[2], x, y));
+  };
+  const V C(p.center[0], p.center[1], p.center[2]);
+  auto P = [&](int x, int y) -> V { return C + at(p.depth, x, y) * ray(x, y); };
+  double total_all = 0;
+  std::vector<double> row_total(h, 0.0);
+  for (int phase = 0; phase < 3; ++phase) {
+    for (int y = phase; y < h; y += 3) {
+      double total = 0;
+      for (int x = 0; x < w; ++x) {
+        const size_t i = static_cast<size_t>(y) * w + x;
+        const float gamma = p.mask != nullptr ? p.mask[i] : 1.0f;
+        const V n_rend(p.normal[0][i], p.normal[1][i], p.normal[2][i]);
+        const bool interior = x > 0 && y > 0 && x + 1 < w && y + 1 < h;
+        V dy = V::Zero(), dx = V::Zero(), c = V::Zero();
+        float len = 0;
+        if (interior) {
+          dy = P(x, y + 1) - P(x, y - 1);
+          dx = P(x + 1, y) - P(x - 1, y);
+          c = dy.cross(dx);
+          len = c.norm();
+        }
+        const bool defined = interior && len > 0.0f;
+        const V n_surf = defined ? V(c / len) : V::Zero();
+        const float a = p.alpha[i];
+        total += gamma * (1 - n_rend.dot(n_surf) * a);
+        if (p.d_depth == nullptr || gamma == 0.0f) continue;
+        const float s = p.gain * gamma * a;
+        for (int k = 0; k < 3; ++k) p.d_normal[k][i] += s * n_surf[k];
+        if (!defined) continue;
+        const V dn = s * n_rend;
+        const V dc = (dn - n_surf * n_surf.dot(dn)) / len;
+        const V d_dy = dx.cross(dc);
+        const V d_dx = dc.cross(dy);
+        p.d_depth[i + w] += d_dy.dot(ray(x, y + 1));
+        p.d_depth[i - w] -= d_dy.dot(ray(x, y - 1));
+        p.d_depth[i + 1] += d_dx.dot(ray(x + 1, y));
+        p.d_depth[i - 1] -= d_dx.dot(ray(x - 1, y));
+      }
+      row_total[y] = total;
+    }
+  }
+  for (int y = 0; y < h; ++y) total_all += row_total[y];
+  (void)n;
+  return total_all;
+}
+
+TEST(NormalConsistencyPlaneTest, MatchesTheScalarLoopToTheBitOnAnyThreadCount) {
+  for (const auto& [w, h, masked] : std::vector<std::tuple<int, int, bool>>{{256, 256, true},
+                                                                            {256, 256, false},
+                                                                            {37, 5, true},
+                                                                            {19, 1, false},
+                                                                            {1, 7, true},
+                                                                            {2, 2, false},
+                                                                            {300, 41, true}}) {
+    SCOPED_TRACE(std::to_string(w) + " x " + std::to_string(h) + (masked ? " masked" : ""));
+    Rng rng(7 * w + h);
+    const size_t n = static_cast<size_t>(w) * h;
+    std::vector<float> depth(n), normal(3 * n), alpha(n), mask(n), rays(3 * n);
+    for (size_t i = 0; i < n; ++i) {
+      // A smooth surface with steps, flat patches (degenerate normals: equal depths along a
+      // ray fan still differ, so also exact zeros) and holes.
+      const int x = static_cast<int>(i % w), y = static_cast<int>(i / w);
+      const double u = rng.Uniform();
+      depth[i] = u < 0.05 ? 0.0f
+                          : static_cast<float>(2.0 + 0.3 * std::sin(0.1 * x) + 0.01 * y +
+                                               (u > 0.9 ? 0.5 : 0.0));
+      alpha[i] = static_cast<float>(std::clamp(rng.Uniform(-0.2, 1.2), 0.0, 1.0));
+      mask[i] = static_cast<float>(std::clamp(rng.Uniform(-0.5, 1.5), 0.0, 1.0));
+      for (int k = 0; k < 3; ++k) normal[k * n + i] = static_cast<float>(rng.Uniform(-1, 1));
+      rays[i] = static_cast<float>((x + 0.5 - 0.5 * w) / (0.9 * w));
+      rays[n + i] = static_cast<float>((y + 0.5 - 0.5 * h) / (0.9 * w));
+      rays[2 * n + i] = 1.0f;
+    }
+    for (int x = 0; x < w; ++x) depth[static_cast<size_t>(h / 2) * w + x] = 0.0f;  // a zero row
+    NormalConsistencyPlanes<float> p;
+    p.width = w;
+    p.height = h;
+    p.depth = depth.data();
+    p.alpha = alpha.data();
+    p.mask = masked ? mask.data() : nullptr;
+    for (int k = 0; k < 3; ++k) {
+      p.normal[k] = normal.data() + k * n;
+      p.ray[k] = rays.data() + k * n;
+    }
+    p.center[0] = 0.1f;
+    p.center[1] = -0.2f;
+    p.center[2] = -3.0f;
+    p.gain = -0.37f;
+    auto run = [&](bool reference, std::vector<float>* dn, std::vector<float>* dd) {
+      // Start from non-zero gradients, as other terms have added theirs.
+      dn->assign(3 * n, 0.25f);
+      dd->assign(n, -0.5f);
+      NormalConsistencyPlanes<float> q = p;
+      for (int k = 0; k < 3; ++k) q.d_normal[k] = dn->data() + k * n;
+      q.d_depth = dd->data();
+      return reference ? ScalarNormalConsistency(q) : NormalConsistencySum(q);
+    };
+    std::vector<float> dn_ref, dd_ref, dn, dd, dn1, dd1;
+    const double ref = run(true, &dn_ref, &dd_ref);
+    EXPECT_EQ(run(false, &dn, &dd), ref);
+    EXPECT_EQ(dn, dn_ref);
+    EXPECT_EQ(dd, dd_ref);
+    const int threads = omp_get_max_threads();
+    omp_set_num_threads(1);
+    EXPECT_EQ(run(false, &dn1, &dd1), ref);
+    omp_set_num_threads(threads);
+    EXPECT_EQ(dn1, dn_ref);
+    EXPECT_EQ(dd1, dd_ref);
+    // Without gradients: the same value.
+    NormalConsistencyPlanes<float> value_only = p;
+    EXPECT_EQ(NormalConsistencySum(value_only), ref);
   }
 }
 
