@@ -1,11 +1,13 @@
 // BM_LossSet3D / BM_LossSet2D: the full loss sets of the two branches (value and gradient) at
-// 256 and 512 pixels, and BM_Dssim alone, to compare with the rasterizer's forward+backward
-// (D-SSIM should stay well under a quarter of it). Argument: image width (square images).
+// 256 and 512 pixels, BM_PhotoRow (the exposure-compensated render loss) and BM_Dssim alone, to
+// compare with the rasterizer's forward+backward (D-SSIM should stay well under a quarter of it).
+// Argument: image width (square images).
 #include <benchmark/benchmark.h>
 
 #include "mgsr/core/rng.h"
 #include "mgsr/loss/dssim_loss.h"
 #include "mgsr/loss/edge_aware_tv_loss.h"
+#include "mgsr/loss/exposure_compensation.h"
 #include "mgsr/loss/mutual_depth_loss.h"
 #include "mgsr/loss/normal_consistency_loss.h"
 #include "mgsr/loss/problem.h"
@@ -80,6 +82,18 @@ void BM_Dssim(benchmark::State& state) {
   mgsr::RenderGradients g;
   for (auto _ : state) benchmark::DoNotOptimize(dssim.Evaluate(in.in, in.targets, 1.0, &g));
 }
+
+// The photometric row as training runs it: the render loss (L1 + D-SSIM) of the exposure-
+// compensated colour (an affine colour transform, masked) against the photo.
+void BM_PhotoRow(benchmark::State& state) {
+  Inputs in(static_cast<int>(state.range(0)));
+  const mgsr::ColorTransform transform = {1.1,   0.05, -0.02, 0.03, 0.9,   0.01,
+                                          -0.04, 0.02, 1.05,  0.02, -0.01, 0.03};
+  const mgsr::ExposureCompensatedLoss photo(std::make_unique<mgsr::RenderLoss>(), transform);
+  mgsr::RenderGradients g;
+  for (auto _ : state) benchmark::DoNotOptimize(photo.Evaluate(in.in, in.targets, 1.0, &g));
+}
+BENCHMARK(BM_PhotoRow)->Arg(256)->Arg(512)->ArgName("width")->Unit(benchmark::kMillisecond);
 
 // One edge-aware TV term (depth: 1 channel; normals: 3), guided by a colour image: about 0.6 /
 // 1.0 ms at 256 px on this machine, a few percent of BM_LossSet2D (a vectorised rewrite with a
