@@ -82,6 +82,8 @@ class McmcDensity : public DensityStrategy {
   const DensityContext context_;
   const McmcOptions options_;
   float growth_ = options_.growth, pending_growth_ = 0;
+  // BeforeStep's activated values (kept between steps: no allocation once sized).
+  std::vector<float> activated_;
 };
 
 }  // namespace mgsr
