@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstdint>
 
 #include "mgsr/loss/loss_util.h"
 #include "mgsr/loss/photometric_term.h"
@@ -26,19 +27,18 @@ class L1Loss : public PhotometricTerm<L1Loss> {
     const T* xd = x.data();
     const T* yd = y.data();
     const size_t n = x.size();
-    // Two loops so each vectorises (a simd reduction: the sum's order is fixed by the build, not
-    // by the thread count).
+    // The gradient element by element on all threads; the sum one simd reduction on one thread
+    // (its order fixed by the build, not by the thread count).
     if (g != nullptr) {
-#pragma omp simd reduction(+ : sum)
-      for (size_t i = 0; i < n; ++i) {
+      const int64_t count = static_cast<int64_t>(n);
+#pragma omp parallel for simd schedule(static) if (count >= 16384)
+      for (int64_t i = 0; i < count; ++i) {
         const T d = xd[i] - yd[i];
-        sum += std::abs(d);
         g[i] += d > 0 ? step : (d < 0 ? -step : T(0));
       }
-    } else {
-#pragma omp simd reduction(+ : sum)
-      for (size_t i = 0; i < n; ++i) sum += std::abs(xd[i] - yd[i]);
     }
+#pragma omp simd reduction(+ : sum)
+    for (size_t i = 0; i < n; ++i) sum += std::abs(xd[i] - yd[i]);
     return sum * inv_n;
   }
 };
