@@ -12,9 +12,27 @@ namespace {
 // gsplat caps the copies of one primitive per event at 51 (its binomial table); a primitive drawn
 // more often than that in one event is matched as 51.
 constexpr int kMaxCopies = 51;
-// BeforeStep's loops over at least this many entries (a 128 px view's worth, as the loss kernels)
-// run on all threads.
+// ActivateAddAndSum's loops over at least this many entries (a 128 px view's worth, as the loss
+// kernels) run on all threads.
 constexpr int64_t kParallelFrom = 16384;
+
+// s_i = activate(x_i) and d_i += w * slope(s_i) on all threads, then the sum of the s_i in order in
+// double, returned: what one loop on one thread computed, to the bit (`scratch` holds the s_i).
+template <typename Activate, typename Slope>
+double ActivateAddAndSum(const float* x, size_t n, float w, Activate activate, Slope slope,
+                         float* d, std::vector<float>* scratch) {
+  scratch->resize(n);
+  float* const s = scratch->data();
+  const int64_t count = static_cast<int64_t>(n);
+#pragma omp parallel for schedule(static) if (count >= kParallelFrom)
+  for (int64_t i = 0; i < count; ++i) {
+    s[i] = activate(x[i]);
+    d[i] += w * slope(s[i]);
+  }
+  double sum = 0;
+  for (size_t i = 0; i < n; ++i) sum += s[i];
+  return sum;
+}
 
 // Draws `count` rows with replacement, row i with probability weight[i] / sum (weights >= 0, at
 // least one > 0): inverse transform sampling on the cumulative sums.
@@ -148,18 +166,9 @@ double McmcDensity::BeforeStep(const DensityStep& step, const PrimitiveRows& row
   const float* logits = rows.Block("opacity_logits");
   if (options_.opacity_reg > 0 && logits != nullptr && d_opacity != nullptr) {
     const float w = options_.opacity_reg / static_cast<float>(n) * views;
-    // The activations and gradients on all threads, the sum after them in order (as one loop
-    // did it on one thread: the same bits).
-    activated_.resize(n);
-    float* const s = activated_.data();
-    const int64_t rows_n = static_cast<int64_t>(n);
-#pragma omp parallel for schedule(static) if (rows_n >= kParallelFrom)
-    for (int64_t i = 0; i < rows_n; ++i) {
-      s[i] = Sigmoid(logits[i]);
-      d_opacity[i] += w * SigmoidGradFromValue(s[i]);
-    }
-    double sum = 0;
-    for (size_t i = 0; i < n; ++i) sum += s[i];
+    const double sum = ActivateAddAndSum(
+        logits, n, w, [](float x) { return Sigmoid(x); },
+        [](float s) { return SigmoidGradFromValue(s); }, d_opacity, &activated_);
     value += options_.opacity_reg * sum / n * views;
   }
   const float* log_scales = rows.Block("log_scales");
@@ -167,16 +176,9 @@ double McmcDensity::BeforeStep(const DensityStep& step, const PrimitiveRows& row
   if (options_.scale_reg > 0 && log_scales != nullptr && d_scale != nullptr && axes > 0) {
     const size_t count = n * axes;
     const float w = options_.scale_reg / static_cast<float>(count * context_.extent) * views;
-    activated_.resize(count);
-    float* const s = activated_.data();
-    const int64_t entries = static_cast<int64_t>(count);
-#pragma omp parallel for schedule(static) if (entries >= kParallelFrom)
-    for (int64_t j = 0; j < entries; ++j) {
-      s[j] = std::exp(log_scales[j]);
-      d_scale[j] += w * s[j];
-    }
-    double sum = 0;
-    for (size_t j = 0; j < count; ++j) sum += s[j];
+    const double sum = ActivateAddAndSum(
+        log_scales, count, w, [](float x) { return std::exp(x); }, [](float s) { return s; },
+        d_scale, &activated_);
     value += options_.scale_reg * sum / (count * context_.extent) * views;
   }
   return value;
