@@ -28,82 +28,57 @@ Scalar ParseScalar(const std::string& t) {
   return Scalar::kUnknown;
 }
 
-// Size in bytes, 0 when unknown.
-int ScalarSize(Scalar t) {
+// f(X{}) for the C++ type X of `t`, or unknown() for an unknown type.
+template <typename F, typename U>
+auto WithScalarType(Scalar t, F&& f, U&& unknown) {
   switch (t) {
     case Scalar::kInt8:
+      return f(int8_t{});
     case Scalar::kUint8:
-      return 1;
+      return f(uint8_t{});
     case Scalar::kInt16:
+      return f(int16_t{});
     case Scalar::kUint16:
-      return 2;
+      return f(uint16_t{});
     case Scalar::kInt32:
+      return f(int32_t{});
     case Scalar::kUint32:
+      return f(uint32_t{});
     case Scalar::kFloat32:
-      return 4;
+      return f(float{});
     case Scalar::kFloat64:
-      return 8;
+      return f(double{});
     case Scalar::kUnknown:
       break;
   }
-  return 0;
+  return unknown();
+}
+
+// Size in bytes, 0 when unknown.
+int ScalarSize(Scalar t) {
+  return WithScalarType(
+      t, [](auto x) { return static_cast<int>(sizeof(x)); }, [] { return 0; });
 }
 
 int TypeSize(const std::string& t) { return ScalarSize(ParseScalar(t)); }
 
-template <typename X>
-Status ReadAs(BinaryReader* in, double* v) {
-  X x = 0;
-  MGSR_RETURN_IF_ERROR(in->Read(&x));
-  *v = x;
-  return Status::Ok();
-}
-
 Status ReadScalar(BinaryReader* in, Scalar t, double* v) {
-  switch (t) {
-    case Scalar::kInt8:
-      return ReadAs<int8_t>(in, v);
-    case Scalar::kUint8:
-      return ReadAs<uint8_t>(in, v);
-    case Scalar::kInt16:
-      return ReadAs<int16_t>(in, v);
-    case Scalar::kUint16:
-      return ReadAs<uint16_t>(in, v);
-    case Scalar::kInt32:
-      return ReadAs<int32_t>(in, v);
-    case Scalar::kUint32:
-      return ReadAs<uint32_t>(in, v);
-    case Scalar::kFloat32:
-      return ReadAs<float>(in, v);
-    case Scalar::kFloat64:
-      return ReadAs<double>(in, v);
-    case Scalar::kUnknown:
-      break;
-  }
-  return Status::Error(in->path() + ": unknown PLY type");  // the header check rules this out
+  return WithScalarType(
+      t,
+      [&](auto x) {
+        MGSR_RETURN_IF_ERROR(in->Read(&x));
+        *v = x;
+        return Status::Ok();
+      },
+      // The header check rules this out.
+      [&] { return Status::Error(in->path() + ": unknown PLY type"); });
 }
 
 // An unknown type name is written as a double (as before types were parsed).
 void WriteScalar(BinaryWriter* out, Scalar t, double v) {
-  switch (t) {
-    case Scalar::kInt8:
-      return out->Write<int8_t>(static_cast<int8_t>(v));
-    case Scalar::kUint8:
-      return out->Write<uint8_t>(static_cast<uint8_t>(v));
-    case Scalar::kInt16:
-      return out->Write<int16_t>(static_cast<int16_t>(v));
-    case Scalar::kUint16:
-      return out->Write<uint16_t>(static_cast<uint16_t>(v));
-    case Scalar::kInt32:
-      return out->Write<int32_t>(static_cast<int32_t>(v));
-    case Scalar::kUint32:
-      return out->Write<uint32_t>(static_cast<uint32_t>(v));
-    case Scalar::kFloat32:
-      return out->Write<float>(static_cast<float>(v));
-    case Scalar::kFloat64:
-    case Scalar::kUnknown:
-      return out->Write<double>(v);
-  }
+  WithScalarType(
+      t, [&](auto x) { out->Write<decltype(x)>(static_cast<decltype(x)>(v)); },
+      [&] { out->Write<double>(v); });
 }
 
 // The parsed types of an element's properties: values, and list counts (unused for scalars).
