@@ -7,6 +7,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "mgsr/loss/parallel_pixels.h"
 #include "mgsr/render/simd16.h"
 
 namespace mgsr {
@@ -47,7 +48,7 @@ void SumsT(const T* P, int channels, const T* I, int guide_channels, const T* ga
   // d (w d^2) / d p = 2 w d (times -1 or +1 for the two pixels of the pair).
   const T gv = 2 * scale_v, gh = 2 * scale_h;
 
-#pragma omp parallel if (static_cast <int64_t>(w) * h >= 16384)
+#pragma omp parallel if (static_cast <int64_t>(w) * h >= kParallelPixels)
   {
     // 1. Edge weights from the guide.
 #pragma omp for schedule(static)

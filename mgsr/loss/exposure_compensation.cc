@@ -3,6 +3,7 @@
 #include <cstdint>
 
 #include "mgsr/loss/loss_util.h"
+#include "mgsr/loss/parallel_pixels.h"
 
 namespace mgsr {
 
@@ -45,9 +46,6 @@ bool ColorTransformParameterIsFree(ExposureMode mode, int index) {
   return false;
 }
 
-// Element-wise loops over at least this many pixels (a 128 px view) run on all threads.
-constexpr int64_t kParallelFrom = 16384;
-
 template <typename T>
 void ApplyColorTransform(const ColorTransform& p, const ImageT<T>& in, const ImageT<T>* mask,
                          ImageT<T>* out) {
@@ -60,7 +58,7 @@ void ApplyColorTransform(const ColorTransform& p, const ImageT<T>& in, const Ima
             a2 = static_cast<T>(p[3 * o + 2]), b = static_cast<T>(p[9 + o]);
     T* dst = out->plane(o);
     const int64_t count = static_cast<int64_t>(n);
-#pragma omp parallel for schedule(static) if (count >= kParallelFrom)
+#pragma omp parallel for schedule(static) if (count >= kParallelPixels)
     for (int64_t i = 0; i < count; ++i) {
       const T mapped = a0 * c[0][i] + a1 * c[1][i] + a2 * c[2][i] + b;
       dst[i] = m != nullptr ? m[i] * mapped + (T(1) - m[i]) * c[o][i] : mapped;
@@ -105,7 +103,7 @@ void ColorTransformBackward(const ColorTransform& p, const ImageT<T>& in, const 
     for (int k = 0; k < 3; ++k) {
       const T a = static_cast<T>(p[3 * o + k]);
       T* dc = d_in->plane(k);
-#pragma omp parallel for schedule(static) if (count >= kParallelFrom)
+#pragma omp parallel for schedule(static) if (count >= kParallelPixels)
       for (int64_t i = 0; i < count; ++i) {
         const T w = m != nullptr ? m[i] : T(1);
         const T identity = (o == k) ? (T(1) - w) : T(0);
@@ -118,7 +116,7 @@ void ColorTransformBackward(const ColorTransform& p, const ImageT<T>& in, const 
   // the other thread waiting).
   const T* g[3] = {d_out.plane(0), d_out.plane(1), d_out.plane(2)};
   double sums[3][4];
-#pragma omp parallel for schedule(dynamic, 1) if (count >= kParallelFrom)
+#pragma omp parallel for schedule(dynamic, 1) if (count >= kParallelPixels)
   for (int j = 0; j < 12; ++j) {
     const int o = j / 4, k = j % 4;
     sums[o][k] = k < 3 ? WeightedDot(g[o], m, in.plane(k), n) : WeightedSum(g[o], m, n);

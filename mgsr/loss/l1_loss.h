@@ -5,6 +5,7 @@
 #include <cstdint>
 
 #include "mgsr/loss/loss_util.h"
+#include "mgsr/loss/parallel_pixels.h"
 #include "mgsr/loss/photometric_term.h"
 
 namespace mgsr {
@@ -31,7 +32,7 @@ class L1Loss : public PhotometricTerm<L1Loss> {
     // (its order fixed by the build, not by the thread count).
     if (g != nullptr) {
       const int64_t count = static_cast<int64_t>(n);
-#pragma omp parallel for simd schedule(static) if (count >= 16384)
+#pragma omp parallel for simd schedule(static) if (count >= kParallelPixels)
       for (int64_t i = 0; i < count; ++i) {
         const T d = xd[i] - yd[i];
         g[i] += d > 0 ? step : (d < 0 ? -step : T(0));

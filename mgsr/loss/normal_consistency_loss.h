@@ -14,6 +14,7 @@
 #include "mgsr/loss/loss_term.h"
 #include "mgsr/loss/loss_util.h"
 #include "mgsr/loss/normal_consistency_plane.h"
+#include "mgsr/loss/parallel_pixels.h"
 
 namespace mgsr {
 
@@ -92,7 +93,7 @@ double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const Targets
   static thread_local std::vector<T> ray_storage;
   ray_storage.resize(3 * n);
   T* const rays = ray_storage.data();
-#pragma omp parallel for schedule(static) if (static_cast <int64_t>(n) >= 16384)
+#pragma omp parallel for schedule(static) if (static_cast <int64_t>(n) >= kParallelPixels)
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       const internal::Vec3<T> r = internal::PixelRay<T>(cam, x, y);

@@ -5,6 +5,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "mgsr/loss/parallel_pixels.h"
+
 namespace mgsr {
 namespace {
 
@@ -121,7 +123,7 @@ double NormalConsistencySumT(const NormalConsistencyPlanes<T>& p) {
   // A pixel writes the depth gradient of rows y - 1 .. y + 1: rows go in three interleaved phases
   // (y mod 3), each in parallel, so no two threads touch one row.
   for (int phase = 0; phase < 3; ++phase) {
-#pragma omp parallel if (static_cast <int64_t>(w) * h >= 16384)
+#pragma omp parallel if (static_cast <int64_t>(w) * h >= kParallelPixels)
     {
       // Per worker: the row-local arrays and a row of ones (gamma without a mask).
       static thread_local std::vector<T> scratch;
