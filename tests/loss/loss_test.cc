@@ -537,14 +537,12 @@ TEST(EdgeAwareTvPlaneTest, MatchesTheDefinitionOnAnyThreadCount) {
 double ScalarNormalConsistency(const NormalConsistencyPlanes<float>& p) {
   using V = Eigen::Vector3f;
   const int w = p.width, h = p.height;
-  const size_t n = static_cast<size_t>(w) * h;
   auto at = [&](const float* plane, int x, int y) { return plane[static_cast<size_t>(y) * w + x]; };
   auto ray = [&](int x, int y) {
     return V(at(p.ray[0], x, y), at(p.ray[1], x, y), at(p.ray[2], x, y));
   };
   const V C(p.center[0], p.center[1], p.center[2]);
   auto P = [&](int x, int y) -> V { return C + at(p.depth, x, y) * ray(x, y); };
-  double total_all = 0;
   std::vector<double> row_total(h, 0.0);
   for (int phase = 0; phase < 3; ++phase) {
     for (int y = phase; y < h; y += 3) {
@@ -582,9 +580,9 @@ double ScalarNormalConsistency(const NormalConsistencyPlanes<float>& p) {
       row_total[y] = total;
     }
   }
-  for (int y = 0; y < h; ++y) total_all += row_total[y];
-  (void)n;
-  return total_all;
+  double total = 0;
+  for (int y = 0; y < h; ++y) total += row_total[y];
+  return total;
 }
 
 TEST(NormalConsistencyPlaneTest, MatchesTheScalarLoopToTheBitOnAnyThreadCount) {
