@@ -29,9 +29,6 @@ void RadixSortByKey(std::vector<uint32_t>* keys, std::vector<uint32_t>* ids,
   for (int shift = 0; shift < 32; shift += kBits) {
     uint32_t count[kBuckets] = {};
     for (uint32_t k : *keys) ++count[(k >> shift) & (kBuckets - 1)];
-    // Every key with the same digit: the stable pass would keep the order (depths in a narrow
-    // range share their float exponent, so the top digit is often one bucket).
-    if (n > 0 && count[((*keys)[0] >> shift) & (kBuckets - 1)] == n) continue;
     uint32_t sum = 0;
     for (uint32_t& c : count) {
       const uint32_t v = c;
