@@ -95,7 +95,7 @@ std::string DepthLine(const char* label, const DepthErrorStats& d) {
 class DepthAfterWarmup : public IterationCallback {
  public:
   DepthAfterWarmup(MutualBoostedSolver* solver, const SolverOptions& options, const Scene& scene,
-                   const RayCaster* ground_truth, std::string path)
+                   ExactDepthViews* ground_truth, std::string path)
       : solver_(solver),
         options_(options),
         scene_(scene),
@@ -106,7 +106,7 @@ class DepthAfterWarmup : public IterationCallback {
         i.iteration != 1)
       return CallbackReturnType::kContinue;
     done_ = true;
-    const SurfaceDepthReport r = MeasureSurfaceDepth(solver_, options_, scene_, *gt_);
+    const SurfaceDepthReport r = MeasureSurfaceDepth(solver_, options_, scene_, gt_);
     std::printf("%s\n%s\n",
                 DepthLine("depth after warm-up (train views): expected", r.expected).c_str(),
                 DepthLine("                                    median  ", r.median).c_str());
@@ -122,7 +122,7 @@ class DepthAfterWarmup : public IterationCallback {
   MutualBoostedSolver* solver_;
   const SolverOptions& options_;
   const Scene& scene_;
-  const RayCaster* gt_;
+  ExactDepthViews* gt_;
   std::string path_;
   bool done_ = false;
 };
@@ -131,7 +131,7 @@ class DepthAfterWarmup : public IterationCallback {
 // exact-depth ceiling of the same cameras and fusion (and of the training resolution when fusing
 // finer), and the signed depth error after the warm-up and at the end.
 Status ReportGeometry(MutualBoostedSolver* solver, const SolverOptions& options, const Scene& scene,
-                      const GroundTruthGeometry& gt, const RayCaster& gt_caster,
+                      const GroundTruthGeometry& gt, ExactDepthViews* gt_depth,
                       const SurfaceOptions& surface, const TriangleMesh* mesh,
                       const std::string& warmup_depth_path, nlohmann::json* metrics) {
   const double footprint = TrainingFootprint(scene);
@@ -154,19 +154,19 @@ Status ReportGeometry(MutualBoostedSolver* solver, const SolverOptions& options,
     line("mesh vs ground truth:   ", m);
   }
   TriangleMesh ceiling;
-  MGSR_RETURN_IF_ERROR(ExactDepthCeiling(gt.mesh, scene, surface, &ceiling));
+  MGSR_RETURN_IF_ERROR(ExactDepthCeiling(gt_depth, scene, surface, &ceiling));
   const MeshMetrics c = EvaluateMesh(ceiling, gt.mesh, mo);
   out["ceiling"] = MeshMetricsToJson(c);
   line("exact-depth ceiling:    ", c);
   if (surface.resolution_scale != 1) {
     SurfaceOptions one = surface;
     one.resolution_scale = 1;
-    MGSR_RETURN_IF_ERROR(ExactDepthCeiling(gt.mesh, scene, one, &ceiling));
+    MGSR_RETURN_IF_ERROR(ExactDepthCeiling(gt_depth, scene, one, &ceiling));
     const MeshMetrics c1 = EvaluateMesh(ceiling, gt.mesh, mo);
     out["ceiling_1x"] = MeshMetricsToJson(c1);
     line("ceiling at 1x:          ", c1);
   }
-  const SurfaceDepthReport d = MeasureSurfaceDepth(solver, options, scene, gt_caster);
+  const SurfaceDepthReport d = MeasureSurfaceDepth(solver, options, scene, gt_depth);
   (*metrics)["depth"]["end"] = {{"expected", DepthErrorToJson(d.expected)},
                                 {"median", DepthErrorToJson(d.median)}};
   std::printf("%s\n%s\n", DepthLine("depth at the end (train views): expected", d.expected).c_str(),
@@ -586,8 +586,13 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   s = FindGroundTruth(scene.root, &ground_truth);
   if (!s.ok()) std::fprintf(stderr, "warning: ground truth not used: %s\n", s.message().c_str());
   std::unique_ptr<RayCaster> gt_caster;
-  if (ground_truth.found()) gt_caster = std::make_unique<RayCaster>(ground_truth.mesh);
-  DepthAfterWarmup depth_after_warmup(&solver, options, scene, gt_caster.get(),
+  // The training views' exact depth, cast once for the three readers (warm-up check, ceiling, end).
+  std::unique_ptr<ExactDepthViews> gt_depth;
+  if (ground_truth.found()) {
+    gt_caster = std::make_unique<RayCaster>(ground_truth.mesh);
+    gt_depth = std::make_unique<ExactDepthViews>(*gt_caster, TrainingCameras(scene));
+  }
+  DepthAfterWarmup depth_after_warmup(&solver, options, scene, gt_depth.get(),
                                       JoinPath(ckpt_dir, "depth_after_warmup.json"));
   solver.AddCallback(&depth_after_warmup);
   SolveSummary summary;
@@ -850,7 +855,7 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
     metrics["test"]["depth_abs_error_over_extent"] = depth_err / depth_views / scene.extent;
   }
   if (ground_truth.found()) {
-    const Status reported = ReportGeometry(&solver, options, scene, ground_truth, *gt_caster,
+    const Status reported = ReportGeometry(&solver, options, scene, ground_truth, gt_depth.get(),
                                            surface, &mesh, depth_after_warmup.path(), &metrics);
     if (!reported.ok()) std::fprintf(stderr, "warning: %s\n", reported.message().c_str());
   }

@@ -12,12 +12,6 @@
 namespace mgsr {
 namespace {
 
-std::vector<Camera> TrainingCameras(const Scene& scene) {
-  std::vector<Camera> cameras;
-  for (int i : scene.TrainIndices()) cameras.push_back(scene.views[i].camera);
-  return cameras;
-}
-
 // A 0/1 mask at the camera's resolution: bilinear over the view's mask (pixel centres at
 // half-integers), then thresholded at 0.5, so the silhouette stays smooth at finer scales.
 Image ResampleMask(const Image& mask, int width, int height) {
@@ -55,6 +49,12 @@ double ObjectDistance(const Scene& scene) {
   if (d.empty()) return 1.0;
   std::nth_element(d.begin(), d.begin() + d.size() / 2, d.end());
   return d[d.size() / 2];
+}
+
+std::vector<Camera> TrainingCameras(const Scene& scene) {
+  std::vector<Camera> cameras;
+  for (int i : scene.TrainIndices()) cameras.push_back(scene.views[i].camera);
+  return cameras;
 }
 
 std::vector<Camera> FusionCameras(const Scene& scene, int resolution_scale) {
@@ -183,20 +183,24 @@ Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_o
   return integrator.Extract(mesh);
 }
 
-Status ExactDepthCeiling(const TriangleMesh& ground_truth, const Scene& scene,
+Status ExactDepthCeiling(ExactDepthViews* training_depth, const Scene& scene,
                          const SurfaceOptions& options, TriangleMesh* mesh) {
-  return FuseExactDepth(ground_truth, FusionCameras(scene, std::max(1, options.resolution_scale)),
-                        SurfaceTsdfOptions(scene, options), mesh);
+  const TsdfOptions tsdf = SurfaceTsdfOptions(scene, options);
+  const int scale = std::max(1, options.resolution_scale);
+  if (scale == 1) return FuseExactDepth(training_depth, tsdf, mesh);
+  ExactDepthViews finer(training_depth->caster(), FusionCameras(scene, scale), 0);
+  return FuseExactDepth(&finer, tsdf, mesh);
 }
 
 SurfaceDepthReport MeasureSurfaceDepth(MutualBoostedSolver* solver,
                                        const SolverOptions& solver_options, const Scene& scene,
-                                       const RayCaster& ground_truth) {
+                                       ExactDepthViews* training_depth) {
   DepthErrorAccumulator expected, median;
-  for (int i : scene.TrainIndices()) {
-    const View& v = scene.views[i];
+  const std::vector<int> train = scene.TrainIndices();
+  for (size_t k = 0; k < train.size(); ++k) {
+    const View& v = scene.views[train[k]];
     const ViewRender r = RenderView(solver, solver_options, v.camera, true);
-    const Image truth = RenderExactDepth(ground_truth, v.camera);
+    const Image truth = training_depth->Depth(k);
     const Image* mask = v.mask.empty() ? nullptr : &v.mask;
     expected.Add(r.geometry.depth, truth, mask, v.camera);
     median.Add(r.geometry.median_depth, truth, mask, v.camera);

@@ -13,13 +13,12 @@
 #include "mgsr/core/triangle_mesh.h"
 #include "mgsr/eval/depth_error.h"
 #include "mgsr/io/scene.h"
+#include "mgsr/mesh/exact_depth_ceiling.h"
 #include "mgsr/mesh/tsdf_fusion.h"
 #include "solvers/mutual_boosted_solver.h"
 #include "solvers/solver_options.h"
 
 namespace mgsr {
-
-class RayCaster;
 
 struct SurfaceOptions {
   int resolution_scale = 1;      // render depth for fusion at this many times the resolution
@@ -52,7 +51,8 @@ TsdfOptions SurfaceTsdfOptions(const Scene& scene, const SurfaceOptions& options
 // The median distance of the training cameras from the point their optical axes meet.
 double ObjectDistance(const Scene& scene);
 
-// The training cameras at the fusion resolution.
+// The training cameras (in TrainIndices order), and the same at the fusion resolution.
+std::vector<Camera> TrainingCameras(const Scene& scene);
 std::vector<Camera> FusionCameras(const Scene& scene, int resolution_scale);
 
 // Renders and fuses the trained geometry of every training view; depth is kept where the render's
@@ -66,16 +66,18 @@ Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_o
                       ViewGroup* group = nullptr);
 
 // The same fusion of the ground truth's exact depth: what this fusion can achieve at best.
-Status ExactDepthCeiling(const TriangleMesh& ground_truth, const Scene& scene,
+// `training_depth` holds the ground truth's exact depth for TrainingCameras(scene); at a finer
+// fusion resolution its caster casts the finer views.
+Status ExactDepthCeiling(ExactDepthViews* training_depth, const Scene& scene,
                          const SurfaceOptions& options, TriangleMesh* mesh);
 
 // Signed depth error of the geometry branch's expected and median depth on the training views
-// (inside the masks), against the exact depth of `ground_truth`.
+// (inside the masks), against the ground truth's exact depth for TrainingCameras(scene).
 struct SurfaceDepthReport {
   DepthErrorStats expected, median;
 };
 SurfaceDepthReport MeasureSurfaceDepth(MutualBoostedSolver* solver,
                                        const SolverOptions& solver_options, const Scene& scene,
-                                       const RayCaster& ground_truth);
+                                       ExactDepthViews* training_depth);
 
 }  // namespace mgsr

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "mgsr/eval/mesh_metrics.h"
@@ -34,6 +35,25 @@ TEST(ExactDepthCeilingTest, ExactDepthIsTheRayCastZ) {
   const float z = depth.at(0, 32, 32);
   EXPECT_NEAR(z, (camera.Center().norm() - 1.0), 2e-3);
   EXPECT_EQ(depth.at(0, 0, 0), 0.0f);  // the corner misses
+}
+
+// Kept or cast again, every read is the camera's own exact depth; the budget bounds what is kept.
+TEST(ExactDepthCeilingTest, ExactDepthViewsKeepWithinTheirBudget) {
+  const TriangleMesh sphere = MakeIcoSphere(1.0, 4);
+  const RayCaster caster(sphere);
+  const std::vector<Camera> cameras = RingOfCameras(3, 48);
+  const size_t one_image = 48 * 48 * sizeof(float);
+  for (const size_t budget : {size_t{0}, one_image, 3 * one_image}) {
+    ExactDepthViews views(caster, cameras, budget);
+    ASSERT_EQ(views.size(), 3u);
+    for (const size_t k : {0, 1, 2, 0, 2, 1, 1}) {
+      const Image expected = RenderExactDepth(caster, cameras[k]);
+      const Image got = views.Depth(k);
+      ASSERT_TRUE(got.SameShape(expected));
+      for (size_t p = 0; p < got.size(); ++p) ASSERT_EQ(got.data()[p], expected.data()[p]) << k;
+    }
+    EXPECT_EQ(views.kept_bytes(), std::min(budget, 3 * one_image)) << budget;
+  }
 }
 
 // The ceiling of a sphere is a sphere: fused exact depth lies within 0.2 voxels of the surface.
