@@ -6,6 +6,7 @@
 
 #include "mgsr/core/zero_fill.h"
 #include "mgsr/model/activations.h"
+#include "mgsr/render/prefetch_rows.h"
 #include "mgsr/render/sh.h"
 
 namespace mgsr {
@@ -130,6 +131,11 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
   const int n_coeffs = (degree + 1) * (degree + 1);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
+    if (i + kPrefetchAhead < n) {  // the coefficients the colours read
+      const size_t ahead = static_cast<size_t>(i + kPrefetchAhead) * K * 3;
+      PrefetchRow(&m.sh[ahead], 3 * n_coeffs);
+      if (reflection) PrefetchRow(&m.ref_sh[ahead], 3 * n_coeffs);
+    }
     out->radius[i] = 0;
     out->rects[i] = TileRect();
     out->extent[2 * i] = out->extent[2 * i + 1] = 0;
@@ -198,6 +204,13 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
   const size_t row = static_cast<size_t>(K) * 3;  // SH floats per Gaussian
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
+    if (i + kPrefetchAhead < n) {  // the coefficients read and the gradient rows written
+      const size_t ahead = row * (i + kPrefetchAhead);
+      PrefetchRow(&m.sh[ahead], 3 * n_coeffs);
+      if (reflection) PrefetchRow(&m.ref_sh[ahead], 3 * n_coeffs);
+      PrefetchRow(&G.sh[ahead], row);
+      PrefetchRow(&G.ref_sh[ahead], row);
+    }
     float* const d_sh = &G.sh[row * i];
     float* const d_ref_sh = &G.ref_sh[row * i];
     if (p.radius[i] <= 0) {  // not drawn: its SH rows are written zero, the rest stays zero

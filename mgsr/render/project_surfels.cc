@@ -6,6 +6,7 @@
 
 #include "mgsr/core/zero_fill.h"
 #include "mgsr/model/activations.h"
+#include "mgsr/render/prefetch_rows.h"
 #include "mgsr/render/project_gaussians.h"  // kMinBlendAlpha
 #include "mgsr/render/sh.h"
 
@@ -126,10 +127,13 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
   const int tiles_y = (cam.height + kTileSize - 1) / kTileSize;
   const int Kc = m.sh_coeffs();
   const int degree = std::min(sh_degree, m.max_sh_degree);
+  const int n_coeffs = (degree + 1) * (degree + 1);
   const float min_radius = 3.0f * filter_sigma;  // 3 sigma of the low-pass filter
   const float inv_square = 1.0f / (filter_sigma * filter_sigma);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
+    if (i + kPrefetchAhead < n)  // the coefficients the colour reads
+      PrefetchRow(&m.sh[static_cast<size_t>(i + kPrefetchAhead) * Kc * 3], 3 * n_coeffs);
     out->radius[i] = 0;
     out->rects[i] = TileRect();
     SurfelGeometry g;
@@ -209,6 +213,10 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
   const int n_coeffs = (degree + 1) * (degree + 1);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
+    if (i + kPrefetchAhead < n) {  // the coefficients read and the gradient row written
+      PrefetchRow(&m.sh[row * (i + kPrefetchAhead)], 3 * n_coeffs);
+      PrefetchRow(&G.sh[row * (i + kPrefetchAhead)], row);
+    }
     float* const d_sh = &G.sh[row * i];
     if (p.radius[i] <= 0) {  // not drawn: its SH row is written zero, the rest stays zero
       std::fill(d_sh, d_sh + row, 0.0f);
