@@ -51,16 +51,16 @@ void ApplyColorTransform(const ColorTransform& p, const ImageT<T>& in, const Ima
                          ImageT<T>* out) {
   if (!out->SameShape(in)) *out = ImageT<T>(in.width(), in.height(), 3);
   const size_t n = in.plane_size();
-  const T* c[3] = {in.plane(0), in.plane(1), in.plane(2)};
+  // Plain pointers and, below, two loops: the vectoriser takes neither a pointer loaded from an
+  // array inside the loop nor the mask loaded under a condition (both had kept this loop scalar).
+  const T *c0 = in.plane(0), *c1 = in.plane(1), *c2 = in.plane(2);
   const T* m = mask != nullptr ? mask->plane(0) : nullptr;
   for (int o = 0; o < 3; ++o) {
     const T a0 = static_cast<T>(p[3 * o]), a1 = static_cast<T>(p[3 * o + 1]),
             a2 = static_cast<T>(p[3 * o + 2]), b = static_cast<T>(p[9 + o]);
     T* dst = out->plane(o);
     const int64_t count = static_cast<int64_t>(n);
-    // Plain pointers and two loops: the vectoriser takes neither a pointer loaded from an array
-    // inside the loop nor the mask loaded under a condition (both had kept this loop scalar).
-    const T *c0 = c[0], *c1 = c[1], *c2 = c[2], *co = c[o];
+    const T* co = in.plane(o);
     if (m != nullptr) {
 #pragma omp parallel for simd schedule(static) if (count >= kParallelPixels)
       for (int64_t i = 0; i < count; ++i) {
@@ -94,10 +94,6 @@ double WeightedSum(const T* g, const T* m, size_t n) {
   for (size_t i = 0; i < n; ++i) s += static_cast<double>(m != nullptr ? g[i] * m[i] : g[i]);
   return s;
 }
-
-}  // namespace
-
-namespace {
 
 // Channel k of pixel i adds o = 0, 1, 2 in turn: g_o (w A_ok + [o == k] (1 - w)), A = a (row o).
 template <typename T>
