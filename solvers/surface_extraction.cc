@@ -5,7 +5,6 @@
 
 #include "mgsr/mesh/exact_depth_ceiling.h"
 #include "mgsr/mesh/fusion_region.h"
-#include "mgsr/synth/ray_caster.h"
 #include "solvers/trained_views.h"
 #include "solvers/view_group.h"
 
