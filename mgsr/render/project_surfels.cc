@@ -4,75 +4,12 @@
 #include <algorithm>
 #include <cmath>
 
-#include "mgsr/core/zero_fill.h"
 #include "mgsr/model/activations.h"
 #include "mgsr/render/prefetch_rows.h"
 #include "mgsr/render/project_gaussians.h"  // kMinBlendAlpha
 #include "mgsr/render/sh.h"
 
 namespace mgsr {
-namespace {
-
-using Mat3 = Eigen::Matrix<float, 3, 3, Eigen::RowMajor>;
-
-struct SurfelGeometry {
-  Mat3 R;  // columns t_u, t_v, t_w
-  float su, sv;
-  Eigen::Vector3f p;  // centre (world)
-  Mat3 A;             // R_c [s_u t_u, s_v t_v, p] + t_c e3^T
-  Mat3 M;             // K A, rows T_u, T_v, T_w
-};
-
-Mat3 Intrinsics(const Camera& cam) {
-  Mat3 K;
-  K << static_cast<float>(cam.fx), 0, static_cast<float>(cam.cx), 0, static_cast<float>(cam.fy),
-      static_cast<float>(cam.cy), 0, 0, 1;
-  return K;
-}
-
-void ComputeGeometry(const SurfelModel& m, size_t i, const Mat3& Rc, const Eigen::Vector3f& tc,
-                     const Mat3& K, SurfelGeometry* g) {
-  float q_unit[4];
-  QuaternionToRotation(&m.quats[4 * i], g->R.data(), q_unit);
-  g->su = std::exp(m.log_scales[2 * i]);
-  g->sv = std::exp(m.log_scales[2 * i + 1]);
-  g->p = Eigen::Vector3f(m.means[3 * i], m.means[3 * i + 1], m.means[3 * i + 2]);
-  g->A.col(0) = Rc * (g->su * g->R.col(0));
-  g->A.col(1) = Rc * (g->sv * g->R.col(1));
-  g->A.col(2) = Rc * g->p + tc;
-  g->M = K * g->A;
-}
-
-constexpr float kCutoff2 = 9.0f;  // (3 sigma)^2
-
-// The half-extents (ex, ey) around the centre beyond which no pixel of a surfel reaches alpha
-// 1/255, i.e. rho = min(rho3d, rho2d) <= r2 = -2 min_power: the bounding box of the image of the
-// disk u^2 + v^2 <= r2 (a conic; the box as for the 3-sigma one, from the stored rows) and of the
-// low-pass circle |pixel - m|^2 <= r2 sigma^2 (its widest: the area-preserving offset only shrinks
-// it), widened by 2% and half a pixel against float rounding in the pixel loops, and at most
-// `radius`. (Tested against the per-pixel reference renderer, which has no such box.)
-void AlphaReach(const float tu[3], const float tv[3], const float tw[3], float radius,
-                float inv_square, float min_power, float* ex, float* ey) {
-  *ex = *ey = radius;
-  const float r2 = -2.0f * min_power;
-  const float d = r2 * (tw[0] * tw[0] + tw[1] * tw[1]) - tw[2] * tw[2];
-  if (!(d < 0.0f)) return;  // the disk of radius r is not all in front of the camera
-  const float f[3] = {r2 / d, r2 / d, -1.0f / d};
-  const float cx = f[0] * tu[0] * tw[0] + f[1] * tu[1] * tw[1] + f[2] * tu[2] * tw[2];
-  const float cy = f[0] * tv[0] * tw[0] + f[1] * tv[1] * tw[1] + f[2] * tv[2] * tw[2];
-  const float qx = f[0] * tu[0] * tu[0] + f[1] * tu[1] * tu[1] + f[2] * tu[2] * tu[2];
-  const float qy = f[0] * tv[0] * tv[0] + f[1] * tv[1] * tv[1] + f[2] * tv[2] * tv[2];
-  const float disk_x = std::abs(cx) + std::sqrt(std::max(0.0f, cx * cx - qx));
-  const float disk_y = std::abs(cy) + std::sqrt(std::max(0.0f, cy * cy - qy));
-  const float circle = std::sqrt(r2 / inv_square);
-  const float x = std::max(disk_x, circle) * 1.02f + 0.5f;
-  const float y = std::max(disk_y, circle) * 1.02f + 0.5f;
-  if (!std::isfinite(x) || !std::isfinite(y)) return;
-  *ex = std::min(radius, x);
-  *ey = std::min(radius, y);
-}
-
-}  // namespace
 
 void ProjectedSurfels::Resize(size_t n) {
   M.resize(9 * n);
@@ -90,39 +27,78 @@ void ProjectedSurfels::Resize(size_t n) {
   extent.resize(2 * n);
 }
 
-void ProjectedSurfelsGrad::ResizeAndZero(size_t n) {
-  ZeroFill(9 * n, &M);
-  ZeroFill(2 * n, &center);
-  ZeroFill(3 * n, &normal);
-  ZeroFill(n, &opacity);
-  ZeroFill(3 * n, &color);
+namespace {
+
+// The forward runs over blocks of kLanes surfels in three passes: a scalar one that gathers each
+// surfel's parameters into the block's lanes and takes the library calls (exp, log), short loops
+// over the lanes that GCC vectorises (the geometry, the culling tests, the rows and the alpha
+// reach: the bulk of the arithmetic), and a scalar one that writes what is kept and evaluates the
+// SH colour (a row of coefficients per surfel). Each lane computes what the per-surfel Eigen loop
+// before it computed, in its order and with its fused multiply-adds (as GCC 12 fused them for this
+// file's flags): every output was the same to the bit on the benchmark scene and on scenes with
+// zero quaternions, surfels behind the camera, huge and tiny scales, all four SH degrees.
+constexpr int kLanes = 16;
+
+using Mat3 = Eigen::Matrix<float, 3, 3, Eigen::RowMajor>;
+
+struct SurfelLanes {
+  // Inputs (pass 1).
+  float qw[kLanes], qx[kLanes], qy[kLanes], qz[kLanes];
+  float px[kLanes], py[kLanes], pz[kLanes];
+  float su[kLanes], sv[kLanes], opacity[kLanes], min_power[kLanes];
+  // Results (pass 2).
+  float R[9][kLanes], M[9][kLanes], pv[3][kLanes];
+  float mx[kLanes], my[kLanes], radius[kLanes], sign[kLanes];
+  float n[3][kLanes], rows[9][kLanes], ex[kLanes], ey[kLanes], dir[3][kLanes];
+  int ok[kLanes];  // passed every test before the tile rectangle's
+};
+
+// The 3-term dot products as the per-surfel Eigen code rounded them. A fixed-size product of
+// row-major floats sums a0 b0 + (a1 b1 + a2 b2), which GCC fused (on a CPU with FMA) as
+// fma(a0, b0, fma(a2, b2, a1 b1)); where GCC had packed several such sums into one vector (the
+// middle row of M = K A, the screen centre's two sums) it fused them the other way round,
+// fma(a0, b0, fma(a1, b1, a2 b2)); a column-major double product takes its first two rows as
+// packets, (a0 b0 + a1 b1) + a2 b2, fused from the left, and the third as the first form.
+template <class T>
+inline T FusedMultiplyAdd(T a, T b, T c) {
+#ifdef __FMA__
+  return std::fma(a, b, c);
+#else
+  return a * b + c;
+#endif
+}
+template <class T>
+inline T DotScalarOrder(T a0, T a1, T a2, T b0, T b1, T b2) {
+  return FusedMultiplyAdd(a0, b0, FusedMultiplyAdd(a2, b2, a1 * b1));
+}
+inline float DotPackedScalarOrder(float a0, float a1, float a2, float b0, float b1, float b2) {
+  return FusedMultiplyAdd(a0, b0, FusedMultiplyAdd(a1, b1, a2 * b2));
+}
+inline double DotPacketOrder(double a0, double a1, double a2, double b0, double b1, double b2) {
+  return FusedMultiplyAdd(a2, b2, FusedMultiplyAdd(a1, b1, a0 * b0));
+}
+// std::max by value: GCC vectorises a loop that takes it (std::max's reference to one of two
+// temporaries became an index into a stack array that stopped the vectoriser).
+inline float MaxValue(float a, float b) { return a < b ? b : a; }
+// Row r of a column-major 3x3 double product.
+inline double DotColumnMajorRow(int r, double a0, double a1, double a2, double b0, double b1,
+                                double b2) {
+  return r < 2 ? DotPacketOrder(a0, a1, a2, b0, b1, b2) : DotScalarOrder(a0, a1, a2, b0, b1, b2);
 }
 
-void SurfelGradients::ResizeAndZero(const SurfelModel& model) {
-  ResizeForBackward(model);
-  ZeroFill(params.sh.size(), &params.sh);
-}
-
-void SurfelGradients::ResizeForBackward(const SurfelModel& model) {
-  params.max_sh_degree = model.max_sh_degree;
-  const size_t n = model.size();
-  ZeroFill(3 * n, &params.means);
-  ZeroFill(2 * n, &params.log_scales);
-  ZeroFill(4 * n, &params.quats);
-  ZeroFill(n, &params.opacity_logits);
-  params.sh.resize(3 * static_cast<size_t>(params.sh_coeffs()) * n);
-  ZeroFill(2 * n, &mean2d);
-}
+}  // namespace
 
 void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, ProjectedSurfels* out,
                     float filter_sigma) {
-  const Eigen::Matrix3d Kd = Intrinsics(cam).cast<double>();
   const int n = static_cast<int>(m.size());
   out->Resize(n);
   const Mat3 Rc = cam.R.cast<float>();
   const Eigen::Vector3f tc = cam.t.cast<float>();
   const Eigen::Vector3f center = cam.Center().cast<float>();
-  const Mat3 K = Intrinsics(cam);
+  const float fx = static_cast<float>(cam.fx), fy = static_cast<float>(cam.fy);
+  const float cx = static_cast<float>(cam.cx), cy = static_cast<float>(cam.cy);
+  const Eigen::Matrix3d Rd = cam.R;
+  const Eigen::Vector3d td = cam.t;
   const int tiles_x = (cam.width + kTileSize - 1) / kTileSize;
   const int tiles_y = (cam.height + kTileSize - 1) / kTileSize;
   const int Kc = m.sh_coeffs();
@@ -130,157 +106,206 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
   const int n_coeffs = (degree + 1) * (degree + 1);
   const float min_radius = 3.0f * filter_sigma;  // 3 sigma of the low-pass filter
   const float inv_square = 1.0f / (filter_sigma * filter_sigma);
+  const int blocks = (n + kLanes - 1) / kLanes;
 #pragma omp parallel for schedule(static)
-  for (int i = 0; i < n; ++i) {
-    if (i + kPrefetchAhead < n)  // the coefficients the colour reads
-      PrefetchRow(&m.sh[static_cast<size_t>(i + kPrefetchAhead) * Kc * 3], 3 * n_coeffs);
-    out->radius[i] = 0;
-    out->rects[i] = TileRect();
-    SurfelGeometry g;
-    ComputeGeometry(m, i, Rc, tc, K, &g);
-    const Eigen::Vector3f pv = g.A.col(2);  // view-space centre
-    out->depth[i] = pv.z();
-    if (!(pv.z() > kSurfelNear)) continue;
-    Eigen::Vector3f n_view = Rc * g.R.col(2);
-    const float cos = -pv.dot(n_view);
-    if (cos == 0.0f || !std::isfinite(cos)) continue;
-    const float sign = cos < 0 ? -1.0f : 1.0f;
-    n_view *= sign;
-    const Eigen::Vector3f Tu = g.M.row(0), Tv = g.M.row(1), Tw = g.M.row(2);
-    // Screen AABB of the projected 3-sigma disk (reference 3.2).
-    const Eigen::Vector3f t(kCutoff2, kCutoff2, -1.0f);
-    const float d = t.dot(Tw.cwiseProduct(Tw));
-    if (d == 0.0f || !std::isfinite(d)) continue;
-    const Eigen::Vector3f f = t / d;
-    const float mx = f.dot(Tu.cwiseProduct(Tw)), my = f.dot(Tv.cwiseProduct(Tw));
-    const float hx = std::sqrt(std::max(1e-4f, mx * mx - f.dot(Tu.cwiseProduct(Tu))));
-    const float hy = std::sqrt(std::max(1e-4f, my * my - f.dot(Tv.cwiseProduct(Tv))));
-    const float radius = std::ceil(std::max(std::max(hx, hy), min_radius));
-    if (!std::isfinite(mx) || !std::isfinite(my) || !std::isfinite(radius)) continue;
-    const TileRect rect = TileRectFromBox(mx, my, radius, radius, tiles_x, tiles_y);
-    if (rect.empty()) continue;
-    out->radius[i] = radius;
-    out->rects[i] = rect;
-    out->center[2 * i] = mx;
-    out->center[2 * i + 1] = my;
-    // The rows again in double, centred on m (see the header).
-    Eigen::Matrix3d Ad;
-    Ad.col(0) = cam.R * (static_cast<double>(g.su) * g.R.col(0).cast<double>());
-    Ad.col(1) = cam.R * (static_cast<double>(g.sv) * g.R.col(1).cast<double>());
-    Ad.col(2) = cam.R * g.p.cast<double>() + cam.t;
-    const Eigen::Matrix3d Md = Kd * Ad;
-    const Eigen::Vector3d rows[3] = {
-        Md.row(0).transpose() - static_cast<double>(mx) * Md.row(2).transpose(),
-        Md.row(1).transpose() - static_cast<double>(my) * Md.row(2).transpose(),
-        Md.row(2).transpose()};
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) out->M[9 * i + 3 * r + c] = static_cast<float>(rows[r][c]);
-      out->normal[3 * i + r] = n_view[r];
+  for (int b = 0; b < blocks; ++b) {
+    SurfelLanes L;
+    const int base = b * kLanes, count = std::min(kLanes, n - base);
+    // Pass 1: gather, and the library calls. (Lanes past the end repeat the first surfel.)
+    for (int l = 0; l < kLanes; ++l) {
+      const size_t i = base + (l < count ? l : 0);
+      L.qw[l] = m.quats[4 * i];
+      L.qx[l] = m.quats[4 * i + 1];
+      L.qy[l] = m.quats[4 * i + 2];
+      L.qz[l] = m.quats[4 * i + 3];
+      L.px[l] = m.means[3 * i];
+      L.py[l] = m.means[3 * i + 1];
+      L.pz[l] = m.means[3 * i + 2];
+      L.su[l] = std::exp(m.log_scales[2 * i]);
+      L.sv[l] = std::exp(m.log_scales[2 * i + 1]);
+      const float opacity = Sigmoid(m.opacity_logits[i]);
+      L.opacity[l] = opacity;
+      L.min_power[l] = opacity > kMinBlendAlpha ? std::log(kMinBlendAlpha / opacity) : 0.0f;
     }
-    out->normal_sign[i] = sign;
-    const float opacity = Sigmoid(m.opacity_logits[i]);
-    out->opacity[i] = opacity;
-    // What the pixel loops need (see the header), and the tiles where a pixel may reach 1/255.
-    out->min_power[i] = opacity > kMinBlendAlpha ? std::log(kMinBlendAlpha / opacity) : 0.0f;
-    float* ext = &out->extent[2 * i];
-    if (opacity > kMinBlendAlpha) {
-      const float* rows_f = &out->M[9 * i];
-      AlphaReach(rows_f, rows_f + 3, rows_f + 6, radius, inv_square, out->min_power[i], &ext[0],
-                 &ext[1]);
-      out->rects[i] = TileRectFromBox(mx, my, ext[0], ext[1], tiles_x, tiles_y);
-    } else {
-      ext[0] = ext[1] = radius;
+    // Pass 2: the geometry of every lane, in short loops GCC vectorises one by one.
+#pragma omp simd
+    for (int l = 0; l < kLanes; ++l) {  // the rotation (QuaternionToRotation)
+      const float q0 = L.qw[l], q1 = L.qx[l], q2 = L.qy[l], q3 = L.qz[l];
+      const float qn = std::sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3);
+      // (Every quotient is taken, then selected: GCC would not if-convert a conditional division.)
+      const bool q_ok = qn > 0;
+      const float qd0 = q0 / qn, qd1 = q1 / qn, qd2 = q2 / qn, qd3 = q3 / qn;
+      const float w = q_ok ? qd0 : 1.0f, x = q_ok ? qd1 : 0.0f, y = q_ok ? qd2 : 0.0f,
+                  z = q_ok ? qd3 : 0.0f;
+      L.R[0][l] = 1 - 2 * (y * y + z * z);
+      L.R[1][l] = 2 * (x * y - w * z);
+      L.R[2][l] = 2 * (x * z + w * y);
+      L.R[3][l] = 2 * (x * y + w * z);
+      L.R[4][l] = 1 - 2 * (x * x + z * z);
+      L.R[5][l] = 2 * (y * z - w * x);
+      L.R[6][l] = 2 * (x * z - w * y);
+      L.R[7][l] = 2 * (y * z + w * x);
+      L.R[8][l] = 1 - 2 * (x * x + y * y);
     }
-    const Eigen::Vector3f dir = (g.p - center).normalized();
-    for (int k = 0; k < 3; ++k) out->view_dir[3 * i + k] = dir[k];
-    EvalShColor(degree, &m.sh[static_cast<size_t>(i) * Kc * 3], dir.data(), &out->color[3 * i],
-                &out->clamp[3 * i]);
-  }
-}
-
-void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degree,
-                            const ProjectedSurfels& p, const ProjectedSurfelsGrad& d,
-                            SurfelGradients* grads) {
-  const int n = static_cast<int>(m.size());
-  const Mat3 Rc = cam.R.cast<float>();
-  const Eigen::Vector3f tc = cam.t.cast<float>();
-  const Eigen::Vector3f center = cam.Center().cast<float>();
-  const Mat3 K = Intrinsics(cam);
-  const int Kc = m.sh_coeffs();
-  const int degree = std::min(sh_degree, m.max_sh_degree);
-  SurfelModel& G = grads->params;
-  const size_t row = static_cast<size_t>(Kc) * 3;  // SH floats per surfel
-  const int n_coeffs = (degree + 1) * (degree + 1);
-#pragma omp parallel for schedule(static)
-  for (int i = 0; i < n; ++i) {
-    if (i + kPrefetchAhead < n) {  // the coefficients read and the gradient row written
-      PrefetchRow(&m.sh[row * (i + kPrefetchAhead)], 3 * n_coeffs);
-      PrefetchRow(&G.sh[row * (i + kPrefetchAhead)], row);
+#pragma omp simd
+    for (int l = 0; l < kLanes; ++l) {  // A = R_c [s_u t_u, s_v t_v, p] + t_c e3^T, M = K A
+      const float su = L.su[l], sv = L.sv[l];
+      const float u0 = su * L.R[0][l], u1 = su * L.R[3][l], u2 = su * L.R[6][l];
+      const float v0 = sv * L.R[1][l], v1 = sv * L.R[4][l], v2 = sv * L.R[7][l];
+      float A[3][3];
+      for (int r = 0; r < 3; ++r) {
+        A[r][0] = DotScalarOrder(Rc(r, 0), Rc(r, 1), Rc(r, 2), u0, u1, u2);
+        A[r][1] = DotScalarOrder(Rc(r, 0), Rc(r, 1), Rc(r, 2), v0, v1, v2);
+        A[r][2] = DotScalarOrder(Rc(r, 0), Rc(r, 1), Rc(r, 2), L.px[l], L.py[l], L.pz[l]) + tc[r];
+      }
+      for (int c = 0; c < 3; ++c) {
+        L.M[c][l] = DotScalarOrder(fx, 0.0f, cx, A[0][c], A[1][c], A[2][c]);
+        L.M[3 + c][l] = DotPackedScalarOrder(0.0f, fy, cy, A[0][c], A[1][c], A[2][c]);
+        L.M[6 + c][l] = c == 0 ? DotPackedScalarOrder(0.0f, 0.0f, 1.0f, A[0][c], A[1][c], A[2][c])
+                               : DotScalarOrder(0.0f, 0.0f, 1.0f, A[0][c], A[1][c], A[2][c]);
+      }
+      L.pv[0][l] = A[0][2];
+      L.pv[1][l] = A[1][2];
+      L.pv[2][l] = A[2][2];
     }
-    float* const d_sh = &G.sh[row * i];
-    if (p.radius[i] <= 0) {  // not drawn: its SH row is written zero, the rest stays zero
-      std::fill(d_sh, d_sh + row, 0.0f);
-      continue;
+#pragma omp simd
+    for (int l = 0; l < kLanes; ++l) {  // the camera-facing normal
+      const float r2 = L.R[2][l], r5 = L.R[5][l], r8 = L.R[8][l];
+      const float nv0 = DotScalarOrder(Rc(0, 0), Rc(0, 1), Rc(0, 2), r2, r5, r8);
+      const float nv1 = DotScalarOrder(Rc(1, 0), Rc(1, 1), Rc(1, 2), r2, r5, r8);
+      const float nv2 = DotScalarOrder(Rc(2, 0), Rc(2, 1), Rc(2, 2), r2, r5, r8);
+      const float cos = -DotScalarOrder(L.pv[0][l], L.pv[1][l], L.pv[2][l], nv0, nv1, nv2);
+      const float sign = cos < 0 ? -1.0f : 1.0f;
+      L.sign[l] = sign;
+      L.n[0][l] = nv0 * sign;
+      L.n[1][l] = nv1 * sign;
+      L.n[2][l] = nv2 * sign;
+      L.ok[l] = (L.pv[2][l] > kSurfelNear) & (cos != 0.0f) & std::isfinite(cos);
     }
-    SurfelGeometry g;
-    ComputeGeometry(m, i, Rc, tc, K, &g);
-    G.opacity_logits[i] += d.opacity[i] * SigmoidGradFromValue(p.opacity[i]);
-    // Colour -> SH and the view direction.
-    // (The coefficients above the current degree get zero.)
-    float d_dir[3] = {0, 0, 0}, d_v[3];
-    float basis[kMaxShCoeffs], dbasis[kMaxShCoeffs][3];
-    ShBasisWithGradient(degree, &p.view_dir[3 * i], basis, dbasis);
-    WriteShColorBackwardFromBasis(n_coeffs, basis, dbasis, &m.sh[row * i], &p.clamp[3 * i],
-                                  &d.color[3 * i], d_sh, d_dir);
-    std::fill(d_sh + 3 * n_coeffs, d_sh + row, 0.0f);
-    const Eigen::Vector3f v = g.p - center;
-    NormalizeBackward(v.data(), d_dir, d_v);
-    Eigen::Vector3f d_p(d_v[0], d_v[1], d_v[2]);
-    // d/dM from the rasterizer, plus the screen centre m = (f.(T_u o T_w), f.(T_v o T_w)).
-    // Undo the centring T_u' = T_u - m_x T_w, T_v' = T_v - m_y T_w (m held as its own input).
-    Mat3 dM;
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) dM(r, c) = d.M[9 * i + 3 * r + c];
+#pragma omp simd
+    for (int l = 0; l < kLanes; ++l) {  // screen AABB of the projected 3-sigma disk (reference 3.2)
+      const float tu0 = L.M[0][l], tu1 = L.M[1][l], tu2 = L.M[2][l];
+      const float tv0 = L.M[3][l], tv1 = L.M[4][l], tv2 = L.M[5][l];
+      const float tw0 = L.M[6][l], tw1 = L.M[7][l], tw2 = L.M[8][l];
+      // (9 tw0^2 + (9 tw1^2 - tw2^2): GCC folded the product by -1 into a negated multiply-add.)
+      const float d = FusedMultiplyAdd(kSurfelCutoff2, tw0 * tw0,
+                                       FusedMultiplyAdd(-tw2, tw2, kSurfelCutoff2 * (tw1 * tw1)));
+      const float f0 = kSurfelCutoff2 / d, f1 = kSurfelCutoff2 / d, f2 = -1.0f / d;
+      const float mx = DotPackedScalarOrder(f0, f1, f2, tu0 * tw0, tu1 * tw1, tu2 * tw2);
+      const float my = DotPackedScalarOrder(f0, f1, f2, tv0 * tw0, tv1 * tw1, tv2 * tw2);
+      const float hx = std::sqrt(
+          MaxValue(1e-4f, mx * mx - DotScalarOrder(f0, f1, f2, tu0 * tu0, tu1 * tu1, tu2 * tu2)));
+      const float hy = std::sqrt(
+          MaxValue(1e-4f, my * my - DotScalarOrder(f0, f1, f2, tv0 * tv0, tv1 * tv1, tv2 * tv2)));
+      L.mx[l] = mx;
+      L.my[l] = my;
+      L.radius[l] = MaxValue(MaxValue(hx, hy), min_radius);  // before its ceil, below
+      L.ok[l] = L.ok[l] & (d != 0.0f) & std::isfinite(d) & std::isfinite(mx) & std::isfinite(my);
     }
-    const float cx = p.center[2 * i], cy = p.center[2 * i + 1];
-    const Eigen::Vector3f dTu_c = dM.row(0), dTv_c = dM.row(1);
-    const Eigen::Vector3f Tw_row = g.M.row(2);
-    dM.row(2) -= (cx * dTu_c + cy * dTv_c).transpose();
-    const float dmx = d.center[2 * i] - Tw_row.dot(dTu_c),
-                dmy = d.center[2 * i + 1] - Tw_row.dot(dTv_c);
-    if (dmx != 0.0f || dmy != 0.0f) {
-      const Eigen::Vector3f Tu = g.M.row(0), Tv = g.M.row(1), Tw = g.M.row(2);
-      const Eigen::Vector3f t(kCutoff2, kCutoff2, -1.0f);
-      const float dd = t.dot(Tw.cwiseProduct(Tw));
-      const Eigen::Vector3f f = t / dd;
-      const float mx = f.dot(Tu.cwiseProduct(Tw)), my = f.dot(Tv.cwiseProduct(Tw));
-      dM.row(0) += dmx * f.cwiseProduct(Tw).transpose();
-      dM.row(1) += dmy * f.cwiseProduct(Tw).transpose();
-      // d m / d T_w through the numerators and through d = t . (T_w o T_w).
-      const Eigen::Vector3f dTw = dmx * (f.cwiseProduct(Tu) - 2.0f * mx * f.cwiseProduct(Tw)) +
-                                  dmy * (f.cwiseProduct(Tv) - 2.0f * my * f.cwiseProduct(Tw));
-      dM.row(2) += dTw.transpose();
+    for (int l = 0; l < kLanes; ++l) {  // (GCC does not vectorise ceilf under -ftrapping-math)
+      L.radius[l] = std::ceil(L.radius[l]);
+      L.ok[l] = L.ok[l] & std::isfinite(L.radius[l]);
     }
-    // Densification statistic (reference 3.8(5)): the centre's x_num / y_num gradients scaled by
-    // the depth, in pixels.
-    grads->mean2d[2 * i] = dM(0, 2) * g.M(2, 2);
-    grads->mean2d[2 * i + 1] = dM(1, 2) * g.M(2, 2);
-    // M = K A: dA = K^T dM; A's columns are R_c s_u t_u, R_c s_v t_v, R_c p + t_c.
-    const Mat3 dA = K.transpose() * dM;
-    Mat3 dR = Mat3::Zero();
-    const Eigen::Vector3f du = Rc.transpose() * dA.col(0), dv = Rc.transpose() * dA.col(1);
-    G.log_scales[2 * i] += g.R.col(0).dot(du) * g.su;
-    G.log_scales[2 * i + 1] += g.R.col(1).dot(dv) * g.sv;
-    dR.col(0) = g.su * du;
-    dR.col(1) = g.sv * dv;
-    d_p += Rc.transpose() * dA.col(2);
-    // Normal: n = sign R_c t_w.
-    const Eigen::Vector3f dn(d.normal[3 * i], d.normal[3 * i + 1], d.normal[3 * i + 2]);
-    dR.col(2) = p.normal_sign[i] * (Rc.transpose() * dn);
-    float dq[4];
-    QuaternionToRotationBackward(&m.quats[4 * i], dR.data(), dq);
-    for (int k = 0; k < 4; ++k) G.quats[4 * i + k] += dq[k];
-    for (int k = 0; k < 3; ++k) G.means[3 * i + k] += d_p[k];
+#pragma omp simd
+    for (int l = 0; l < kLanes; ++l) {  // the rows again in double, centred on m (see the header)
+      const double su = L.su[l], sv = L.sv[l];
+      const double ud0 = su * double(L.R[0][l]), ud1 = su * double(L.R[3][l]),
+                   ud2 = su * double(L.R[6][l]);
+      const double vd0 = sv * double(L.R[1][l]), vd1 = sv * double(L.R[4][l]),
+                   vd2 = sv * double(L.R[7][l]);
+      const double pd0 = L.px[l], pd1 = L.py[l], pd2 = L.pz[l];
+      double Ad[3][3];
+      for (int r = 0; r < 3; ++r) {
+        Ad[r][0] = DotColumnMajorRow(r, Rd(r, 0), Rd(r, 1), Rd(r, 2), ud0, ud1, ud2);
+        Ad[r][1] = DotColumnMajorRow(r, Rd(r, 0), Rd(r, 1), Rd(r, 2), vd0, vd1, vd2);
+        Ad[r][2] = DotColumnMajorRow(r, Rd(r, 0), Rd(r, 1), Rd(r, 2), pd0, pd1, pd2) + td[r];
+      }
+      const double mx = L.mx[l], my = L.my[l];
+      // The float intrinsics in double, converted here: GCC 12 at -O3 (SLP) dropped the rounding
+      // to float of `const double fxd = static_cast<float>(cam.fx)` written beside the float ones.
+      const double fxd = fx, fyd = fy, cxd = cx, cyd = cy;
+      for (int c = 0; c < 3; ++c) {
+        const double m0 = DotColumnMajorRow(0, fxd, 0.0, cxd, Ad[0][c], Ad[1][c], Ad[2][c]);
+        const double m1 = DotColumnMajorRow(1, 0.0, fyd, cyd, Ad[0][c], Ad[1][c], Ad[2][c]);
+        const double m2 = DotColumnMajorRow(2, 0.0, 0.0, 1.0, Ad[0][c], Ad[1][c], Ad[2][c]);
+        L.rows[c][l] = static_cast<float>(m0 - mx * m2);
+        L.rows[3 + c][l] = static_cast<float>(m1 - my * m2);
+        L.rows[6 + c][l] = static_cast<float>(m2);
+      }
+    }
+    // The half-extents (ex, ey) around the centre beyond which no pixel of a surfel reaches alpha
+    // 1/255, i.e. rho = min(rho3d, rho2d) <= r2 = -2 min_power: the bounding box of the image of
+    // the disk u^2 + v^2 <= r2 (a conic; the box as for the 3-sigma one, from the stored rows) and
+    // of the low-pass circle |pixel - m|^2 <= r2 sigma^2 (its widest: the area-preserving offset
+    // only shrinks it), widened by 2% and half a pixel against float rounding in the pixel loops,
+    // and at most `radius` (which they are where the opacity is below 1/255 or the disk is not all
+    // in front of the camera). (Tested against the per-pixel reference renderer, which has no such
+    // box.)
+#pragma omp simd
+    for (int l = 0; l < kLanes; ++l) {
+      const float tu0 = L.rows[0][l], tu1 = L.rows[1][l], tu2 = L.rows[2][l];
+      const float tv0 = L.rows[3][l], tv1 = L.rows[4][l], tv2 = L.rows[5][l];
+      const float tw0 = L.rows[6][l], tw1 = L.rows[7][l], tw2 = L.rows[8][l];
+      const float radius = L.radius[l];
+      const float r2 = -2.0f * L.min_power[l];
+      const float d = r2 * (tw0 * tw0 + tw1 * tw1) - tw2 * tw2;
+      const float f0 = r2 / d, f1 = r2 / d, f2 = -1.0f / d;
+      const float cx_ = f0 * tu0 * tw0 + f1 * tu1 * tw1 + f2 * tu2 * tw2;
+      const float cy_ = f0 * tv0 * tw0 + f1 * tv1 * tw1 + f2 * tv2 * tw2;
+      const float qx = f0 * tu0 * tu0 + f1 * tu1 * tu1 + f2 * tu2 * tu2;
+      const float qy = f0 * tv0 * tv0 + f1 * tv1 * tv1 + f2 * tv2 * tv2;
+      const float disk_x = std::abs(cx_) + std::sqrt(std::max(0.0f, cx_ * cx_ - qx));
+      const float disk_y = std::abs(cy_) + std::sqrt(std::max(0.0f, cy_ * cy_ - qy));
+      const float circle = std::sqrt(r2 / inv_square);
+      const float x = std::max(disk_x, circle) * 1.02f + 0.5f;
+      const float y = std::max(disk_y, circle) * 1.02f + 0.5f;
+      const bool reach =
+          (L.opacity[l] > kMinBlendAlpha) & (d < 0.0f) & std::isfinite(x) & std::isfinite(y);
+      L.ex[l] = reach ? std::min(radius, x) : radius;
+      L.ey[l] = reach ? std::min(radius, y) : radius;
+    }
+#pragma omp simd
+    for (int l = 0; l < kLanes; ++l) {  // the view direction (Eigen's normalized())
+      const float dx = L.px[l] - center[0], dy = L.py[l] - center[1], dz = L.pz[l] - center[2];
+      const float sq = DotScalarOrder(dx, dy, dz, dx, dy, dz);
+      const float len = std::sqrt(sq);
+      const float ux = dx / len, uy = dy / len, uz = dz / len;
+      L.dir[0][l] = sq > 0.0f ? ux : dx;
+      L.dir[1][l] = sq > 0.0f ? uy : dy;
+      L.dir[2][l] = sq > 0.0f ? uz : dz;
+    }
+    // Pass 3: write out, and the SH colour.
+    for (int l = 0; l < count; ++l) {
+      const int i = base + l;
+      if (i + kPrefetchAhead < n)  // the coefficients the colour reads
+        PrefetchRow(&m.sh[static_cast<size_t>(i + kPrefetchAhead) * Kc * 3], 3 * n_coeffs);
+      out->depth[i] = L.pv[2][l];
+      out->radius[i] = 0;
+      out->rects[i] = TileRect();
+      if (!L.ok[l]) continue;
+      const float mx = L.mx[l], my = L.my[l], radius = L.radius[l];
+      const TileRect rect = TileRectFromBox(mx, my, radius, radius, tiles_x, tiles_y);
+      if (rect.empty()) continue;
+      out->radius[i] = radius;
+      out->center[2 * i] = mx;
+      out->center[2 * i + 1] = my;
+      for (int k = 0; k < 9; ++k) out->M[9 * i + k] = L.rows[k][l];
+      for (int k = 0; k < 3; ++k) {
+        out->normal[3 * i + k] = L.n[k][l];
+        out->view_dir[3 * i + k] = L.dir[k][l];
+      }
+      out->normal_sign[i] = L.sign[l];
+      const float opacity = L.opacity[l];
+      out->opacity[i] = opacity;
+      out->min_power[i] = L.min_power[l];
+      out->extent[2 * i] = L.ex[l];
+      out->extent[2 * i + 1] = L.ey[l];
+      out->rects[i] = opacity > kMinBlendAlpha
+                          ? TileRectFromBox(mx, my, L.ex[l], L.ey[l], tiles_x, tiles_y)
+                          : rect;
+      EvalShColor(degree, &m.sh[static_cast<size_t>(i) * Kc * 3], &out->view_dir[3 * i],
+                  &out->color[3 * i], &out->clamp[3 * i]);
+    }
   }
 }
 

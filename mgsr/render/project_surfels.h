@@ -16,6 +16,8 @@
 namespace mgsr {
 
 constexpr float kSurfelNear = 0.2f, kSurfelFar = 100.0f;
+// (3 sigma)^2: the disk's extent in its local (u, v) units that the screen radius covers.
+constexpr float kSurfelCutoff2 = 9.0f;
 // The reference's screen low-pass: a Gaussian of sigma sqrt(2)/2 px (rho2d = 2 |d|^2).
 constexpr float kReferenceSurfelFilterSigma = 0.70710678f;
 
