@@ -7,6 +7,7 @@
 #include "mgsr/model/activations.h"
 #include "mgsr/render/prefetch_rows.h"
 #include "mgsr/render/project_gaussians.h"  // kMinBlendAlpha
+#include "mgsr/render/projection_lanes.h"
 #include "mgsr/render/sh.h"
 
 namespace mgsr {
@@ -37,7 +38,12 @@ namespace {
 // before it computed, in its order and with its fused multiply-adds (as GCC 12 fused them for this
 // file's flags): every output was the same to the bit on the benchmark scene and on scenes with
 // zero quaternions, surfels behind the camera, huge and tiny scales, all four SH degrees.
-constexpr int kLanes = 16;
+using projection_lanes::DotColumnMajorRow;
+using projection_lanes::DotPackedOrder;
+using projection_lanes::DotScalarOrder;
+using projection_lanes::FusedMultiplyAdd;
+using projection_lanes::kLanes;
+using projection_lanes::MaxValue;
 
 using Mat3 = Eigen::Matrix<float, 3, 3, Eigen::RowMajor>;
 
@@ -52,39 +58,6 @@ struct SurfelLanes {
   float n[3][kLanes], rows[9][kLanes], ex[kLanes], ey[kLanes], dir[3][kLanes];
   int ok[kLanes];  // passed every test before the tile rectangle's
 };
-
-// The 3-term dot products as the per-surfel Eigen code rounded them. A fixed-size product of
-// row-major floats sums a0 b0 + (a1 b1 + a2 b2), which GCC fused (on a CPU with FMA) as
-// fma(a0, b0, fma(a2, b2, a1 b1)); where GCC had packed several such sums into one vector (the
-// middle row of M = K A, the screen centre's two sums) it fused them the other way round,
-// fma(a0, b0, fma(a1, b1, a2 b2)); a column-major double product takes its first two rows as
-// packets, (a0 b0 + a1 b1) + a2 b2, fused from the left, and the third as the first form.
-template <class T>
-inline T FusedMultiplyAdd(T a, T b, T c) {
-#ifdef __FMA__
-  return std::fma(a, b, c);
-#else
-  return a * b + c;
-#endif
-}
-template <class T>
-inline T DotScalarOrder(T a0, T a1, T a2, T b0, T b1, T b2) {
-  return FusedMultiplyAdd(a0, b0, FusedMultiplyAdd(a2, b2, a1 * b1));
-}
-inline float DotPackedScalarOrder(float a0, float a1, float a2, float b0, float b1, float b2) {
-  return FusedMultiplyAdd(a0, b0, FusedMultiplyAdd(a1, b1, a2 * b2));
-}
-inline double DotPacketOrder(double a0, double a1, double a2, double b0, double b1, double b2) {
-  return FusedMultiplyAdd(a2, b2, FusedMultiplyAdd(a1, b1, a0 * b0));
-}
-// std::max by value: GCC vectorises a loop that takes it (std::max's reference to one of two
-// temporaries became an index into a stack array that stopped the vectoriser).
-inline float MaxValue(float a, float b) { return a < b ? b : a; }
-// Row r of a column-major 3x3 double product.
-inline double DotColumnMajorRow(int r, double a0, double a1, double a2, double b0, double b1,
-                                double b2) {
-  return r < 2 ? DotPacketOrder(a0, a1, a2, b0, b1, b2) : DotScalarOrder(a0, a1, a2, b0, b1, b2);
-}
 
 }  // namespace
 
@@ -129,23 +102,8 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
     }
     // Pass 2: the geometry of every lane, in short loops GCC vectorises one by one.
 #pragma omp simd
-    for (int l = 0; l < kLanes; ++l) {  // the rotation (QuaternionToRotation)
-      const float q0 = L.qw[l], q1 = L.qx[l], q2 = L.qy[l], q3 = L.qz[l];
-      const float qn = std::sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3);
-      // (Every quotient is taken, then selected: GCC would not if-convert a conditional division.)
-      const bool q_ok = qn > 0;
-      const float qd0 = q0 / qn, qd1 = q1 / qn, qd2 = q2 / qn, qd3 = q3 / qn;
-      const float w = q_ok ? qd0 : 1.0f, x = q_ok ? qd1 : 0.0f, y = q_ok ? qd2 : 0.0f,
-                  z = q_ok ? qd3 : 0.0f;
-      L.R[0][l] = 1 - 2 * (y * y + z * z);
-      L.R[1][l] = 2 * (x * y - w * z);
-      L.R[2][l] = 2 * (x * z + w * y);
-      L.R[3][l] = 2 * (x * y + w * z);
-      L.R[4][l] = 1 - 2 * (x * x + z * z);
-      L.R[5][l] = 2 * (y * z - w * x);
-      L.R[6][l] = 2 * (x * z - w * y);
-      L.R[7][l] = 2 * (y * z + w * x);
-      L.R[8][l] = 1 - 2 * (x * x + y * y);
+    for (int l = 0; l < kLanes; ++l) {  // the rotation
+      projection_lanes::LaneRotation(L.qw[l], L.qx[l], L.qy[l], L.qz[l], L.R, l);
     }
 #pragma omp simd
     for (int l = 0; l < kLanes; ++l) {  // A = R_c [s_u t_u, s_v t_v, p] + t_c e3^T, M = K A
@@ -160,8 +118,8 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
       }
       for (int c = 0; c < 3; ++c) {
         L.M[c][l] = DotScalarOrder(fx, 0.0f, cx, A[0][c], A[1][c], A[2][c]);
-        L.M[3 + c][l] = DotPackedScalarOrder(0.0f, fy, cy, A[0][c], A[1][c], A[2][c]);
-        L.M[6 + c][l] = c == 0 ? DotPackedScalarOrder(0.0f, 0.0f, 1.0f, A[0][c], A[1][c], A[2][c])
+        L.M[3 + c][l] = DotPackedOrder(0.0f, fy, cy, A[0][c], A[1][c], A[2][c]);
+        L.M[6 + c][l] = c == 0 ? DotPackedOrder(0.0f, 0.0f, 1.0f, A[0][c], A[1][c], A[2][c])
                                : DotScalarOrder(0.0f, 0.0f, 1.0f, A[0][c], A[1][c], A[2][c]);
       }
       L.pv[0][l] = A[0][2];
@@ -191,8 +149,8 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
       const float d = FusedMultiplyAdd(kSurfelCutoff2, tw0 * tw0,
                                        FusedMultiplyAdd(-tw2, tw2, kSurfelCutoff2 * (tw1 * tw1)));
       const float f0 = kSurfelCutoff2 / d, f1 = kSurfelCutoff2 / d, f2 = -1.0f / d;
-      const float mx = DotPackedScalarOrder(f0, f1, f2, tu0 * tw0, tu1 * tw1, tu2 * tw2);
-      const float my = DotPackedScalarOrder(f0, f1, f2, tv0 * tw0, tv1 * tw1, tv2 * tw2);
+      const float mx = DotPackedOrder(f0, f1, f2, tu0 * tw0, tu1 * tw1, tu2 * tw2);
+      const float my = DotPackedOrder(f0, f1, f2, tv0 * tw0, tv1 * tw1, tv2 * tw2);
       const float hx = std::sqrt(
           MaxValue(1e-4f, mx * mx - DotScalarOrder(f0, f1, f2, tu0 * tu0, tu1 * tu1, tu2 * tu2)));
       const float hy = std::sqrt(
