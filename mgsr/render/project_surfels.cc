@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "mgsr/core/zero_fill.h"
 #include "mgsr/model/activations.h"
 #include "mgsr/render/prefetch_rows.h"
 #include "mgsr/render/project_gaussians.h"  // kMinBlendAlpha
@@ -28,6 +29,30 @@ void ProjectedSurfels::Resize(size_t n) {
   extent.resize(2 * n);
 }
 
+void ProjectedSurfelsGrad::ResizeAndZero(size_t n) {
+  ZeroFill(9 * n, &M);
+  ZeroFill(2 * n, &center);
+  ZeroFill(3 * n, &normal);
+  ZeroFill(n, &opacity);
+  ZeroFill(3 * n, &color);
+}
+
+void SurfelGradients::ResizeAndZero(const SurfelModel& model) {
+  ResizeForBackward(model);
+  ZeroFill(params.sh.size(), &params.sh);
+}
+
+void SurfelGradients::ResizeForBackward(const SurfelModel& model) {
+  params.max_sh_degree = model.max_sh_degree;
+  const size_t n = model.size();
+  ZeroFill(3 * n, &params.means);
+  ZeroFill(2 * n, &params.log_scales);
+  ZeroFill(4 * n, &params.quats);
+  ZeroFill(n, &params.opacity_logits);
+  params.sh.resize(3 * static_cast<size_t>(params.sh_coeffs()) * n);
+  ZeroFill(2 * n, &mean2d);
+}
+
 namespace {
 
 // The forward runs over blocks of kLanes surfels in three passes: a scalar one that gathers each
@@ -47,13 +72,70 @@ using projection_lanes::MaxValue;
 
 using Mat3 = Eigen::Matrix<float, 3, 3, Eigen::RowMajor>;
 
-struct SurfelLanes {
-  // Inputs (pass 1).
-  float qw[kLanes], qx[kLanes], qy[kLanes], qz[kLanes];
-  float px[kLanes], py[kLanes], pz[kLanes];
-  float su[kLanes], sv[kLanes], opacity[kLanes], min_power[kLanes];
-  // Results (pass 2).
+// A block's surfels and their geometry, as both passes need them: the parameters (gathered by
+// GatherSurfels) and the rotation R (row-major; columns t_u, t_v, t_w), the rows of
+// M = K [R_c [s_u t_u, s_v t_v, p] + t_c e3^T] and the view-space centre (SurfelGeometryLanes).
+struct SurfelGeometry {
+  float q[4][kLanes], p[3][kLanes], su[kLanes], sv[kLanes];
   float R[9][kLanes], M[9][kLanes], pv[3][kLanes];
+};
+
+// Lanes past the end repeat the block's first surfel.
+void GatherSurfels(const SurfelModel& m, int base, int count, SurfelGeometry* g) {
+  for (int l = 0; l < kLanes; ++l) {
+    const size_t i = base + (l < count ? l : 0);
+    for (int k = 0; k < 4; ++k) g->q[k][l] = m.quats[4 * i + k];
+    for (int k = 0; k < 3; ++k) g->p[k][l] = m.means[3 * i + k];
+    g->su[l] = std::exp(m.log_scales[2 * i]);
+    g->sv[l] = std::exp(m.log_scales[2 * i + 1]);
+  }
+}
+
+struct CameraLanes {
+  Mat3 Rc;
+  Eigen::Vector3f tc, center;
+  float fx, fy, cx, cy;
+  explicit CameraLanes(const Camera& cam)
+      : Rc(cam.R.cast<float>()),
+        tc(cam.t.cast<float>()),
+        center(cam.Center().cast<float>()),
+        fx(static_cast<float>(cam.fx)),
+        fy(static_cast<float>(cam.fy)),
+        cx(static_cast<float>(cam.cx)),
+        cy(static_cast<float>(cam.cy)) {}
+};
+
+void SurfelGeometryLanes(const CameraLanes& c, SurfelGeometry* g) {
+  const Mat3& Rc = c.Rc;
+#pragma omp simd
+  for (int l = 0; l < kLanes; ++l) {  // the rotation
+    projection_lanes::LaneRotation(g->q[0][l], g->q[1][l], g->q[2][l], g->q[3][l], g->R, l);
+  }
+#pragma omp simd
+  for (int l = 0; l < kLanes; ++l) {  // A = R_c [s_u t_u, s_v t_v, p] + t_c e3^T, M = K A
+    const float su = g->su[l], sv = g->sv[l];
+    const float u0 = su * g->R[0][l], u1 = su * g->R[3][l], u2 = su * g->R[6][l];
+    const float v0 = sv * g->R[1][l], v1 = sv * g->R[4][l], v2 = sv * g->R[7][l];
+    float A[3][3];
+    for (int r = 0; r < 3; ++r) {
+      A[r][0] = DotScalarOrder(Rc(r, 0), Rc(r, 1), Rc(r, 2), u0, u1, u2);
+      A[r][1] = DotScalarOrder(Rc(r, 0), Rc(r, 1), Rc(r, 2), v0, v1, v2);
+      A[r][2] = DotScalarOrder(Rc(r, 0), Rc(r, 1), Rc(r, 2), g->p[0][l], g->p[1][l], g->p[2][l]) +
+                c.tc[r];
+    }
+    for (int k = 0; k < 3; ++k) {
+      g->M[k][l] = DotScalarOrder(c.fx, 0.0f, c.cx, A[0][k], A[1][k], A[2][k]);
+      g->M[3 + k][l] = DotPackedOrder(0.0f, c.fy, c.cy, A[0][k], A[1][k], A[2][k]);
+      g->M[6 + k][l] = k == 0 ? DotPackedOrder(0.0f, 0.0f, 1.0f, A[0][k], A[1][k], A[2][k])
+                              : DotScalarOrder(0.0f, 0.0f, 1.0f, A[0][k], A[1][k], A[2][k]);
+    }
+    for (int r = 0; r < 3; ++r) g->pv[r][l] = A[r][2];
+  }
+}
+
+struct SurfelLanes {
+  SurfelGeometry g;
+  float opacity[kLanes], min_power[kLanes];
   float mx[kLanes], my[kLanes], radius[kLanes], sign[kLanes];
   float n[3][kLanes], rows[9][kLanes], ex[kLanes], ey[kLanes], dir[3][kLanes];
   int ok[kLanes];  // passed every test before the tile rectangle's
@@ -65,11 +147,10 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
                     float filter_sigma) {
   const int n = static_cast<int>(m.size());
   out->Resize(n);
-  const Mat3 Rc = cam.R.cast<float>();
-  const Eigen::Vector3f tc = cam.t.cast<float>();
-  const Eigen::Vector3f center = cam.Center().cast<float>();
-  const float fx = static_cast<float>(cam.fx), fy = static_cast<float>(cam.fy);
-  const float cx = static_cast<float>(cam.cx), cy = static_cast<float>(cam.cy);
+  const CameraLanes camera(cam);
+  const Mat3& Rc = camera.Rc;
+  const Eigen::Vector3f& center = camera.center;
+  const float fx = camera.fx, fy = camera.fy, cx = camera.cx, cy = camera.cy;
   const Eigen::Matrix3d Rd = cam.R;
   const Eigen::Vector3d td = cam.t;
   const int tiles_x = (cam.width + kTileSize - 1) / kTileSize;
@@ -84,77 +165,44 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
   for (int b = 0; b < blocks; ++b) {
     SurfelLanes L;
     const int base = b * kLanes, count = std::min(kLanes, n - base);
-    // Pass 1: gather, and the library calls. (Lanes past the end repeat the first surfel.)
+    // Pass 1: gather, and the library calls.
+    GatherSurfels(m, base, count, &L.g);
     for (int l = 0; l < kLanes; ++l) {
-      const size_t i = base + (l < count ? l : 0);
-      L.qw[l] = m.quats[4 * i];
-      L.qx[l] = m.quats[4 * i + 1];
-      L.qy[l] = m.quats[4 * i + 2];
-      L.qz[l] = m.quats[4 * i + 3];
-      L.px[l] = m.means[3 * i];
-      L.py[l] = m.means[3 * i + 1];
-      L.pz[l] = m.means[3 * i + 2];
-      L.su[l] = std::exp(m.log_scales[2 * i]);
-      L.sv[l] = std::exp(m.log_scales[2 * i + 1]);
-      const float opacity = Sigmoid(m.opacity_logits[i]);
+      const float opacity = Sigmoid(m.opacity_logits[base + (l < count ? l : 0)]);
       L.opacity[l] = opacity;
       L.min_power[l] = opacity > kMinBlendAlpha ? std::log(kMinBlendAlpha / opacity) : 0.0f;
     }
     // Pass 2: the geometry of every lane, in short loops GCC vectorises one by one.
-#pragma omp simd
-    for (int l = 0; l < kLanes; ++l) {  // the rotation
-      projection_lanes::LaneRotation(L.qw[l], L.qx[l], L.qy[l], L.qz[l], L.R, l);
-    }
-#pragma omp simd
-    for (int l = 0; l < kLanes; ++l) {  // A = R_c [s_u t_u, s_v t_v, p] + t_c e3^T, M = K A
-      const float su = L.su[l], sv = L.sv[l];
-      const float u0 = su * L.R[0][l], u1 = su * L.R[3][l], u2 = su * L.R[6][l];
-      const float v0 = sv * L.R[1][l], v1 = sv * L.R[4][l], v2 = sv * L.R[7][l];
-      float A[3][3];
-      for (int r = 0; r < 3; ++r) {
-        A[r][0] = DotScalarOrder(Rc(r, 0), Rc(r, 1), Rc(r, 2), u0, u1, u2);
-        A[r][1] = DotScalarOrder(Rc(r, 0), Rc(r, 1), Rc(r, 2), v0, v1, v2);
-        A[r][2] = DotScalarOrder(Rc(r, 0), Rc(r, 1), Rc(r, 2), L.px[l], L.py[l], L.pz[l]) + tc[r];
-      }
-      for (int c = 0; c < 3; ++c) {
-        L.M[c][l] = DotScalarOrder(fx, 0.0f, cx, A[0][c], A[1][c], A[2][c]);
-        L.M[3 + c][l] = DotPackedOrder(0.0f, fy, cy, A[0][c], A[1][c], A[2][c]);
-        L.M[6 + c][l] = c == 0 ? DotPackedOrder(0.0f, 0.0f, 1.0f, A[0][c], A[1][c], A[2][c])
-                               : DotScalarOrder(0.0f, 0.0f, 1.0f, A[0][c], A[1][c], A[2][c]);
-      }
-      L.pv[0][l] = A[0][2];
-      L.pv[1][l] = A[1][2];
-      L.pv[2][l] = A[2][2];
-    }
+    SurfelGeometryLanes(camera, &L.g);
 #pragma omp simd
     for (int l = 0; l < kLanes; ++l) {  // the camera-facing normal
-      const float r2 = L.R[2][l], r5 = L.R[5][l], r8 = L.R[8][l];
+      const float r2 = L.g.R[2][l], r5 = L.g.R[5][l], r8 = L.g.R[8][l];
       const float nv0 = DotScalarOrder(Rc(0, 0), Rc(0, 1), Rc(0, 2), r2, r5, r8);
       const float nv1 = DotScalarOrder(Rc(1, 0), Rc(1, 1), Rc(1, 2), r2, r5, r8);
       const float nv2 = DotScalarOrder(Rc(2, 0), Rc(2, 1), Rc(2, 2), r2, r5, r8);
-      const float cos = -DotScalarOrder(L.pv[0][l], L.pv[1][l], L.pv[2][l], nv0, nv1, nv2);
+      const float cos = -DotScalarOrder(L.g.pv[0][l], L.g.pv[1][l], L.g.pv[2][l], nv0, nv1, nv2);
       const float sign = cos < 0 ? -1.0f : 1.0f;
       L.sign[l] = sign;
       L.n[0][l] = nv0 * sign;
       L.n[1][l] = nv1 * sign;
       L.n[2][l] = nv2 * sign;
-      L.ok[l] = (L.pv[2][l] > kSurfelNear) & (cos != 0.0f) & std::isfinite(cos);
+      L.ok[l] = (L.g.pv[2][l] > kSurfelNear) & (cos != 0.0f) & std::isfinite(cos);
     }
 #pragma omp simd
     for (int l = 0; l < kLanes; ++l) {  // screen AABB of the projected 3-sigma disk (reference 3.2)
-      const float tu0 = L.M[0][l], tu1 = L.M[1][l], tu2 = L.M[2][l];
-      const float tv0 = L.M[3][l], tv1 = L.M[4][l], tv2 = L.M[5][l];
-      const float tw0 = L.M[6][l], tw1 = L.M[7][l], tw2 = L.M[8][l];
+      const float tu0 = L.g.M[0][l], tu1 = L.g.M[1][l], tu2 = L.g.M[2][l];
+      const float tv0 = L.g.M[3][l], tv1 = L.g.M[4][l], tv2 = L.g.M[5][l];
+      const float tw0 = L.g.M[6][l], tw1 = L.g.M[7][l], tw2 = L.g.M[8][l];
       // (9 tw0^2 + (9 tw1^2 - tw2^2): GCC folded the product by -1 into a negated multiply-add.)
       const float d = FusedMultiplyAdd(kSurfelCutoff2, tw0 * tw0,
                                        FusedMultiplyAdd(-tw2, tw2, kSurfelCutoff2 * (tw1 * tw1)));
       const float f0 = kSurfelCutoff2 / d, f1 = kSurfelCutoff2 / d, f2 = -1.0f / d;
       const float mx = DotPackedOrder(f0, f1, f2, tu0 * tw0, tu1 * tw1, tu2 * tw2);
       const float my = DotPackedOrder(f0, f1, f2, tv0 * tw0, tv1 * tw1, tv2 * tw2);
-      const float hx = std::sqrt(
-          MaxValue(1e-4f, mx * mx - DotScalarOrder(f0, f1, f2, tu0 * tu0, tu1 * tu1, tu2 * tu2)));
-      const float hy = std::sqrt(
-          MaxValue(1e-4f, my * my - DotScalarOrder(f0, f1, f2, tv0 * tv0, tv1 * tv1, tv2 * tv2)));
+      const float qx = DotScalarOrder(f0, f1, f2, tu0 * tu0, tu1 * tu1, tu2 * tu2);
+      const float qy = DotScalarOrder(f0, f1, f2, tv0 * tv0, tv1 * tv1, tv2 * tv2);
+      const float hx = std::sqrt(MaxValue(1e-4f, FusedMultiplyAdd(mx, mx, -qx)));
+      const float hy = std::sqrt(MaxValue(1e-4f, FusedMultiplyAdd(my, my, -qy)));
       L.mx[l] = mx;
       L.my[l] = my;
       L.radius[l] = MaxValue(MaxValue(hx, hy), min_radius);  // before its ceil, below
@@ -166,12 +214,12 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
     }
 #pragma omp simd
     for (int l = 0; l < kLanes; ++l) {  // the rows again in double, centred on m (see the header)
-      const double su = L.su[l], sv = L.sv[l];
-      const double ud0 = su * double(L.R[0][l]), ud1 = su * double(L.R[3][l]),
-                   ud2 = su * double(L.R[6][l]);
-      const double vd0 = sv * double(L.R[1][l]), vd1 = sv * double(L.R[4][l]),
-                   vd2 = sv * double(L.R[7][l]);
-      const double pd0 = L.px[l], pd1 = L.py[l], pd2 = L.pz[l];
+      const double su = L.g.su[l], sv = L.g.sv[l];
+      const double ud0 = su * double(L.g.R[0][l]), ud1 = su * double(L.g.R[3][l]),
+                   ud2 = su * double(L.g.R[6][l]);
+      const double vd0 = sv * double(L.g.R[1][l]), vd1 = sv * double(L.g.R[4][l]),
+                   vd2 = sv * double(L.g.R[7][l]);
+      const double pd0 = L.g.p[0][l], pd1 = L.g.p[1][l], pd2 = L.g.p[2][l];
       double Ad[3][3];
       for (int r = 0; r < 3; ++r) {
         Ad[r][0] = DotColumnMajorRow(r, Rd(r, 0), Rd(r, 1), Rd(r, 2), ud0, ud1, ud2);
@@ -186,8 +234,8 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
         const double m0 = DotColumnMajorRow(0, fxd, 0.0, cxd, Ad[0][c], Ad[1][c], Ad[2][c]);
         const double m1 = DotColumnMajorRow(1, 0.0, fyd, cyd, Ad[0][c], Ad[1][c], Ad[2][c]);
         const double m2 = DotColumnMajorRow(2, 0.0, 0.0, 1.0, Ad[0][c], Ad[1][c], Ad[2][c]);
-        L.rows[c][l] = static_cast<float>(m0 - mx * m2);
-        L.rows[3 + c][l] = static_cast<float>(m1 - my * m2);
+        L.rows[c][l] = static_cast<float>(FusedMultiplyAdd(-mx, m2, m0));
+        L.rows[3 + c][l] = static_cast<float>(FusedMultiplyAdd(-my, m2, m1));
         L.rows[6 + c][l] = static_cast<float>(m2);
       }
     }
@@ -206,17 +254,21 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
       const float tw0 = L.rows[6][l], tw1 = L.rows[7][l], tw2 = L.rows[8][l];
       const float radius = L.radius[l];
       const float r2 = -2.0f * L.min_power[l];
-      const float d = r2 * (tw0 * tw0 + tw1 * tw1) - tw2 * tw2;
+      const float d = FusedMultiplyAdd(r2, FusedMultiplyAdd(tw0, tw0, tw1 * tw1), -(tw2 * tw2));
       const float f0 = r2 / d, f1 = r2 / d, f2 = -1.0f / d;
-      const float cx_ = f0 * tu0 * tw0 + f1 * tu1 * tw1 + f2 * tu2 * tw2;
-      const float cy_ = f0 * tv0 * tw0 + f1 * tv1 * tw1 + f2 * tv2 * tw2;
-      const float qx = f0 * tu0 * tu0 + f1 * tu1 * tu1 + f2 * tu2 * tu2;
-      const float qy = f0 * tv0 * tv0 + f1 * tv1 * tv1 + f2 * tv2 * tv2;
-      const float disk_x = std::abs(cx_) + std::sqrt(std::max(0.0f, cx_ * cx_ - qx));
-      const float disk_y = std::abs(cy_) + std::sqrt(std::max(0.0f, cy_ * cy_ - qy));
+      const float a0 = f0 * tu0, a1 = f1 * tu1, a2 = f2 * tu2;
+      const float b0 = f0 * tv0, b1 = f1 * tv1, b2 = f2 * tv2;
+      const float cx_ = FusedMultiplyAdd(a2, tw2, FusedMultiplyAdd(a0, tw0, a1 * tw1));
+      const float cy_ = FusedMultiplyAdd(b2, tw2, FusedMultiplyAdd(b0, tw0, b1 * tw1));
+      const float qx = FusedMultiplyAdd(a2, tu2, FusedMultiplyAdd(a0, tu0, a1 * tu1));
+      const float qy = FusedMultiplyAdd(b2, tv2, FusedMultiplyAdd(b0, tv0, b1 * tv1));
+      const float disk_x =
+          std::abs(cx_) + std::sqrt(MaxValue(0.0f, FusedMultiplyAdd(cx_, cx_, -qx)));
+      const float disk_y =
+          std::abs(cy_) + std::sqrt(MaxValue(0.0f, FusedMultiplyAdd(cy_, cy_, -qy)));
       const float circle = std::sqrt(r2 / inv_square);
-      const float x = std::max(disk_x, circle) * 1.02f + 0.5f;
-      const float y = std::max(disk_y, circle) * 1.02f + 0.5f;
+      const float x = FusedMultiplyAdd(MaxValue(disk_x, circle), 1.02f, 0.5f);
+      const float y = FusedMultiplyAdd(MaxValue(disk_y, circle), 1.02f, 0.5f);
       const bool reach =
           (L.opacity[l] > kMinBlendAlpha) & (d < 0.0f) & std::isfinite(x) & std::isfinite(y);
       L.ex[l] = reach ? std::min(radius, x) : radius;
@@ -224,7 +276,8 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
     }
 #pragma omp simd
     for (int l = 0; l < kLanes; ++l) {  // the view direction (Eigen's normalized())
-      const float dx = L.px[l] - center[0], dy = L.py[l] - center[1], dz = L.pz[l] - center[2];
+      const float dx = L.g.p[0][l] - center[0], dy = L.g.p[1][l] - center[1],
+                  dz = L.g.p[2][l] - center[2];
       const float sq = DotScalarOrder(dx, dy, dz, dx, dy, dz);
       const float len = std::sqrt(sq);
       const float ux = dx / len, uy = dy / len, uz = dz / len;
@@ -237,7 +290,7 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
       const int i = base + l;
       if (i + kPrefetchAhead < n)  // the coefficients the colour reads
         PrefetchRow(&m.sh[static_cast<size_t>(i + kPrefetchAhead) * Kc * 3], 3 * n_coeffs);
-      out->depth[i] = L.pv[2][l];
+      out->depth[i] = L.g.pv[2][l];
       out->radius[i] = 0;
       out->rects[i] = TileRect();
       if (!L.ok[l]) continue;
@@ -263,6 +316,230 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
                           : rect;
       EvalShColor(degree, &m.sh[static_cast<size_t>(i) * Kc * 3], &out->view_dir[3 * i],
                   &out->color[3 * i], &out->clamp[3 * i]);
+    }
+  }
+}
+
+namespace {
+
+// The backward's lanes: its inputs beyond the geometry, what the scalar pass found for the view
+// direction, and what it writes back.
+struct SurfelGradLanes {
+  SurfelGeometry g;
+  float dM[9][kLanes], center[2][kLanes], d_center[2][kLanes], d_normal[3][kLanes];
+  float sign[kLanes], d_dir[3][kLanes];
+  // Results: d log_scales (before the scale factor), the quaternion and mean gradients, mean2d.
+  float ds[2][kLanes], dq[4][kLanes], d_p[3][kLanes], mean2d[2][kLanes];
+};
+
+// NormalizeBackward (mgsr/render/sh.h) of lane l: d_v from d_dir for dir = v / |v|, fused as GCC
+// fused it there.
+inline void LaneNormalizeBackward(float v0, float v1, float v2, const float (&d_dir)[3][kLanes],
+                                  int l, float (&d_v)[3][kLanes]) {
+  const float len = std::sqrt(FusedMultiplyAdd(v2, v2, FusedMultiplyAdd(v0, v0, v1 * v1)));
+  const float inv_len = 1.0f / len;
+  const float inv = len > 0 ? inv_len : 0.0f;
+  const float u0 = v0 * inv, u1 = v1 * inv, u2 = v2 * inv;
+  const float dot =
+      FusedMultiplyAdd(u2, d_dir[2][l], FusedMultiplyAdd(u0, d_dir[0][l], u1 * d_dir[1][l]));
+  d_v[0][l] = FusedMultiplyAdd(-u0, dot, d_dir[0][l]) * inv;
+  d_v[1][l] = FusedMultiplyAdd(-u1, dot, d_dir[1][l]) * inv;
+  d_v[2][l] = FusedMultiplyAdd(-u2, dot, d_dir[2][l]) * inv;
+}
+
+// QuaternionToRotationBackward (mgsr/model/activations.h) of one lane, its sums fused as GCC
+// fused them there (each sum from its first term on, the negated first product of du[0] fused).
+inline void LaneRotationBackward(float q0, float q1, float q2, float q3, const float (&dR)[9],
+                                 float (&dq)[4][kLanes], int l) {
+  const float n = std::sqrt(
+      FusedMultiplyAdd(q3, q3, FusedMultiplyAdd(q2, q2, FusedMultiplyAdd(q0, q0, q1 * q1))));
+  const bool ok = n > 0;
+  const float w = q0 / n, x = q1 / n, y = q2 / n, z = q3 / n;
+  const float x2 = x + x, y2 = -2.0f * y, z2 = -2.0f * z;  // 2 x, -2 y, -2 z
+  float du[4];
+  float s = FusedMultiplyAdd(-z, dR[1], y * dR[2]);
+  s = FusedMultiplyAdd(z, dR[3], s);
+  s = FusedMultiplyAdd(-x, dR[5], s);
+  s = FusedMultiplyAdd(-y, dR[6], s);
+  du[0] = 2 * FusedMultiplyAdd(x, dR[7], s);
+  s = FusedMultiplyAdd(y, dR[1], z * dR[2]);
+  s = FusedMultiplyAdd(y, dR[3], s);
+  s = FusedMultiplyAdd(-x2, dR[4], s);
+  s = FusedMultiplyAdd(-w, dR[5], s);
+  s = FusedMultiplyAdd(z, dR[6], s);
+  s = FusedMultiplyAdd(w, dR[7], s);
+  du[1] = 2 * FusedMultiplyAdd(-x2, dR[8], s);
+  s = FusedMultiplyAdd(y2, dR[0], x * dR[1]);
+  s = FusedMultiplyAdd(w, dR[2], s);
+  s = FusedMultiplyAdd(x, dR[3], s);
+  s = FusedMultiplyAdd(z, dR[5], s);
+  s = FusedMultiplyAdd(-w, dR[6], s);
+  s = FusedMultiplyAdd(z, dR[7], s);
+  du[2] = 2 * FusedMultiplyAdd(y2, dR[8], s);
+  s = FusedMultiplyAdd(z2, dR[0], -(w * dR[1]));
+  s = FusedMultiplyAdd(x, dR[2], s);
+  s = FusedMultiplyAdd(w, dR[3], s);
+  s = FusedMultiplyAdd(z2, dR[4], s);
+  s = FusedMultiplyAdd(y, dR[5], s);
+  s = FusedMultiplyAdd(x, dR[6], s);
+  du[3] = 2 * FusedMultiplyAdd(y, dR[7], s);
+  const float u[4] = {w, x, y, z};
+  const float dot =
+      FusedMultiplyAdd(z, du[3], FusedMultiplyAdd(y, du[2], FusedMultiplyAdd(w, du[0], x * du[1])));
+  for (int k = 0; k < 4; ++k) {
+    const float g = FusedMultiplyAdd(-u[k], dot, du[k]) / n;
+    dq[k][l] = ok ? g : 0.0f;
+  }
+}
+
+}  // namespace
+
+// The backward runs over the forward's blocks of kLanes surfels: a scalar pass takes the SH
+// colour's backward (a row of coefficients per surfel) and gathers, the geometry and the chain to
+// the parameters run in lane loops, and a scalar pass adds what each drawn surfel got into the
+// model's gradients, as the per-surfel loop before it did (the same sums in the same order).
+void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degree,
+                            const ProjectedSurfels& p, const ProjectedSurfelsGrad& d,
+                            SurfelGradients* grads) {
+  const int n = static_cast<int>(m.size());
+  const CameraLanes camera(cam);
+  const Mat3& Rc = camera.Rc;
+  const Eigen::Vector3f& center = camera.center;
+  const float fx = camera.fx, fy = camera.fy, cx = camera.cx, cy = camera.cy;
+  const int Kc = m.sh_coeffs();
+  const int degree = std::min(sh_degree, m.max_sh_degree);
+  SurfelModel& G = grads->params;
+  const size_t row = static_cast<size_t>(Kc) * 3;  // SH floats per surfel
+  const int n_coeffs = (degree + 1) * (degree + 1);
+  const int blocks = (n + kLanes - 1) / kLanes;
+#pragma omp parallel for schedule(static)
+  for (int b = 0; b < blocks; ++b) {
+    SurfelGradLanes L;
+    const int base = b * kLanes, count = std::min(kLanes, n - base);
+    // Pass 1: the SH colour's backward and the gathers. (Lanes past the end, or not drawn, repeat
+    // a drawn surfel's inputs or zeros; pass 3 skips them.)
+    GatherSurfels(m, base, count, &L.g);
+    for (int l = 0; l < kLanes; ++l) {
+      const int i = base + (l < count ? l : 0);
+      if (l < count && i + kPrefetchAhead < n) {  // the coefficients read, the gradient row written
+        PrefetchRow(&m.sh[row * (i + kPrefetchAhead)], 3 * n_coeffs);
+        PrefetchRow(&G.sh[row * (i + kPrefetchAhead)], row);
+      }
+      for (int k = 0; k < 9; ++k) L.dM[k][l] = d.M[9 * i + k];
+      for (int k = 0; k < 2; ++k) {
+        L.center[k][l] = p.center[2 * i + k];
+        L.d_center[k][l] = d.center[2 * i + k];
+      }
+      for (int k = 0; k < 3; ++k) L.d_normal[k][l] = d.normal[3 * i + k];
+      L.sign[l] = p.normal_sign[i];
+      for (int k = 0; k < 3; ++k) L.d_dir[k][l] = 0.0f;
+      if (l >= count) continue;
+      float* const d_sh = &G.sh[row * i];
+      if (p.radius[i] <= 0) {  // not drawn: its SH row is written zero, the rest stays zero
+        std::fill(d_sh, d_sh + row, 0.0f);
+        continue;
+      }
+      G.opacity_logits[i] =
+          FusedMultiplyAdd(SigmoidGradFromValue(p.opacity[i]), d.opacity[i], G.opacity_logits[i]);
+      // Colour -> SH and the view direction. (The coefficients above the current degree get zero.)
+      float d_dir[3] = {0, 0, 0};
+      float basis[kMaxShCoeffs], dbasis[kMaxShCoeffs][3];
+      ShBasisWithGradient(degree, &p.view_dir[3 * i], basis, dbasis);
+      WriteShColorBackwardFromBasis(n_coeffs, basis, dbasis, &m.sh[row * i], &p.clamp[3 * i],
+                                    &d.color[3 * i], d_sh, d_dir);
+      std::fill(d_sh + 3 * n_coeffs, d_sh + row, 0.0f);
+      for (int k = 0; k < 3; ++k) L.d_dir[k][l] = d_dir[k];
+    }
+    // Pass 2: the geometry, and the chain from M, the centre and the normal to the parameters.
+    SurfelGeometryLanes(camera, &L.g);
+#pragma omp simd
+    for (int l = 0; l < kLanes; ++l) {
+      const SurfelGeometry& g = L.g;
+      LaneNormalizeBackward(g.p[0][l] - center[0], g.p[1][l] - center[1], g.p[2][l] - center[2],
+                            L.d_dir, l, L.d_p);
+      // d/dM from the rasterizer, plus the screen centre m = (f.(T_u o T_w), f.(T_v o T_w)).
+      // Undo the centring T_u' = T_u - m_x T_w, T_v' = T_v - m_y T_w (m held as its own input).
+      float dM[9];
+      for (int k = 0; k < 9; ++k) dM[k] = L.dM[k][l];
+      const float mcx = L.center[0][l], mcy = L.center[1][l];
+      const float dTu[3] = {dM[0], dM[1], dM[2]}, dTv[3] = {dM[3], dM[4], dM[5]};
+      const float Tw[3] = {g.M[6][l], g.M[7][l], g.M[8][l]};
+      for (int k = 0; k < 3; ++k)
+        dM[6 + k] = dM[6 + k] - FusedMultiplyAdd(mcy, dTv[k], mcx * dTu[k]);
+      const float dmx =
+          L.d_center[0][l] - DotPackedOrder(Tw[0], Tw[1], Tw[2], dTu[0], dTu[1], dTu[2]);
+      const float dmy =
+          L.d_center[1][l] - DotPackedOrder(Tw[0], Tw[1], Tw[2], dTv[0], dTv[1], dTv[2]);
+      {
+        const float Tu[3] = {g.M[0][l], g.M[1][l], g.M[2][l]};
+        const float Tv[3] = {g.M[3][l], g.M[4][l], g.M[5][l]};
+        const float dd =
+            FusedMultiplyAdd(kSurfelCutoff2, Tw[0] * Tw[0],
+                             FusedMultiplyAdd(-Tw[2], Tw[2], kSurfelCutoff2 * (Tw[1] * Tw[1])));
+        const float f[3] = {kSurfelCutoff2 / dd, kSurfelCutoff2 / dd, -1.0f / dd};
+        const float mx =
+            DotScalarOrder(f[0], f[1], f[2], Tu[0] * Tw[0], Tu[1] * Tw[1], Tu[2] * Tw[2]);
+        const float my =
+            DotScalarOrder(f[0], f[1], f[2], Tv[0] * Tw[0], Tv[1] * Tw[1], Tv[2] * Tw[2]);
+        const bool moved = (dmx != 0.0f) | (dmy != 0.0f);
+        for (int k = 0; k < 3; ++k) {
+          const float fTw = f[k] * Tw[k];
+          const float r0 = FusedMultiplyAdd(dmx, fTw, dM[k]);
+          const float r1 = FusedMultiplyAdd(dmy, fTw, dM[3 + k]);
+          const float a = FusedMultiplyAdd(-(2.0f * mx), fTw, f[k] * Tu[k]);
+          const float b = FusedMultiplyAdd(-(2.0f * my), fTw, f[k] * Tv[k]);
+          const float dTw = FusedMultiplyAdd(dmy, b, dmx * a);
+          const float r2 = dM[6 + k] + dTw;
+          dM[k] = moved ? r0 : dM[k];
+          dM[3 + k] = moved ? r1 : dM[3 + k];
+          dM[6 + k] = moved ? r2 : dM[6 + k];
+        }
+      }
+      // Densification statistic (reference 3.8(5)): the centre's x_num / y_num gradients scaled
+      // by the depth, in pixels.
+      L.mean2d[0][l] = dM[2] * g.M[8][l];
+      L.mean2d[1][l] = dM[5] * g.M[8][l];
+      // M = K A: dA = K^T dM; A's columns are R_c s_u t_u, R_c s_v t_v, R_c p + t_c.
+      float dA[3][3];
+      for (int r = 0; r < 3; ++r) {
+        // Column r of K = [fx 0 cx; 0 fy cy; 0 0 1].
+        const float k0 = r == 0 ? fx : (r == 2 ? cx : 0.0f);
+        const float k1 = r == 1 ? fy : (r == 2 ? cy : 0.0f), k2 = r == 2 ? 1.0f : 0.0f;
+        for (int c = 0; c < 3; ++c)
+          dA[r][c] = DotScalarOrder(k0, k1, k2, dM[c], dM[3 + c], dM[6 + c]);
+      }
+      float du[3], dv[3], dRc2[3];
+      for (int r = 0; r < 3; ++r) {
+        du[r] = DotScalarOrder(Rc(0, r), Rc(1, r), Rc(2, r), dA[0][0], dA[1][0], dA[2][0]);
+        dv[r] = DotScalarOrder(Rc(0, r), Rc(1, r), Rc(2, r), dA[0][1], dA[1][1], dA[2][1]);
+        L.d_p[r][l] = L.d_p[r][l] +
+                      DotScalarOrder(Rc(0, r), Rc(1, r), Rc(2, r), dA[0][2], dA[1][2], dA[2][2]);
+        // (Eigen folded the sign into R_c^T's entries.)
+        const float sign = L.sign[l];
+        dRc2[r] = DotPackedOrder(sign * Rc(0, r), sign * Rc(1, r), sign * Rc(2, r),
+                                 L.d_normal[0][l], L.d_normal[1][l], L.d_normal[2][l]);
+      }
+      L.ds[0][l] = DotScalarOrder(g.R[0][l], g.R[3][l], g.R[6][l], du[0], du[1], du[2]);
+      L.ds[1][l] = DotScalarOrder(g.R[1][l], g.R[4][l], g.R[7][l], dv[0], dv[1], dv[2]);
+      // Normal: n = sign R_c t_w.
+      float dR[9];
+      for (int r = 0; r < 3; ++r) {
+        dR[3 * r] = g.su[l] * du[r];
+        dR[3 * r + 1] = g.sv[l] * dv[r];
+        dR[3 * r + 2] = dRc2[r];
+      }
+      LaneRotationBackward(g.q[0][l], g.q[1][l], g.q[2][l], g.q[3][l], dR, L.dq, l);
+    }
+    // Pass 3: into the model's gradients.
+    for (int l = 0; l < count; ++l) {
+      const int i = base + l;
+      if (p.radius[i] <= 0) continue;
+      grads->mean2d[2 * i] = L.mean2d[0][l];
+      grads->mean2d[2 * i + 1] = L.mean2d[1][l];
+      G.log_scales[2 * i] = FusedMultiplyAdd(L.ds[0][l], L.g.su[l], G.log_scales[2 * i]);
+      G.log_scales[2 * i + 1] = FusedMultiplyAdd(L.ds[1][l], L.g.sv[l], G.log_scales[2 * i + 1]);
+      for (int k = 0; k < 4; ++k) G.quats[4 * i + k] += L.dq[k][l];
+      for (int k = 0; k < 3; ++k) G.means[3 * i + k] += L.d_p[k][l];
     }
   }
 }
