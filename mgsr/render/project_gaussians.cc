@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "mgsr/core/zero_fill.h"
 #include "mgsr/model/activations.h"
 #include "mgsr/render/prefetch_rows.h"
 #include "mgsr/render/projection_lanes.h"
@@ -11,10 +12,13 @@
 
 namespace mgsr {
 
+using projection_lanes::CameraLanes;
 using projection_lanes::DotPackedOrder;
 using projection_lanes::DotScalarOrder;
 using projection_lanes::FusedMultiplyAdd;
 using projection_lanes::kLanes;
+using projection_lanes::LaneNormalizeBackward;
+using projection_lanes::LaneRotationBackward;
 using projection_lanes::MaxValue;
 
 bool AlphaExtent(float cov_xx, float cov_yy, float opacity, float radius, float* ex, float* ey) {
@@ -46,23 +50,136 @@ void ProjectedGaussians::Resize(size_t n) {
   view_dir.resize(3 * n);
 }
 
+void ProjectedGaussiansGrad::ResizeAndZero(size_t n) {
+  for (auto* v : {&mean2d}) ZeroFill(2 * n, v);
+  for (auto* v : {&conic, &color_t, &color_r}) ZeroFill(3 * n, v);
+  for (auto* v : {&depth, &opacity, &ref_opacity, &beta}) ZeroFill(n, v);
+}
+
+void GaussianGradients::ResizeAndZero(const GaussianModel& model) {
+  ResizeForBackward(model);
+  for (auto* v : {&params.sh, &params.ref_sh}) ZeroFill(v->size(), v);
+}
+
+void GaussianGradients::ResizeForBackward(const GaussianModel& model) {
+  params.max_sh_degree = model.max_sh_degree;
+  const size_t n = model.size(), k3 = 3 * static_cast<size_t>(params.sh_coeffs());
+  for (auto* v : {&params.means, &params.log_scales}) ZeroFill(3 * n, v);
+  ZeroFill(4 * n, &params.quats);
+  for (auto* v : {&params.sh, &params.ref_sh}) v->resize(k3 * n);
+  for (auto* v : {&params.opacity_logits, &params.ref_opacity_logits, &params.beta_logits})
+    ZeroFill(n, v);
+  ZeroFill(2 * n, &mean2d);
+}
+
+void ScreenGradientNorms(const std::vector<float>& mean2d, int width, int height,
+                         std::vector<float>* norms) {
+  const size_t n = mean2d.size() / 2;
+  norms->resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    const float gx = mean2d[2 * i] * 0.5f * width, gy = mean2d[2 * i + 1] * 0.5f * height;
+    (*norms)[i] = std::sqrt(FusedMultiplyAdd(gx, gx, gy * gy));
+  }
+}
+
 namespace {
 
 using Mat3 = Eigen::Matrix<float, 3, 3, Eigen::RowMajor>;
 
-// The forward runs over blocks of kLanes Gaussians (see projection_lanes.h): a scalar pass gathers
-// the parameters and takes the scales' exp, lane loops GCC vectorises compute the geometry (the
-// view-space mean, the covariance and its EWA screen image, the conic, the radius, the screen mean
-// and the view direction), and a scalar pass writes what is kept, with the opacities, the alpha
-// box and the SH colours. This file is built without contraction (-ffp-contract=off): every fused
-// multiply-add is the one spelled out, as the per-Gaussian Eigen code had them; every output was
-// the same to the bit as that code's on the benchmark scene and on scenes with zero quaternions,
-// Gaussians behind and beside the camera, huge and tiny scales, all four SH degrees.
-struct GaussianLanes {
-  // Inputs (pass 1).
+// Both passes run over blocks of kLanes Gaussians (see projection_lanes.h): scalar passes gather
+// and take the library calls and the SH colours (a row of coefficients per Gaussian), lane loops
+// GCC vectorises take the geometry and its chain rule, and a scalar pass writes out. This file is
+// built without contraction (-ffp-contract=off): every fused multiply-add is the one spelled out,
+// as GCC had fused the per-Gaussian Eigen code before it; every output and gradient was the same
+// to the bit as that code's on the benchmark scene and on scenes with zero quaternions, Gaussians
+// behind and beside the camera, huge and tiny scales, all four SH degrees, with and without
+// reflection.
+
+// A block's Gaussians and their geometry, as both passes need them: the parameters (gathered by
+// GatherGaussians) and, from GaussianGeometryLanes, the rotation R (row-major), the view-space
+// mean t, M = R diag(s), Sigma = M M^T (S), the clamped x/z and y/z with their clamp flags and
+// T = J R_c (the Jacobian J of the perspective division has j00, j02 in its first row, j11, j12
+// in its second).
+struct GaussianGeometry {
   float q[4][kLanes], mean[3][kLanes], s[3][kLanes];
-  // Results (pass 2).
-  float R[9][kLanes], t[3][kLanes], cov[3][kLanes];  // cov: a, b, c
+  float R[9][kLanes], t[3][kLanes], M[9][kLanes], S[9][kLanes], T[6][kLanes];
+  float rx[kLanes], ry[kLanes], j00[kLanes], j02[kLanes], j11[kLanes], j12[kLanes];
+  int clamped_x[kLanes], clamped_y[kLanes];
+};
+
+// Lanes past the end repeat the block's first Gaussian.
+void GatherGaussians(const GaussianModel& m, int base, int count, GaussianGeometry* g) {
+  for (int l = 0; l < kLanes; ++l) {
+    const size_t i = base + (l < count ? l : 0);
+    for (int k = 0; k < 4; ++k) g->q[k][l] = m.quats[4 * i + k];
+    for (int k = 0; k < 3; ++k) {
+      g->mean[k][l] = m.means[3 * i + k];
+      g->s[k][l] = std::exp(m.log_scales[3 * i + k]);
+    }
+  }
+}
+
+// The clamp of the Jacobian's x/z and y/z to 1.3 x the half field of view.
+float FovLimit(int size, double focal) {
+  return kFovClamp * 0.5f * size / static_cast<float>(focal);
+}
+
+void GaussianGeometryLanes(const CameraLanes& c, float lim_x, float lim_y, GaussianGeometry* g) {
+  const Mat3& Rc = c.Rc;
+#pragma omp simd
+  for (int l = 0; l < kLanes; ++l) {  // the rotation
+    projection_lanes::LaneRotation(g->q[0][l], g->q[1][l], g->q[2][l], g->q[3][l], g->R, l);
+  }
+#pragma omp simd
+  for (int l = 0; l < kLanes; ++l) {  // the view-space mean
+    const float m0 = g->mean[0][l], m1 = g->mean[1][l], m2 = g->mean[2][l];
+#pragma GCC unroll 3
+    for (int r = 0; r < 3; ++r)
+      g->t[r][l] = DotScalarOrder(Rc(r, 0), Rc(r, 1), Rc(r, 2), m0, m1, m2) + c.tc[r];
+  }
+#pragma omp simd
+  for (int l = 0; l < kLanes; ++l) {  // Sigma = M M^T with M = R diag(s), and T = J R_c
+    float M[3][3];
+#pragma GCC unroll 9
+    for (int k = 0; k < 9; ++k) {
+      M[k / 3][k % 3] = g->R[k][l] * g->s[k % 3][l];
+      g->M[k][l] = M[k / 3][k % 3];
+    }
+    float S[3][3];  // (symmetric: each entry once)
+    S[0][0] = DotScalarOrder(M[0][0], M[0][1], M[0][2], M[0][0], M[0][1], M[0][2]);
+    S[0][1] = S[1][0] = DotScalarOrder(M[0][0], M[0][1], M[0][2], M[1][0], M[1][1], M[1][2]);
+    S[0][2] = S[2][0] = DotScalarOrder(M[0][0], M[0][1], M[0][2], M[2][0], M[2][1], M[2][2]);
+    S[1][1] = DotScalarOrder(M[1][0], M[1][1], M[1][2], M[1][0], M[1][1], M[1][2]);
+    S[1][2] = S[2][1] = DotScalarOrder(M[1][0], M[1][1], M[1][2], M[2][0], M[2][1], M[2][2]);
+    S[2][2] = DotScalarOrder(M[2][0], M[2][1], M[2][2], M[2][0], M[2][1], M[2][2]);
+#pragma GCC unroll 9
+    for (int k = 0; k < 9; ++k) g->S[k][l] = S[k / 3][k % 3];
+    // The Jacobian of the perspective division at the clamped x/z, y/z.
+    const float z = g->t[2][l];
+    const float ux = g->t[0][l] / z, uy = g->t[1][l] / z;
+    g->clamped_x[l] = (ux < -lim_x) | (ux > lim_x);
+    g->clamped_y[l] = (uy < -lim_y) | (uy > lim_y);
+    const float rx = ux < -lim_x ? -lim_x : (lim_x < ux ? lim_x : ux);
+    const float ry = uy < -lim_y ? -lim_y : (lim_y < uy ? lim_y : uy);
+    g->rx[l] = rx;
+    g->ry[l] = ry;
+    const float j00 = c.fx / z, j02 = -c.fx * rx / z, j11 = c.fy / z, j12 = -c.fy * ry / z;
+    g->j00[l] = j00;
+    g->j02[l] = j02;
+    g->j11[l] = j11;
+    g->j12[l] = j12;
+#pragma GCC unroll 3
+    for (int k = 0; k < 3; ++k) {
+      // (Eigen's first row: its zero product and the third fused, the first added apart.)
+      g->T[k][l] = j00 * Rc(0, k) + FusedMultiplyAdd(j02, Rc(2, k), 0.0f * Rc(1, k));
+      g->T[3 + k][l] = DotScalarOrder(0.0f, j11, j12, Rc(0, k), Rc(1, k), Rc(2, k));
+    }
+  }
+}
+
+struct GaussianLanes {
+  GaussianGeometry g;
+  float cov[3][kLanes];  // a, b, c
   float det[kLanes], radius[kLanes], u[kLanes], v[kLanes], dir[3][kLanes];
   int ok[kLanes];  // passed every test before the tile rectangle's
 };
@@ -73,51 +190,32 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
                       ProjectedGaussians* out) {
   const int n = static_cast<int>(m.size());
   out->Resize(n);
-  const Mat3 Rc = cam.R.cast<float>();
-  const Eigen::Vector3f tc = cam.t.cast<float>();
-  const Eigen::Vector3f center = cam.Center().cast<float>();
+  const CameraLanes camera(cam);
+  const Eigen::Vector3f& center = camera.center;
   const int tiles_x = (cam.width + kTileSize - 1) / kTileSize;
   const int tiles_y = (cam.height + kTileSize - 1) / kTileSize;
   const int K = m.sh_coeffs();
   const int degree = std::min(sh_degree, m.max_sh_degree);
   const int n_coeffs = (degree + 1) * (degree + 1);
-  const float fx = static_cast<float>(cam.fx), fy = static_cast<float>(cam.fy);
-  const float cx = static_cast<float>(cam.cx), cy = static_cast<float>(cam.cy);
-  // The clamp of the Jacobian's x/z and y/z to 1.3 x the half field of view.
-  const float lim_x = kFovClamp * 0.5f * cam.width / fx;
-  const float lim_y = kFovClamp * 0.5f * cam.height / fy;
+  const float fx = camera.fx, fy = camera.fy, cx = camera.cx, cy = camera.cy;
+  const float lim_x = FovLimit(cam.width, cam.fx), lim_y = FovLimit(cam.height, cam.fy);
   const int blocks = (n + kLanes - 1) / kLanes;
 #pragma omp parallel for schedule(static)
   for (int b = 0; b < blocks; ++b) {
     GaussianLanes L;
     const int base = b * kLanes, count = std::min(kLanes, n - base);
-    // Pass 1: gather, and the scales' exp. (Lanes past the end repeat the first Gaussian.)
-    for (int l = 0; l < kLanes; ++l) {
-      const size_t i = base + (l < count ? l : 0);
-      for (int k = 0; k < 4; ++k) L.q[k][l] = m.quats[4 * i + k];
-      for (int k = 0; k < 3; ++k) {
-        L.mean[k][l] = m.means[3 * i + k];
-        L.s[k][l] = std::exp(m.log_scales[3 * i + k]);
-      }
-    }
+    // Pass 1: gather, and the scales' exp.
+    GatherGaussians(m, base, count, &L.g);
     // Pass 2: the geometry of every lane.
+    GaussianGeometryLanes(camera, lim_x, lim_y, &L.g);
 #pragma omp simd
-    for (int l = 0; l < kLanes; ++l) {  // the rotation
-      projection_lanes::LaneRotation(L.q[0][l], L.q[1][l], L.q[2][l], L.q[3][l], L.R, l);
-    }
-#pragma omp simd
-    for (int l = 0; l < kLanes; ++l) {  // the view-space mean, the screen mean and the direction
-      const float m0 = L.mean[0][l], m1 = L.mean[1][l], m2 = L.mean[2][l];
-      float t[3];
-#pragma GCC unroll 3
-      for (int r = 0; r < 3; ++r)
-        t[r] = DotScalarOrder(Rc(r, 0), Rc(r, 1), Rc(r, 2), m0, m1, m2) + tc[r];
-#pragma GCC unroll 3
-      for (int r = 0; r < 3; ++r) L.t[r][l] = t[r];
-      L.u[l] = fx * t[0] / t[2] + cx;
-      L.v[l] = fy * t[1] / t[2] + cy;
+    for (int l = 0; l < kLanes; ++l) {  // the screen mean and the view direction
+      const float t0 = L.g.t[0][l], t1 = L.g.t[1][l], t2 = L.g.t[2][l];
+      L.u[l] = fx * t0 / t2 + cx;
+      L.v[l] = fy * t1 / t2 + cy;
       // (mean - camera centre).normalized()
-      const float d0 = m0 - center[0], d1 = m1 - center[1], d2 = m2 - center[2];
+      const float d0 = L.g.mean[0][l] - center[0], d1 = L.g.mean[1][l] - center[1],
+                  d2 = L.g.mean[2][l] - center[2];
       const float sq = DotScalarOrder(d0, d1, d2, d0, d1, d2);
       const float len = std::sqrt(sq);
       const float u0 = d0 / len, u1 = d1 / len, u2 = d2 / len;
@@ -126,31 +224,12 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
       L.dir[2][l] = sq > 0.0f ? u2 : d2;
     }
 #pragma omp simd
-    for (int l = 0; l < kLanes; ++l) {  // cov = T Sigma T^T + dilation, T = J R_c
-      // Sigma = M M^T, M = R diag(s) (symmetric: each entry once).
-      float M[3][3];
+    for (int l = 0; l < kLanes; ++l) {  // cov = T Sigma T^T + dilation
+      float T[2][3], S[3][3];
+#pragma GCC unroll 6
+      for (int k = 0; k < 6; ++k) T[k / 3][k % 3] = L.g.T[k][l];
 #pragma GCC unroll 9
-      for (int k = 0; k < 9; ++k) M[k / 3][k % 3] = L.R[k][l] * L.s[k % 3][l];
-      float S[3][3];
-      S[0][0] = DotScalarOrder(M[0][0], M[0][1], M[0][2], M[0][0], M[0][1], M[0][2]);
-      S[0][1] = S[1][0] = DotScalarOrder(M[0][0], M[0][1], M[0][2], M[1][0], M[1][1], M[1][2]);
-      S[0][2] = S[2][0] = DotScalarOrder(M[0][0], M[0][1], M[0][2], M[2][0], M[2][1], M[2][2]);
-      S[1][1] = DotScalarOrder(M[1][0], M[1][1], M[1][2], M[1][0], M[1][1], M[1][2]);
-      S[1][2] = S[2][1] = DotScalarOrder(M[1][0], M[1][1], M[1][2], M[2][0], M[2][1], M[2][2]);
-      S[2][2] = DotScalarOrder(M[2][0], M[2][1], M[2][2], M[2][0], M[2][1], M[2][2]);
-      // The Jacobian of the perspective division at the clamped x/z, y/z.
-      const float z = L.t[2][l];
-      const float ux = L.t[0][l] / z, uy = L.t[1][l] / z;
-      const float rx = ux < -lim_x ? -lim_x : (lim_x < ux ? lim_x : ux);
-      const float ry = uy < -lim_y ? -lim_y : (lim_y < uy ? lim_y : uy);
-      const float j00 = fx / z, j02 = -fx * rx / z, j11 = fy / z, j12 = -fy * ry / z;
-      float T[2][3];
-#pragma GCC unroll 3
-      for (int c = 0; c < 3; ++c) {
-        // (Eigen's first row: its zero product and the third fused, the first added apart.)
-        T[0][c] = j00 * Rc(0, c) + FusedMultiplyAdd(j02, Rc(2, c), 0.0f * Rc(1, c));
-        T[1][c] = DotScalarOrder(0.0f, j11, j12, Rc(0, c), Rc(1, c), Rc(2, c));
-      }
+      for (int k = 0; k < 9; ++k) S[k / 3][k % 3] = L.g.S[k][l];
       float TS[2][3];
 #pragma GCC unroll 6
       for (int k = 0; k < 6; ++k) {
@@ -170,8 +249,8 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
       const float mid = 0.5f * (a + c);
       const float lambda = mid + std::sqrt(MaxValue(0.1f, FusedMultiplyAdd(mid, mid, -det)));
       L.radius[l] = 3.0f * std::sqrt(lambda);  // before its ceil, below
-      L.ok[l] = (z > kNearPlane) & (det > 0) & std::isfinite(det) & std::isfinite(L.u[l]) &
-                std::isfinite(L.v[l]);
+      L.ok[l] = (L.g.t[2][l] > kNearPlane) & (det > 0) & std::isfinite(det) &
+                std::isfinite(L.u[l]) & std::isfinite(L.v[l]);
     }
     for (int l = 0; l < kLanes; ++l) L.radius[l] = std::ceil(L.radius[l]);  // (not vectorised)
     // Pass 3: write out, with the opacities, the alpha box and the SH colours.
@@ -182,7 +261,7 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
         PrefetchRow(&m.sh[ahead], 3 * n_coeffs);
         if (reflection) PrefetchRow(&m.ref_sh[ahead], 3 * n_coeffs);
       }
-      out->depth[i] = L.t[2][l];
+      out->depth[i] = L.g.t[2][l];
       out->radius[i] = 0;
       out->rects[i] = TileRect();
       out->extent[2 * i] = out->extent[2 * i + 1] = 0;
@@ -208,6 +287,7 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
       out->conic[3 * i] = c / det;
       out->conic[3 * i + 1] = -bb / det;
       out->conic[3 * i + 2] = a / det;
+#pragma GCC unroll 3
       for (int k = 0; k < 3; ++k) out->view_dir[3 * i + k] = L.dir[k][l];
       float basis[kMaxShCoeffs];  // shared by the transmitted and the reflected colour
       ShBasis(degree, &out->view_dir[3 * i], basis);
@@ -218,6 +298,246 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
         EvalShColorFromBasis(n_coeffs, basis, &m.ref_sh[static_cast<size_t>(i) * K * 3],
                              &out->color_r[3 * i], &out->clamp_r[3 * i]);
       }
+    }
+  }
+}
+
+namespace {
+
+// The backward's lanes: the geometry, the upstream gradients it needs beyond the SH colours', what
+// the scalar pass found for the view direction, and what it writes back.
+struct GaussianGradLanes {
+  GaussianGeometry g;
+  float conic[3][kLanes], d_conic[3][kLanes], d_mean2d[2][kLanes], d_depth[kLanes];
+  float d_dir[3][kLanes];
+  // Results: the mean's gradient, d log_scales (before the scale factor), the quaternion's.
+  float d_mean[3][kLanes], ds[3][kLanes], dq[4][kLanes];
+  float dJ[6][kLanes], dSigma[9][kLanes];  // between the lane loops
+};
+
+}  // namespace
+
+void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_degree,
+                              bool reflection, const ProjectedGaussians& p,
+                              const ProjectedGaussiansGrad& d, GaussianGradients* grads) {
+  const int n = static_cast<int>(m.size());
+  const CameraLanes camera(cam);
+  const Mat3& Rc = camera.Rc;
+  const Eigen::Vector3f& center = camera.center;
+  const float fx = camera.fx, fy = camera.fy;
+  const float lim_x = FovLimit(cam.width, cam.fx), lim_y = FovLimit(cam.height, cam.fy);
+  const int K = m.sh_coeffs();
+  const int degree = std::min(sh_degree, m.max_sh_degree);
+  const int n_coeffs = (degree + 1) * (degree + 1);
+  GaussianModel& G = grads->params;
+  const size_t row = static_cast<size_t>(K) * 3;  // SH floats per Gaussian
+  const int blocks = (n + kLanes - 1) / kLanes;
+#pragma omp parallel for schedule(static)
+  for (int b = 0; b < blocks; ++b) {
+    GaussianGradLanes L;
+    const int base = b * kLanes, count = std::min(kLanes, n - base);
+    // Pass 1: the activations' and the SH colours' backward, and the gathers. (Lanes past the end
+    // or not drawn compute on what they hold; pass 3 skips them.)
+    GatherGaussians(m, base, count, &L.g);
+    for (int l = 0; l < kLanes; ++l) {
+      const int i = base + (l < count ? l : 0);
+      if (l < count && i + kPrefetchAhead < n) {  // the coefficients read, the rows written
+        const size_t ahead = row * (i + kPrefetchAhead);
+        PrefetchRow(&m.sh[ahead], 3 * n_coeffs);
+        if (reflection) PrefetchRow(&m.ref_sh[ahead], 3 * n_coeffs);
+        PrefetchRow(&G.sh[ahead], row);
+        PrefetchRow(&G.ref_sh[ahead], row);
+      }
+#pragma GCC unroll 3
+      for (int k = 0; k < 3; ++k) {
+        L.conic[k][l] = p.conic[3 * i + k];
+        L.d_conic[k][l] = d.conic[3 * i + k];
+        L.d_dir[k][l] = 0.0f;
+      }
+#pragma GCC unroll 2
+      for (int k = 0; k < 2; ++k) L.d_mean2d[k][l] = d.mean2d[2 * i + k];
+      L.d_depth[l] = d.depth[i];
+      if (l >= count) continue;
+      float* const d_sh = &G.sh[row * i];
+      float* const d_ref_sh = &G.ref_sh[row * i];
+      if (p.radius[i] <= 0) {  // not drawn: its SH rows are written zero, the rest stays zero
+        std::fill(d_sh, d_sh + row, 0.0f);
+        std::fill(d_ref_sh, d_ref_sh + row, 0.0f);
+        continue;
+      }
+      grads->mean2d[2 * i] += d.mean2d[2 * i];
+      grads->mean2d[2 * i + 1] += d.mean2d[2 * i + 1];
+      // Activations.
+      G.opacity_logits[i] =
+          FusedMultiplyAdd(SigmoidGradFromValue(p.opacity[i]), d.opacity[i], G.opacity_logits[i]);
+      if (reflection) {
+        G.ref_opacity_logits[i] = FusedMultiplyAdd(SigmoidGradFromValue(p.ref_opacity[i]),
+                                                   d.ref_opacity[i], G.ref_opacity_logits[i]);
+        G.beta_logits[i] =
+            FusedMultiplyAdd(SigmoidGradFromValue(p.beta[i]), d.beta[i], G.beta_logits[i]);
+      }
+      // Colours -> SH coefficients and the view direction (from both colours). The coefficients
+      // above the current degree get zero.
+      float sum_dir[3] = {0, 0, 0};
+      float basis[kMaxShCoeffs], dbasis[kMaxShCoeffs][3];
+      ShBasisWithGradient(degree, &p.view_dir[3 * i], basis, dbasis);
+      WriteShColorBackwardFromBasis(n_coeffs, basis, dbasis, &m.sh[row * i], &p.clamp_t[3 * i],
+                                    &d.color_t[3 * i], d_sh, sum_dir);
+      std::fill(d_sh + 3 * n_coeffs, d_sh + row, 0.0f);
+      if (reflection) {
+        WriteShColorBackwardFromBasis(n_coeffs, basis, dbasis, &m.ref_sh[row * i],
+                                      &p.clamp_r[3 * i], &d.color_r[3 * i], d_ref_sh, sum_dir);
+        std::fill(d_ref_sh + 3 * n_coeffs, d_ref_sh + row, 0.0f);
+      } else {
+        std::fill(d_ref_sh, d_ref_sh + row, 0.0f);
+      }
+#pragma GCC unroll 3
+      for (int k = 0; k < 3; ++k) L.d_dir[k][l] = sum_dir[k];
+    }
+    // Pass 2: the geometry, and the chain from the conic, the screen mean and the depth to the
+    // mean, the scales and the rotation.
+    GaussianGeometryLanes(camera, lim_x, lim_y, &L.g);
+#pragma omp simd
+    for (int l = 0; l < kLanes; ++l) {
+      const GaussianGeometry& g = L.g;
+      LaneNormalizeBackward(g.mean[0][l] - center[0], g.mean[1][l] - center[1],
+                            g.mean[2][l] - center[2], L.d_dir, l, L.d_mean);
+    }
+    // (In four loops: as one, GCC did not vectorise it.)
+#pragma omp simd
+    for (int l = 0; l < kLanes; ++l) {
+      const GaussianGeometry& g = L.g;
+      // conic -> screen covariance: dCov = -Q dQ Q with the symmetric dQ (b appears twice).
+      const float Q[2][2] = {{L.conic[0][l], L.conic[1][l]}, {L.conic[1][l], L.conic[2][l]}};
+      const float hb = 0.5f * L.d_conic[1][l];
+      const float dQ[2][2] = {{L.d_conic[0][l], hb}, {hb, L.d_conic[2][l]}};
+      float P[2][2], dCov[2][2];
+      // P = -Q dQ, each entry fused from its second product, except the last (GCC had packed it
+      // with other sums).
+#pragma GCC unroll 2
+      for (int r = 0; r < 2; ++r) {
+#pragma GCC unroll 2
+        for (int c = 0; c < 2; ++c)
+          P[r][c] = FusedMultiplyAdd(-Q[r][1], dQ[1][c], -Q[r][0] * dQ[0][c]);
+      }
+      P[1][1] = FusedMultiplyAdd(-Q[1][0], dQ[0][1], -Q[1][1] * dQ[1][1]);
+#pragma GCC unroll 2
+      for (int r = 0; r < 2; ++r) {
+#pragma GCC unroll 2
+        for (int c = 0; c < 2; ++c)
+          dCov[r][c] = FusedMultiplyAdd(P[r][1], Q[1][c], P[r][0] * Q[0][c]);
+      }
+      // Cov = T Sigma T^T (+ dilation): dSigma = T^T dCov T, dT = 2 dCov T Sigma.
+      float T[2][3], S[3][3];
+#pragma GCC unroll 6
+      for (int k = 0; k < 6; ++k) T[k / 3][k % 3] = g.T[k][l];
+#pragma GCC unroll 9
+      for (int k = 0; k < 9; ++k) S[k / 3][k % 3] = g.S[k][l];
+      float TD[3][2];  // T^T dCov
+#pragma GCC unroll 3
+      for (int r = 0; r < 3; ++r) {
+#pragma GCC unroll 2
+        for (int c = 0; c < 2; ++c)
+          TD[r][c] = FusedMultiplyAdd(T[1][r], dCov[1][c], T[0][r] * dCov[0][c]);
+      }
+      float dSigma[3][3];
+#pragma GCC unroll 3
+      for (int r = 0; r < 3; ++r) {
+#pragma GCC unroll 3
+        for (int c = 0; c < 3; ++c)
+          dSigma[r][c] = FusedMultiplyAdd(TD[r][1], T[1][c], TD[r][0] * T[0][c]);
+      }
+      float A[2][3];  // (2 dCov) T
+#pragma GCC unroll 2
+      for (int r = 0; r < 2; ++r) {
+#pragma GCC unroll 3
+        for (int c = 0; c < 3; ++c)
+          A[r][c] = FusedMultiplyAdd(2.0f * dCov[r][1], T[1][c], (2.0f * dCov[r][0]) * T[0][c]);
+      }
+      float dT[2][3], dJ[2][3];
+#pragma GCC unroll 2
+      for (int r = 0; r < 2; ++r) {
+#pragma GCC unroll 3
+        for (int c = 0; c < 3; ++c)
+          dT[r][c] = DotScalarOrder(A[r][0], A[r][1], A[r][2], S[0][c], S[1][c], S[2][c]);
+      }
+#pragma GCC unroll 2
+      for (int r = 0; r < 2; ++r) {
+#pragma GCC unroll 3
+        for (int c = 0; c < 3; ++c)
+          dJ[r][c] = DotScalarOrder(dT[r][0], dT[r][1], dT[r][2], Rc(c, 0), Rc(c, 1), Rc(c, 2));
+      }
+#pragma GCC unroll 6
+      for (int k = 0; k < 6; ++k) L.dJ[k][l] = dJ[k / 3][k % 3];
+#pragma GCC unroll 9
+      for (int k = 0; k < 9; ++k) L.dSigma[k][l] = dSigma[k / 3][k % 3];
+    }
+#pragma omp simd
+    for (int l = 0; l < kLanes; ++l) {
+      const GaussianGeometry& g = L.g;
+      const float z = g.t[2][l], tx = g.t[0][l], ty = g.t[1][l];
+      float dJ[2][3];
+#pragma GCC unroll 6
+      for (int k = 0; k < 6; ++k) dJ[k / 3][k % 3] = L.dJ[k][l];
+      // J entries -> view-space mean (the clamped ratio carries no gradient).
+      const float mx = static_cast<float>(1 - g.clamped_x[l]);  // 0 where clamped, else 1
+      const float my = static_cast<float>(1 - g.clamped_y[l]);
+      const float zz = z * z, zzz = zz * z;
+      float d_t[3];
+      d_t[0] = FusedMultiplyAdd(dJ[0][2], -fx * mx / zz, 0.0f);
+      d_t[1] = FusedMultiplyAdd(dJ[1][2], -fy * my / zz, 0.0f);
+      float sz = FusedMultiplyAdd(dJ[0][0], -fx / zz, dJ[1][1] * (-fy / zz));
+      sz = FusedMultiplyAdd(dJ[0][2], fx * g.rx[l] / zz + fx * mx * tx / zzz, sz);
+      sz = FusedMultiplyAdd(dJ[1][2], fy * g.ry[l] / zz + fy * my * ty / zzz, sz);
+      d_t[2] = 0.0f + sz;
+      // Screen mean and depth.
+      const float du = L.d_mean2d[0][l], dv = L.d_mean2d[1][l];
+      d_t[0] = d_t[0] + du * fx / z;
+      d_t[1] = d_t[1] + dv * fy / z;
+      d_t[2] = d_t[2] + (-du * fx * tx / zz - dv * fy * ty / zz + L.d_depth[l]);
+#pragma GCC unroll 3
+      for (int r = 0; r < 3; ++r)
+        L.d_mean[r][l] = (0.0f + L.d_mean[r][l]) +
+                         DotScalarOrder(Rc(0, r), Rc(1, r), Rc(2, r), d_t[0], d_t[1], d_t[2]);
+    }
+#pragma omp simd
+    for (int l = 0; l < kLanes; ++l) {
+      const GaussianGeometry& g = L.g;
+      float dSigma[3][3], M[3][3];
+#pragma GCC unroll 9
+      for (int k = 0; k < 9; ++k) {
+        dSigma[k / 3][k % 3] = L.dSigma[k][l];
+        M[k / 3][k % 3] = g.M[k][l];
+      }
+      // Sigma = M M^T, M = R diag(s).
+      float dM[3][3];
+#pragma GCC unroll 3
+      for (int r = 0; r < 3; ++r) {
+#pragma GCC unroll 3
+        for (int c = 0; c < 3; ++c)
+          dM[r][c] = DotScalarOrder(2.0f * dSigma[r][0], 2.0f * dSigma[r][1], 2.0f * dSigma[r][2],
+                                    M[0][c], M[1][c], M[2][c]);
+      }
+      float dR[9];
+#pragma GCC unroll 3
+      for (int k = 0; k < 3; ++k) {
+        L.ds[k][l] =
+            DotScalarOrder(g.R[k][l], g.R[3 + k][l], g.R[6 + k][l], dM[0][k], dM[1][k], dM[2][k]);
+#pragma GCC unroll 3
+        for (int r = 0; r < 3; ++r) dR[3 * r + k] = g.s[k][l] * dM[r][k];
+      }
+      LaneRotationBackward(g.q[0][l], g.q[1][l], g.q[2][l], g.q[3][l], dR, L.dq, l);
+    }
+    // Pass 3: into the model's gradients.
+    for (int l = 0; l < count; ++l) {
+      const int i = base + l;
+      if (p.radius[i] <= 0) continue;
+      for (int k = 0; k < 3; ++k) {
+        G.means[3 * i + k] += L.d_mean[k][l];
+        G.log_scales[3 * i + k] =
+            FusedMultiplyAdd(L.ds[k][l], L.g.s[k][l], G.log_scales[3 * i + k]);
+      }
+      for (int k = 0; k < 4; ++k) G.quats[4 * i + k] += L.dq[k][l];
     }
   }
 }

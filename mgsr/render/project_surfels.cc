@@ -63,11 +63,14 @@ namespace {
 // before it computed, in its order and with its fused multiply-adds (as GCC 12 fused them for this
 // file's flags): every output was the same to the bit on the benchmark scene and on scenes with
 // zero quaternions, surfels behind the camera, huge and tiny scales, all four SH degrees.
+using projection_lanes::CameraLanes;
 using projection_lanes::DotColumnMajorRow;
 using projection_lanes::DotPackedOrder;
 using projection_lanes::DotScalarOrder;
 using projection_lanes::FusedMultiplyAdd;
 using projection_lanes::kLanes;
+using projection_lanes::LaneNormalizeBackward;
+using projection_lanes::LaneRotationBackward;
 using projection_lanes::MaxValue;
 
 using Mat3 = Eigen::Matrix<float, 3, 3, Eigen::RowMajor>;
@@ -90,20 +93,6 @@ void GatherSurfels(const SurfelModel& m, int base, int count, SurfelGeometry* g)
     g->sv[l] = std::exp(m.log_scales[2 * i + 1]);
   }
 }
-
-struct CameraLanes {
-  Mat3 Rc;
-  Eigen::Vector3f tc, center;
-  float fx, fy, cx, cy;
-  explicit CameraLanes(const Camera& cam)
-      : Rc(cam.R.cast<float>()),
-        tc(cam.t.cast<float>()),
-        center(cam.Center().cast<float>()),
-        fx(static_cast<float>(cam.fx)),
-        fy(static_cast<float>(cam.fy)),
-        cx(static_cast<float>(cam.cx)),
-        cy(static_cast<float>(cam.cy)) {}
-};
 
 void SurfelGeometryLanes(const CameraLanes& c, SurfelGeometry* g) {
   const Mat3& Rc = c.Rc;
@@ -331,66 +320,6 @@ struct SurfelGradLanes {
   // Results: d log_scales (before the scale factor), the quaternion and mean gradients, mean2d.
   float ds[2][kLanes], dq[4][kLanes], d_p[3][kLanes], mean2d[2][kLanes];
 };
-
-// NormalizeBackward (mgsr/render/sh.h) of lane l: d_v from d_dir for dir = v / |v|, fused as GCC
-// fused it there.
-inline void LaneNormalizeBackward(float v0, float v1, float v2, const float (&d_dir)[3][kLanes],
-                                  int l, float (&d_v)[3][kLanes]) {
-  const float len = std::sqrt(FusedMultiplyAdd(v2, v2, FusedMultiplyAdd(v0, v0, v1 * v1)));
-  const float inv_len = 1.0f / len;
-  const float inv = len > 0 ? inv_len : 0.0f;
-  const float u0 = v0 * inv, u1 = v1 * inv, u2 = v2 * inv;
-  const float dot =
-      FusedMultiplyAdd(u2, d_dir[2][l], FusedMultiplyAdd(u0, d_dir[0][l], u1 * d_dir[1][l]));
-  d_v[0][l] = FusedMultiplyAdd(-u0, dot, d_dir[0][l]) * inv;
-  d_v[1][l] = FusedMultiplyAdd(-u1, dot, d_dir[1][l]) * inv;
-  d_v[2][l] = FusedMultiplyAdd(-u2, dot, d_dir[2][l]) * inv;
-}
-
-// QuaternionToRotationBackward (mgsr/model/activations.h) of one lane, its sums fused as GCC
-// fused them there (each sum from its first term on, the negated first product of du[0] fused).
-inline void LaneRotationBackward(float q0, float q1, float q2, float q3, const float (&dR)[9],
-                                 float (&dq)[4][kLanes], int l) {
-  const float n = std::sqrt(
-      FusedMultiplyAdd(q3, q3, FusedMultiplyAdd(q2, q2, FusedMultiplyAdd(q0, q0, q1 * q1))));
-  const bool ok = n > 0;
-  const float w = q0 / n, x = q1 / n, y = q2 / n, z = q3 / n;
-  const float x2 = x + x, y2 = -2.0f * y, z2 = -2.0f * z;  // 2 x, -2 y, -2 z
-  float du[4];
-  float s = FusedMultiplyAdd(-z, dR[1], y * dR[2]);
-  s = FusedMultiplyAdd(z, dR[3], s);
-  s = FusedMultiplyAdd(-x, dR[5], s);
-  s = FusedMultiplyAdd(-y, dR[6], s);
-  du[0] = 2 * FusedMultiplyAdd(x, dR[7], s);
-  s = FusedMultiplyAdd(y, dR[1], z * dR[2]);
-  s = FusedMultiplyAdd(y, dR[3], s);
-  s = FusedMultiplyAdd(-x2, dR[4], s);
-  s = FusedMultiplyAdd(-w, dR[5], s);
-  s = FusedMultiplyAdd(z, dR[6], s);
-  s = FusedMultiplyAdd(w, dR[7], s);
-  du[1] = 2 * FusedMultiplyAdd(-x2, dR[8], s);
-  s = FusedMultiplyAdd(y2, dR[0], x * dR[1]);
-  s = FusedMultiplyAdd(w, dR[2], s);
-  s = FusedMultiplyAdd(x, dR[3], s);
-  s = FusedMultiplyAdd(z, dR[5], s);
-  s = FusedMultiplyAdd(-w, dR[6], s);
-  s = FusedMultiplyAdd(z, dR[7], s);
-  du[2] = 2 * FusedMultiplyAdd(y2, dR[8], s);
-  s = FusedMultiplyAdd(z2, dR[0], -(w * dR[1]));
-  s = FusedMultiplyAdd(x, dR[2], s);
-  s = FusedMultiplyAdd(w, dR[3], s);
-  s = FusedMultiplyAdd(z2, dR[4], s);
-  s = FusedMultiplyAdd(y, dR[5], s);
-  s = FusedMultiplyAdd(x, dR[6], s);
-  du[3] = 2 * FusedMultiplyAdd(y, dR[7], s);
-  const float u[4] = {w, x, y, z};
-  const float dot =
-      FusedMultiplyAdd(z, du[3], FusedMultiplyAdd(y, du[2], FusedMultiplyAdd(w, du[0], x * du[1])));
-  for (int k = 0; k < 4; ++k) {
-    const float g = FusedMultiplyAdd(-u[k], dot, du[k]) / n;
-    dq[k][l] = ok ? g : 0.0f;
-  }
-}
 
 }  // namespace
 

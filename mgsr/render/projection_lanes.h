@@ -7,7 +7,13 @@
 // which Eigen's order gives, where the build has no FMA.
 #pragma once
 
+#include <Eigen/Core>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+
+#include "mgsr/core/camera.h"
 
 namespace mgsr {
 namespace projection_lanes {
@@ -50,10 +56,24 @@ inline double DotColumnMajorRow(int r, double a0, double a1, double a2, double b
 inline float MaxValue(float a, float b) { return a < b ? b : a; }
 inline float MinValue(float a, float b) { return b < a ? b : a; }
 
+// 1 / x where x > 0, else 0 (x >= 0 or NaN), with the division taken on every lane and the zero
+// masked in: GCC moves a division selected by a condition into a branch, and a branch stops the
+// vectoriser. (For x > 0, max(x, the least subnormal) is x.)
+inline float ReciprocalOrZero(float x) {
+  const float r = 1.0f / MaxValue(x, std::numeric_limits<float>::denorm_min());
+  uint32_t bits;
+  std::memcpy(&bits, &r, 4);
+  bits &= x > 0 ? 0xffffffffu : 0u;
+  float out;
+  std::memcpy(&out, &bits, 4);
+  return out;
+}
+
 // QuaternionToRotation (mgsr/model/activations.h) of lane l: the row-major rotation R[.][l] of the
 // normalised quaternion (w, x, y, z), the identity for a zero quaternion. (Every quotient is taken,
 // then selected: GCC does not if-convert a conditional division.)
-inline void LaneRotation(float q0, float q1, float q2, float q3, float (&R)[9][kLanes], int l) {
+__attribute__((always_inline)) inline void LaneRotation(float q0, float q1, float q2, float q3,
+                                                        float (&R)[9][kLanes], int l) {
   const float qn = std::sqrt(
       FusedMultiplyAdd(q3, q3, FusedMultiplyAdd(q2, q2, FusedMultiplyAdd(q0, q0, q1 * q1))));
   const bool q_ok = qn > 0;
@@ -69,6 +89,82 @@ inline void LaneRotation(float q0, float q1, float q2, float q3, float (&R)[9][k
   R[6][l] = 2 * FusedMultiplyAdd(x, z, -(w * y));
   R[7][l] = 2 * FusedMultiplyAdd(y, z, w * x);
   R[8][l] = FusedMultiplyAdd(-2.0f, FusedMultiplyAdd(y, y, x * x), 1.0f);
+}
+
+// The camera as the lane loops read it, in float.
+struct CameraLanes {
+  Eigen::Matrix<float, 3, 3, Eigen::RowMajor> Rc;
+  Eigen::Vector3f tc, center;
+  float fx, fy, cx, cy;
+  explicit CameraLanes(const Camera& cam)
+      : Rc(cam.R.cast<float>()),
+        tc(cam.t.cast<float>()),
+        center(cam.Center().cast<float>()),
+        fx(static_cast<float>(cam.fx)),
+        fy(static_cast<float>(cam.fy)),
+        cx(static_cast<float>(cam.cx)),
+        cy(static_cast<float>(cam.cy)) {}
+};
+
+// NormalizeBackward (mgsr/render/sh.h) of lane l: d_v from d_dir for dir = v / |v|, fused as GCC
+// fused it there.
+__attribute__((always_inline)) inline void LaneNormalizeBackward(float v0, float v1, float v2,
+                                                                 const float (&d_dir)[3][kLanes],
+                                                                 int l, float (&d_v)[3][kLanes]) {
+  const float len = std::sqrt(FusedMultiplyAdd(v2, v2, FusedMultiplyAdd(v0, v0, v1 * v1)));
+  const float inv = ReciprocalOrZero(len);
+  const float u0 = v0 * inv, u1 = v1 * inv, u2 = v2 * inv;
+  const float dot =
+      FusedMultiplyAdd(u2, d_dir[2][l], FusedMultiplyAdd(u0, d_dir[0][l], u1 * d_dir[1][l]));
+  d_v[0][l] = FusedMultiplyAdd(-u0, dot, d_dir[0][l]) * inv;
+  d_v[1][l] = FusedMultiplyAdd(-u1, dot, d_dir[1][l]) * inv;
+  d_v[2][l] = FusedMultiplyAdd(-u2, dot, d_dir[2][l]) * inv;
+}
+
+// QuaternionToRotationBackward (mgsr/model/activations.h) of one lane, its sums fused as GCC
+// fused them there (each sum from its first term on, the negated first product of du[0] fused).
+__attribute__((always_inline)) inline void LaneRotationBackward(float q0, float q1, float q2,
+                                                                float q3, const float (&dR)[9],
+                                                                float (&dq)[4][kLanes], int l) {
+  const float n = std::sqrt(
+      FusedMultiplyAdd(q3, q3, FusedMultiplyAdd(q2, q2, FusedMultiplyAdd(q0, q0, q1 * q1))));
+  const bool ok = n > 0;
+  const float w = q0 / n, x = q1 / n, y = q2 / n, z = q3 / n;
+  const float x2 = x + x, y2 = -2.0f * y, z2 = -2.0f * z;  // 2 x, -2 y, -2 z
+  float du[4];
+  float s = FusedMultiplyAdd(-z, dR[1], y * dR[2]);
+  s = FusedMultiplyAdd(z, dR[3], s);
+  s = FusedMultiplyAdd(-x, dR[5], s);
+  s = FusedMultiplyAdd(-y, dR[6], s);
+  du[0] = 2 * FusedMultiplyAdd(x, dR[7], s);
+  s = FusedMultiplyAdd(y, dR[1], z * dR[2]);
+  s = FusedMultiplyAdd(y, dR[3], s);
+  s = FusedMultiplyAdd(-x2, dR[4], s);
+  s = FusedMultiplyAdd(-w, dR[5], s);
+  s = FusedMultiplyAdd(z, dR[6], s);
+  s = FusedMultiplyAdd(w, dR[7], s);
+  du[1] = 2 * FusedMultiplyAdd(-x2, dR[8], s);
+  s = FusedMultiplyAdd(y2, dR[0], x * dR[1]);
+  s = FusedMultiplyAdd(w, dR[2], s);
+  s = FusedMultiplyAdd(x, dR[3], s);
+  s = FusedMultiplyAdd(z, dR[5], s);
+  s = FusedMultiplyAdd(-w, dR[6], s);
+  s = FusedMultiplyAdd(z, dR[7], s);
+  du[2] = 2 * FusedMultiplyAdd(y2, dR[8], s);
+  s = FusedMultiplyAdd(z2, dR[0], -(w * dR[1]));
+  s = FusedMultiplyAdd(x, dR[2], s);
+  s = FusedMultiplyAdd(w, dR[3], s);
+  s = FusedMultiplyAdd(z2, dR[4], s);
+  s = FusedMultiplyAdd(y, dR[5], s);
+  s = FusedMultiplyAdd(x, dR[6], s);
+  du[3] = 2 * FusedMultiplyAdd(y, dR[7], s);
+  const float u[4] = {w, x, y, z};
+  const float dot =
+      FusedMultiplyAdd(z, du[3], FusedMultiplyAdd(y, du[2], FusedMultiplyAdd(w, du[0], x * du[1])));
+  for (int k = 0; k < 4; ++k) {
+    const float g = FusedMultiplyAdd(-u[k], dot, du[k]) / n;
+    dq[k][l] = ok ? g : 0.0f;
+  }
 }
 
 }  // namespace projection_lanes
