@@ -12,6 +12,7 @@
 
 namespace mgsr {
 
+using projection_lanes::AddSigmoidGradient;
 using projection_lanes::CameraLanes;
 using projection_lanes::DotPackedOrder;
 using projection_lanes::DotScalarOrder;
@@ -213,15 +214,8 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
       const float t0 = L.g.t[0][l], t1 = L.g.t[1][l], t2 = L.g.t[2][l];
       L.u[l] = fx * t0 / t2 + cx;
       L.v[l] = fy * t1 / t2 + cy;
-      // (mean - camera centre).normalized()
-      const float d0 = L.g.mean[0][l] - center[0], d1 = L.g.mean[1][l] - center[1],
-                  d2 = L.g.mean[2][l] - center[2];
-      const float sq = DotScalarOrder(d0, d1, d2, d0, d1, d2);
-      const float len = std::sqrt(sq);
-      const float u0 = d0 / len, u1 = d1 / len, u2 = d2 / len;
-      L.dir[0][l] = sq > 0.0f ? u0 : d0;
-      L.dir[1][l] = sq > 0.0f ? u1 : d1;
-      L.dir[2][l] = sq > 0.0f ? u2 : d2;
+      projection_lanes::LaneNormalize(L.g.mean[0][l] - center[0], L.g.mean[1][l] - center[1],
+                                      L.g.mean[2][l] - center[2], L.dir, l);
     }
 #pragma omp simd
     for (int l = 0; l < kLanes; ++l) {  // cov = T Sigma T^T + dilation
@@ -368,30 +362,23 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
       grads->mean2d[2 * i] += d.mean2d[2 * i];
       grads->mean2d[2 * i + 1] += d.mean2d[2 * i + 1];
       // Activations.
-      G.opacity_logits[i] =
-          FusedMultiplyAdd(SigmoidGradFromValue(p.opacity[i]), d.opacity[i], G.opacity_logits[i]);
+      AddSigmoidGradient(p.opacity[i], d.opacity[i], &G.opacity_logits[i]);
       if (reflection) {
-        G.ref_opacity_logits[i] = FusedMultiplyAdd(SigmoidGradFromValue(p.ref_opacity[i]),
-                                                   d.ref_opacity[i], G.ref_opacity_logits[i]);
-        G.beta_logits[i] =
-            FusedMultiplyAdd(SigmoidGradFromValue(p.beta[i]), d.beta[i], G.beta_logits[i]);
+        AddSigmoidGradient(p.ref_opacity[i], d.ref_opacity[i], &G.ref_opacity_logits[i]);
+        AddSigmoidGradient(p.beta[i], d.beta[i], &G.beta_logits[i]);
       }
-      // Colours -> SH coefficients and the view direction (from both colours). The coefficients
-      // above the current degree get zero.
+      // Colours -> SH coefficients and the view direction (from both colours).
       float sum_dir[3] = {0, 0, 0};
       float basis[kMaxShCoeffs], dbasis[kMaxShCoeffs][3];
       ShBasisWithGradient(degree, &p.view_dir[3 * i], basis, dbasis);
-      WriteShColorBackwardFromBasis(n_coeffs, basis, dbasis, &m.sh[row * i], &p.clamp_t[3 * i],
-                                    &d.color_t[3 * i], d_sh, sum_dir);
-      std::fill(d_sh + 3 * n_coeffs, d_sh + row, 0.0f);
+      WriteShRowBackward(n_coeffs, basis, dbasis, &m.sh[row * i], &p.clamp_t[3 * i],
+                         &d.color_t[3 * i], row, d_sh, sum_dir);
       if (reflection) {
-        WriteShColorBackwardFromBasis(n_coeffs, basis, dbasis, &m.ref_sh[row * i],
-                                      &p.clamp_r[3 * i], &d.color_r[3 * i], d_ref_sh, sum_dir);
-        std::fill(d_ref_sh + 3 * n_coeffs, d_ref_sh + row, 0.0f);
+        WriteShRowBackward(n_coeffs, basis, dbasis, &m.ref_sh[row * i], &p.clamp_r[3 * i],
+                           &d.color_r[3 * i], row, d_ref_sh, sum_dir);
       } else {
         std::fill(d_ref_sh, d_ref_sh + row, 0.0f);
       }
-#pragma GCC unroll 3
       for (int k = 0; k < 3; ++k) L.d_dir[k][l] = sum_dir[k];
     }
     // Pass 2: the geometry, and the chain from the conic, the screen mean and the depth to the

@@ -63,6 +63,7 @@ namespace {
 // before it computed, in its order and with its fused multiply-adds (as GCC 12 fused them for this
 // file's flags): every output was the same to the bit on the benchmark scene and on scenes with
 // zero quaternions, surfels behind the camera, huge and tiny scales, all four SH degrees.
+using projection_lanes::AddSigmoidGradient;
 using projection_lanes::CameraLanes;
 using projection_lanes::DotColumnMajorRow;
 using projection_lanes::DotPackedOrder;
@@ -264,15 +265,9 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
       L.ey[l] = reach ? std::min(radius, y) : radius;
     }
 #pragma omp simd
-    for (int l = 0; l < kLanes; ++l) {  // the view direction (Eigen's normalized())
-      const float dx = L.g.p[0][l] - center[0], dy = L.g.p[1][l] - center[1],
-                  dz = L.g.p[2][l] - center[2];
-      const float sq = DotScalarOrder(dx, dy, dz, dx, dy, dz);
-      const float len = std::sqrt(sq);
-      const float ux = dx / len, uy = dy / len, uz = dz / len;
-      L.dir[0][l] = sq > 0.0f ? ux : dx;
-      L.dir[1][l] = sq > 0.0f ? uy : dy;
-      L.dir[2][l] = sq > 0.0f ? uz : dz;
+    for (int l = 0; l < kLanes; ++l) {  // the view direction
+      projection_lanes::LaneNormalize(L.g.p[0][l] - center[0], L.g.p[1][l] - center[1],
+                                      L.g.p[2][l] - center[2], L.dir, l);
     }
     // Pass 3: write out, and the SH colour.
     for (int l = 0; l < count; ++l) {
@@ -368,15 +363,13 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
         std::fill(d_sh, d_sh + row, 0.0f);
         continue;
       }
-      G.opacity_logits[i] =
-          FusedMultiplyAdd(SigmoidGradFromValue(p.opacity[i]), d.opacity[i], G.opacity_logits[i]);
-      // Colour -> SH and the view direction. (The coefficients above the current degree get zero.)
+      AddSigmoidGradient(p.opacity[i], d.opacity[i], &G.opacity_logits[i]);
+      // Colour -> SH and the view direction.
       float d_dir[3] = {0, 0, 0};
       float basis[kMaxShCoeffs], dbasis[kMaxShCoeffs][3];
       ShBasisWithGradient(degree, &p.view_dir[3 * i], basis, dbasis);
-      WriteShColorBackwardFromBasis(n_coeffs, basis, dbasis, &m.sh[row * i], &p.clamp[3 * i],
-                                    &d.color[3 * i], d_sh, d_dir);
-      std::fill(d_sh + 3 * n_coeffs, d_sh + row, 0.0f);
+      WriteShRowBackward(n_coeffs, basis, dbasis, &m.sh[row * i], &p.clamp[3 * i], &d.color[3 * i],
+                         row, d_sh, d_dir);
       for (int k = 0; k < 3; ++k) L.d_dir[k][l] = d_dir[k];
     }
     // Pass 2: the geometry, and the chain from M, the centre and the normal to the parameters.

@@ -14,6 +14,7 @@
 #include <limits>
 
 #include "mgsr/core/camera.h"
+#include "mgsr/model/activations.h"
 
 namespace mgsr {
 namespace projection_lanes {
@@ -28,6 +29,11 @@ inline T FusedMultiplyAdd(T a, T b, T c) {
 #else
   return a * b + c;
 #endif
+}
+
+// *g += d sigmoid'(s) for an activated value s (a logit's gradient), fused as before.
+inline void AddSigmoidGradient(float s, float d, float* g) {
+  *g = FusedMultiplyAdd(SigmoidGradFromValue(s), d, *g);
 }
 
 // Three-term dot products. A fixed-size product of row-major floats sums a0 b0 + (a1 b1 + a2 b2),
@@ -55,6 +61,18 @@ inline double DotColumnMajorRow(int r, double a0, double a1, double a2, double b
 // two temporaries became an index into a stack array that stopped the vectoriser).
 inline float MaxValue(float a, float b) { return a < b ? b : a; }
 inline float MinValue(float a, float b) { return b < a ? b : a; }
+
+// Eigen's normalized() of lane l's vector (v0, v1, v2) into dir[.][l]: v / |v|, or v where |v|^2
+// is 0.
+__attribute__((always_inline)) inline void LaneNormalize(float v0, float v1, float v2,
+                                                         float (&dir)[3][kLanes], int l) {
+  const float sq = DotScalarOrder(v0, v1, v2, v0, v1, v2);
+  const float len = std::sqrt(sq);
+  const float u0 = v0 / len, u1 = v1 / len, u2 = v2 / len;
+  dir[0][l] = sq > 0.0f ? u0 : v0;
+  dir[1][l] = sq > 0.0f ? u1 : v1;
+  dir[2][l] = sq > 0.0f ? u2 : v2;
+}
 
 // 1 / x where x > 0, else 0 (x >= 0 or NaN), with the division taken on every lane and the zero
 // masked in: GCC moves a division selected by a condition into a branch, and a branch stops the

@@ -1,5 +1,6 @@
 #include "mgsr/render/sh.h"
 
+#include <algorithm>
 #include <cmath>
 #include <type_traits>
 
@@ -168,6 +169,13 @@ void WriteShColorBackwardFromBasis(int n, const float b[kMaxShCoeffs],
                                    const uint8_t clamped[3], const float d_rgb[3], float* d_coeffs,
                                    float d_dir[3]) {
   ShColorBackwardFromBasis<true>(n, b, g, coeffs, clamped, d_rgb, d_coeffs, d_dir);
+}
+
+void WriteShRowBackward(int n, const float b[kMaxShCoeffs], const float g[kMaxShCoeffs][3],
+                        const float* coeffs, const uint8_t clamped[3], const float d_rgb[3],
+                        size_t row_floats, float* d_row, float d_dir[3]) {
+  WriteShColorBackwardFromBasis(n, b, g, coeffs, clamped, d_rgb, d_row, d_dir);
+  std::fill(d_row + 3 * n, d_row + row_floats, 0.0f);
 }
 
 void EvalShColorBackward(int degree, const float* coeffs, const float dir[3],

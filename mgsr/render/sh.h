@@ -3,6 +3,7 @@
 // so the backward gives clamped channels no gradient).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 
 namespace mgsr {
@@ -48,6 +49,11 @@ void WriteShColorBackwardFromBasis(int n, const float basis[kMaxShCoeffs],
                                    const float dbasis[kMaxShCoeffs][3], const float* coeffs,
                                    const uint8_t clamped[3], const float d_rgb[3], float* d_coeffs,
                                    float d_dir[3]);
+// WriteShColorBackwardFromBasis into a primitive's whole gradient row of `row_floats` floats: the
+// coefficients above the current degree (from 3 n on) get zero.
+void WriteShRowBackward(int n, const float basis[kMaxShCoeffs], const float dbasis[kMaxShCoeffs][3],
+                        const float* coeffs, const uint8_t clamped[3], const float d_rgb[3],
+                        size_t row_floats, float* d_row, float d_dir[3]);
 
 // dir = v / |v|: given d/d dir, returns d/d v.
 void NormalizeBackward(const float v[3], const float d_dir[3], float d_v[3]);
