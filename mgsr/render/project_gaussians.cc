@@ -99,12 +99,11 @@ using Mat3 = Eigen::Matrix<float, 3, 3, Eigen::RowMajor>;
 // A block's Gaussians and their geometry, as both passes need them: the parameters (gathered by
 // GatherGaussians) and, from GaussianGeometryLanes, the rotation R (row-major), the view-space
 // mean t, M = R diag(s), Sigma = M M^T (S), the clamped x/z and y/z with their clamp flags and
-// T = J R_c (the Jacobian J of the perspective division has j00, j02 in its first row, j11, j12
-// in its second).
+// T = J R_c (J: the Jacobian of the perspective division).
 struct GaussianGeometry {
   float q[4][kLanes], mean[3][kLanes], s[3][kLanes];
   float R[9][kLanes], t[3][kLanes], M[9][kLanes], S[9][kLanes], T[6][kLanes];
-  float rx[kLanes], ry[kLanes], j00[kLanes], j02[kLanes], j11[kLanes], j12[kLanes];
+  float rx[kLanes], ry[kLanes];
   int clamped_x[kLanes], clamped_y[kLanes];
 };
 
@@ -165,10 +164,6 @@ void GaussianGeometryLanes(const CameraLanes& c, float lim_x, float lim_y, Gauss
     g->rx[l] = rx;
     g->ry[l] = ry;
     const float j00 = c.fx / z, j02 = -c.fx * rx / z, j11 = c.fy / z, j12 = -c.fy * ry / z;
-    g->j00[l] = j00;
-    g->j02[l] = j02;
-    g->j11[l] = j11;
-    g->j12[l] = j12;
 #pragma GCC unroll 3
     for (int k = 0; k < 3; ++k) {
       // (Eigen's first row: its zero product and the third fused, the first added apart.)
@@ -281,7 +276,6 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
       out->conic[3 * i] = c / det;
       out->conic[3 * i + 1] = -bb / det;
       out->conic[3 * i + 2] = a / det;
-#pragma GCC unroll 3
       for (int k = 0; k < 3; ++k) out->view_dir[3 * i + k] = L.dir[k][l];
       float basis[kMaxShCoeffs];  // shared by the transmitted and the reflected colour
       ShBasis(degree, &out->view_dir[3 * i], basis);
@@ -342,13 +336,11 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
         PrefetchRow(&G.sh[ahead], row);
         PrefetchRow(&G.ref_sh[ahead], row);
       }
-#pragma GCC unroll 3
       for (int k = 0; k < 3; ++k) {
         L.conic[k][l] = p.conic[3 * i + k];
         L.d_conic[k][l] = d.conic[3 * i + k];
         L.d_dir[k][l] = 0.0f;
       }
-#pragma GCC unroll 2
       for (int k = 0; k < 2; ++k) L.d_mean2d[k][l] = d.mean2d[2 * i + k];
       L.d_depth[l] = d.depth[i];
       if (l >= count) continue;

@@ -60,9 +60,10 @@ namespace {
 // over the lanes that GCC vectorises (the geometry, the culling tests, the rows and the alpha
 // reach: the bulk of the arithmetic), and a scalar one that writes what is kept and evaluates the
 // SH colour (a row of coefficients per surfel). Each lane computes what the per-surfel Eigen loop
-// before it computed, in its order and with its fused multiply-adds (as GCC 12 fused them for this
-// file's flags): every output was the same to the bit on the benchmark scene and on scenes with
-// zero quaternions, surfels behind the camera, huge and tiny scales, all four SH degrees.
+// before it computed, in its order and with its fused multiply-adds, spelled out (this file is
+// built without contraction): every output was the same to the bit on the benchmark scene and on
+// scenes with zero quaternions, surfels behind the camera, huge and tiny scales, all four SH
+// degrees.
 using projection_lanes::AddSigmoidGradient;
 using projection_lanes::CameraLanes;
 using projection_lanes::DotColumnMajorRow;
@@ -340,8 +341,8 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
   for (int b = 0; b < blocks; ++b) {
     SurfelGradLanes L;
     const int base = b * kLanes, count = std::min(kLanes, n - base);
-    // Pass 1: the SH colour's backward and the gathers. (Lanes past the end, or not drawn, repeat
-    // a drawn surfel's inputs or zeros; pass 3 skips them.)
+    // Pass 1: the SH colour's backward and the gathers. (Lanes past the end repeat the block's
+    // first surfel, lanes not drawn get no direction gradient; pass 3 skips both.)
     GatherSurfels(m, base, count, &L.g);
     for (int l = 0; l < kLanes; ++l) {
       const int i = base + (l < count ? l : 0);
@@ -392,7 +393,8 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
           L.d_center[0][l] - DotPackedOrder(Tw[0], Tw[1], Tw[2], dTu[0], dTu[1], dTu[2]);
       const float dmy =
           L.d_center[1][l] - DotPackedOrder(Tw[0], Tw[1], Tw[2], dTv[0], dTv[1], dTv[2]);
-      {
+      {  // (m again from T_u, T_v, T_w, as the per-surfel backward took it: in the scalar order,
+         // where the forward's stored centre had the packed one)
         const float Tu[3] = {g.M[0][l], g.M[1][l], g.M[2][l]};
         const float Tv[3] = {g.M[3][l], g.M[4][l], g.M[5][l]};
         const float dd =

@@ -1,5 +1,5 @@
 // Helpers for the projections' lane loops (ProjectGaussians, ProjectSurfels): they run over blocks
-// of kProjectionLanes primitives, a scalar pass gathering parameters into the block's lanes, short
+// of kLanes primitives, a scalar pass gathering parameters into the block's lanes, short
 // loops over the lanes that GCC vectorises, and a scalar pass writing out. The loops compute what
 // the per-primitive Eigen code before them computed, to the bit: the helpers below spell out the
 // order of each sum and the fused multiply-adds GCC 12 had chosen for that code on a CPU with FMA
@@ -57,10 +57,9 @@ inline double DotColumnMajorRow(int r, double a0, double a1, double a2, double b
   return r < 2 ? DotPacketOrder(a0, a1, a2, b0, b1, b2) : DotScalarOrder(a0, a1, a2, b0, b1, b2);
 }
 
-// std::max and std::min by value: GCC vectorises a loop that takes them (their reference to one of
-// two temporaries became an index into a stack array that stopped the vectoriser).
+// std::max by value: GCC vectorises a loop that takes it (its reference to one of two temporaries
+// became an index into a stack array that stopped the vectoriser).
 inline float MaxValue(float a, float b) { return a < b ? b : a; }
-inline float MinValue(float a, float b) { return b < a ? b : a; }
 
 // Eigen's normalized() of lane l's vector (v0, v1, v2) into dir[.][l]: v / |v|, or v where |v|^2
 // is 0.
