@@ -31,16 +31,23 @@ struct RasterScratch {
 namespace raster_internal {
 
 constexpr int kTilePixels = kTileSize * kTileSize;
+// The most per-pixel arrays a pass carves out of a thread's pixel state (PixelArrays).
+constexpr int kMaxPixelArrays = 32;
 
 // Sizes every thread's tile buffer for the largest tile of `bins` (`fields` floats per entry)
-// before the parallel loop. Which thread draws which tile depends on scheduling, so buffers grown
-// inside the loop allocated at times that varied from run to run (a steady iteration now and
-// then allocated once); sized here, they grow only when the largest tile does, with headroom.
+// and its pixel state for the most arrays any pass uses, before the parallel loop. Which thread
+// draws which tile depends on scheduling, so buffers grown inside the loop allocated at times
+// that varied from run to run: a steady iteration now and then allocated once (a thread that,
+// starved on a loaded machine, drew its first non-empty backward tile late grew its pixel state
+// from the forward's arrays to the backward's). Sized here, the tile buffers grow only when the
+// largest tile does, with headroom, and the pixel state never after the first call.
 inline void EnsureScratch(RasterScratch* s, int threads, const TileBins& bins, int fields) {
   if (static_cast<int>(s->tile_data.size()) < threads) {
     s->tile_data.resize(threads);
     s->pixel_state.resize(threads);
   }
+  for (std::vector<float>& state : s->pixel_state)
+    state.reserve(static_cast<size_t>(kMaxPixelArrays) * kTilePixels);
   uint32_t largest = 0;
   for (int t = 0; t < bins.num_tiles(); ++t)
     largest = std::max(largest, bins.tile_start[t + 1] - bins.tile_start[t]);
@@ -184,16 +191,15 @@ inline int LargestLane(simd::F16 v) {
 // without allocating per tile.
 class PixelArrays {
  public:
-  static constexpr int kMaxArrays = 32;
   PixelArrays(std::vector<float>* buffer, int count) {
     buffer->resize(static_cast<size_t>(count) * kTilePixels);
-    for (int i = 0; i < count && i < kMaxArrays; ++i)
+    for (int i = 0; i < count && i < kMaxPixelArrays; ++i)
       arrays_[i] = buffer->data() + static_cast<size_t>(i) * kTilePixels;
   }
   float* operator[](int i) const { return arrays_[i]; }
 
  private:
-  float* arrays_[kMaxArrays] = {};
+  float* arrays_[kMaxPixelArrays] = {};
 };
 
 // Clears a tile's backward pixel state before its per-pixel set-up. Arrays [acc_begin, acc_end)

@@ -278,6 +278,9 @@ enum BackwardArray {
   bLastR,
   kBackwardArrays
 };
+static_assert(kForwardArrays <= raster_internal::kMaxPixelArrays &&
+                  kBackwardArrays <= raster_internal::kMaxPixelArrays,
+              "EnsureScratch sizes the pixel state for kMaxPixelArrays arrays");
 
 // Gradients of Gaussian j (row `s`) over tile rows [ya, yb], columns [first, first + lanes of
 // V), written to its gradient row `dst` (kGradStride floats); un-blends it from the pixel state.

@@ -378,6 +378,9 @@ enum BackwardArray {
   bMed,
   kBackwardArrays
 };
+static_assert(kForwardArrays <= raster_internal::kMaxPixelArrays &&
+                  kBackwardArrays <= raster_internal::kMaxPixelArrays,
+              "EnsureScratch sizes the pixel state for kMaxPixelArrays arrays");
 
 // Gradients of surfel j over tile rows [ya, yb], columns [first, first + lanes of V), written to
 // its gradient row `dst` (`dlow`: d c / d M of its low-pass offset); un-blends it from the state.

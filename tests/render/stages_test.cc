@@ -1,11 +1,12 @@
 // Stage tests of the render pipeline: SH evaluation and its backward, quaternion rotation and its
-// backward, tile binning against brute force.
+// backward, tile binning against brute force, the rasterizers' per-thread scratch.
 #include <gtest/gtest.h>
 
 #include <cmath>
 
 #include "mgsr/core/rng.h"
 #include "mgsr/model/activations.h"
+#include "mgsr/render/raster_scratch.h"
 #include "mgsr/render/sh.h"
 #include "mgsr/render/tile_binning.h"
 #include "reference_gaussian_renderer.h"
@@ -117,6 +118,33 @@ TEST(TileBinningTest, MatchesBruteForceAndSortsByDepth) {
   // A box entirely off screen touches no tile.
   EXPECT_TRUE(TileRectFromBox(-50, -50, 10, 10, tx, ty).empty());
   EXPECT_TRUE(TileRectFromBox(200, 20, 10, 10, tx, ty).empty());
+}
+
+// Which thread draws which tile depends on scheduling, so every thread's buffers must be sized
+// before the parallel loops: for the largest tile's primitives and for the most pixel arrays a
+// pass (forward or backward) carves out. A thread that first drew a backward tile late grew its
+// pixel state then, and a steady training iteration allocated (#20).
+TEST(RasterScratchTest, EnsureScratchSizesEveryThreadForAnyTileAndPass) {
+  TileBins bins;
+  bins.tiles_x = 3;
+  bins.tiles_y = 1;
+  bins.tile_start = {0, 2, 2, 7};  // the largest tile holds 5 entries, one is empty
+  bins.ids = {0, 1, 0, 1, 2, 3, 4};
+  const int fields = 20, threads = 3;
+  RasterScratch scratch;
+  raster_internal::EnsureScratch(&scratch, threads, bins, fields);
+  ASSERT_EQ(scratch.tile_data.size(), static_cast<size_t>(threads));
+  ASSERT_EQ(scratch.pixel_state.size(), static_cast<size_t>(threads));
+  for (int t = 0; t < threads; ++t) {
+    EXPECT_GE(scratch.tile_data[t].capacity(), 5u * fields) << t;
+    std::vector<float>* state = &scratch.pixel_state[t];
+    const float* before = state->data();
+    ASSERT_NE(before, nullptr) << t;
+    const raster_internal::PixelArrays st(state, raster_internal::kMaxPixelArrays);
+    EXPECT_EQ(state->data(), before) << "thread " << t << "'s pixel state grew in the loop";
+    EXPECT_EQ(st[raster_internal::kMaxPixelArrays - 1] + raster_internal::kTilePixels,
+              state->data() + state->size());
+  }
 }
 
 }  // namespace
