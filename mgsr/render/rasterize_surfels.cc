@@ -583,7 +583,8 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   std::vector<float> entry_weight(o.record_contribution ? bins.ids.size() : 0, 0.0f);
 
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
-  for (int tile = 0; tile < bins.num_tiles(); ++tile) {
+  for (int i = 0; i < bins.num_tiles(); ++i) {
+    const int tile = bins.tile_order[i];
     const int thread = omp_get_thread_num();
     const int tx = tile % bins.tiles_x, ty = tile / bins.tiles_x;
     const uint32_t begin = bins.tile_start[tile];
@@ -702,7 +703,8 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
   {
     const int thread = omp_get_thread_num();
 #pragma omp for schedule(dynamic, 1)
-    for (int tile = 0; tile < bins.num_tiles(); ++tile) {
+    for (int i = 0; i < bins.num_tiles(); ++i) {
+      const int tile = bins.tile_order[i];
       const int tx = tile % bins.tiles_x, ty = tile / bins.tiles_x;
       const uint32_t begin = bins.tile_start[tile];
       const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);

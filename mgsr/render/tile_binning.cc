@@ -111,6 +111,14 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
       }
     }
   }
+  // 4. The largest tiles first.
+  bins->tile_order.resize(num_tiles);
+  for (int tile = 0; tile < num_tiles; ++tile) bins->tile_order[tile] = tile;
+  const std::vector<uint32_t>& start = bins->tile_start;
+  std::sort(bins->tile_order.begin(), bins->tile_order.end(), [&start](int a, int b) {
+    const uint32_t na = start[a + 1] - start[a], nb = start[b + 1] - start[b];
+    return na != nb ? na > nb : a < b;
+  });
 }
 
 }  // namespace mgsr

@@ -26,6 +26,11 @@ struct TileBins {
   std::vector<uint32_t> tile_start;  // tiles_x * tiles_y + 1 offsets into ids
   std::vector<uint32_t> ids;         // primitive ids, per tile front to back
 
+  // The tiles by decreasing entry count (ties by index): the order the rasterizers hand tiles to
+  // threads, so the largest start first and the last ones to finish are small (an idle thread
+  // waits at most for a small tile at the end of a pass).
+  std::vector<int> tile_order;
+
   int num_tiles() const { return tiles_x * tiles_y; }
   // Scratch reused between calls (no allocation once warm).
   std::vector<uint32_t> thread_counts;
