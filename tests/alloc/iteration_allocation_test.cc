@@ -20,9 +20,9 @@
 namespace {
 std::atomic<int64_t> g_allocations{0};
 
-// The call stacks of the first allocations since the current iteration began (or since an earlier
-// one, while iterations that may allocate are dropped: see AllocationCounter). Fixed storage:
-// recording must not allocate through operator new.
+// The call stacks of the first allocations made in iterations that must not allocate (the
+// counter drops those recorded in the others). Fixed storage: recording must not allocate through
+// operator new.
 constexpr int kStacks = 4, kFrames = 24;
 void* g_stack[kStacks][kFrames];
 int g_stack_depth[kStacks];

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <vector>
 
 #include "mgsr/core/rng.h"
 #include "mgsr/model/activations.h"
@@ -87,7 +88,7 @@ TEST(QuaternionTest, RotationBackwardMatchesNumericDifferences) {
   }
 }
 
-TEST(TileBinningTest, MatchesBruteForceAndSortsByDepth) {
+TEST(TileBinningTest, MatchesBruteForceSortsByDepthAndOrdersTilesBySize) {
   Rng rng(2);
   const int W = 100, H = 70, n = 500;
   std::vector<TileRect> rects(n);
@@ -115,6 +116,20 @@ TEST(TileBinningTest, MatchesBruteForceAndSortsByDepth) {
     for (size_t k = 0; k < expected.size(); ++k)
       ASSERT_EQ(bins.ids[bins.tile_start[tile] + k], expected[k].second);
   }
+  // The tile order: every tile once, by decreasing entry count, ties by index.
+  ASSERT_EQ(bins.tile_order.size(), static_cast<size_t>(tx * ty));
+  std::vector<int> seen(tx * ty, 0);
+  for (int i = 0; i < tx * ty; ++i) {
+    const int tile = bins.tile_order[i];
+    ASSERT_TRUE(tile >= 0 && tile < tx * ty);
+    ++seen[tile];
+    if (i == 0) continue;
+    const int prev = bins.tile_order[i - 1];
+    const uint32_t n = bins.tile_start[tile + 1] - bins.tile_start[tile],
+                   n_prev = bins.tile_start[prev + 1] - bins.tile_start[prev];
+    EXPECT_TRUE(n_prev > n || (n_prev == n && prev < tile)) << i;
+  }
+  for (int tile = 0; tile < tx * ty; ++tile) EXPECT_EQ(seen[tile], 1) << tile;
   // A box entirely off screen touches no tile.
   EXPECT_TRUE(TileRectFromBox(-50, -50, 10, 10, tx, ty).empty());
   EXPECT_TRUE(TileRectFromBox(200, 20, 10, 10, tx, ty).empty());
