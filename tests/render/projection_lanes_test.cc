@@ -99,6 +99,13 @@ void ExpectShiftedEqual(const std::vector<TileRect>& a, const std::vector<TileRe
   }
 }
 
+// Row i of `a` (`per` floats) equals row i + shift of `b`, to the bit.
+void ExpectRowShiftedEqual(const std::vector<float>& a, const std::vector<float>& b, size_t per,
+                           size_t i, int shift, const std::string& what) {
+  EXPECT_EQ(std::memcmp(&a[per * i], &b[per * (i + shift)], per * sizeof(float)), 0)
+      << what << " " << i;
+}
+
 // Every gradient of model `b` (shifted by `shift`) equals `a`'s, to the bit.
 template <class Model>
 void ExpectGradientsShiftedEqual(Model a, Model b, int shift, const std::string& what) {
@@ -161,13 +168,12 @@ TEST(ProjectionLanesTest, SurfelsGetTheSameWhicheverLaneTheyFallIn) {
     ExpectShiftedEqual(p.rects, ps.rects, shift, "rects" + what);
     for (size_t i = 0; i < m.size(); ++i) {  // the rest is written for drawn surfels only
       if (p.radius[i] <= 0) continue;
-      const size_t j = i + shift;
-      EXPECT_EQ(std::memcmp(&p.center[2 * i], &ps.center[2 * j], 8), 0) << i << what;
-      EXPECT_EQ(std::memcmp(&p.normal[3 * i], &ps.normal[3 * j], 12), 0) << i << what;
-      EXPECT_EQ(std::memcmp(&p.color[3 * i], &ps.color[3 * j], 12), 0) << i << what;
-      EXPECT_EQ(std::memcmp(&p.extent[2 * i], &ps.extent[2 * j], 8), 0) << i << what;
-      EXPECT_EQ(std::memcmp(&p.opacity[i], &ps.opacity[j], 4), 0) << i << what;
-      EXPECT_EQ(std::memcmp(&p.min_power[i], &ps.min_power[j], 4), 0) << i << what;
+      ExpectRowShiftedEqual(p.center, ps.center, 2, i, shift, "center" + what);
+      ExpectRowShiftedEqual(p.normal, ps.normal, 3, i, shift, "normal" + what);
+      ExpectRowShiftedEqual(p.color, ps.color, 3, i, shift, "color" + what);
+      ExpectRowShiftedEqual(p.extent, ps.extent, 2, i, shift, "extent" + what);
+      ExpectRowShiftedEqual(p.opacity, ps.opacity, 1, i, shift, "opacity" + what);
+      ExpectRowShiftedEqual(p.min_power, ps.min_power, 1, i, shift, "min_power" + what);
     }
     const ProjectedSurfelsGrad ds =
         RandomUpstream<ProjectedSurfelsGrad>(m.size(), shift, 9, SurfelUpstream);
@@ -203,16 +209,15 @@ TEST(ProjectionLanesTest, GaussiansGetTheSameWhicheverLaneTheyFallIn) {
       ExpectShiftedEqual(p.rects, ps.rects, shift, "rects" + what);
       for (size_t i = 0; i < m.size(); ++i) {
         if (p.radius[i] <= 0) continue;
-        const size_t j = i + shift;
-        EXPECT_EQ(std::memcmp(&p.mean2d[2 * i], &ps.mean2d[2 * j], 8), 0) << i << what;
-        EXPECT_EQ(std::memcmp(&p.conic[3 * i], &ps.conic[3 * j], 12), 0) << i << what;
-        EXPECT_EQ(std::memcmp(&p.color_t[3 * i], &ps.color_t[3 * j], 12), 0) << i << what;
-        EXPECT_EQ(std::memcmp(&p.view_dir[3 * i], &ps.view_dir[3 * j], 12), 0) << i << what;
-        EXPECT_EQ(std::memcmp(&p.opacity[i], &ps.opacity[j], 4), 0) << i << what;
+        ExpectRowShiftedEqual(p.mean2d, ps.mean2d, 2, i, shift, "mean2d" + what);
+        ExpectRowShiftedEqual(p.conic, ps.conic, 3, i, shift, "conic" + what);
+        ExpectRowShiftedEqual(p.color_t, ps.color_t, 3, i, shift, "color_t" + what);
+        ExpectRowShiftedEqual(p.view_dir, ps.view_dir, 3, i, shift, "view_dir" + what);
+        ExpectRowShiftedEqual(p.opacity, ps.opacity, 1, i, shift, "opacity" + what);
         if (!reflection) continue;
-        EXPECT_EQ(std::memcmp(&p.color_r[3 * i], &ps.color_r[3 * j], 12), 0) << i << what;
-        EXPECT_EQ(std::memcmp(&p.ref_opacity[i], &ps.ref_opacity[j], 4), 0) << i << what;
-        EXPECT_EQ(std::memcmp(&p.beta[i], &ps.beta[j], 4), 0) << i << what;
+        ExpectRowShiftedEqual(p.color_r, ps.color_r, 3, i, shift, "color_r" + what);
+        ExpectRowShiftedEqual(p.ref_opacity, ps.ref_opacity, 1, i, shift, "ref_opacity" + what);
+        ExpectRowShiftedEqual(p.beta, ps.beta, 1, i, shift, "beta" + what);
       }
       const ProjectedGaussiansGrad ds =
           RandomUpstream<ProjectedGaussiansGrad>(m.size(), shift, 11, GaussianUpstream);
