@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cmath>
 
-#include "mgsr/core/zero_fill.h"
 #include "mgsr/render/simd16.h"
 
 namespace mgsr {
@@ -48,6 +47,7 @@ enum Field {
   kMinPow,
   kEx,
   kEy,
+  kLowPass,
   kNumFields
 };
 // Gradient fields per surfel.
@@ -72,32 +72,6 @@ enum GradField {
   gC2,
   kGradStride
 };
-
-// Everything the pixel loops read about one surfel, packed into one row (AoS), so a tile's gather
-// touches one or two cache lines per surfel instead of eight scattered arrays (on the 100k-surfel
-// benchmark the gather's first load missed the cache for 45% of its samples).
-void PackSurfels(const ProjectedSurfels& p, std::vector<float>* packed) {
-  const int64_t n = static_cast<int64_t>(p.size());
-  packed->resize(static_cast<size_t>(n) * kNumFields);
-  float* out = packed->data();
-#pragma omp parallel for schedule(static)
-  for (int64_t g = 0; g < n; ++g) {
-    if (p.rects[g].empty()) continue;  // never binned
-    float* f = out + g * kNumFields;
-    for (int q = 0; q < 9; ++q) f[kTu0 + q] = p.M[9 * g + q];
-    f[kMx] = p.center[2 * g];
-    f[kMy] = p.center[2 * g + 1];
-    f[kRad] = p.radius[g];
-    f[kOp] = p.opacity[g];
-    for (int c = 0; c < 3; ++c) {
-      f[kN0 + c] = p.normal[3 * g + c];
-      f[kC0 + c] = p.color[3 * g + c];
-    }
-    f[kMinPow] = p.min_power[g];
-    f[kEx] = p.extent[2 * g];
-    f[kEy] = p.extent[2 * g + 1];
-  }
-}
 
 // The low-pass floor's offset c of rho2d (see rasterize_surfels.h): e^{-c/2} = min(1, |det J| /
 // s^2) with det J = det M / T_w2^3 and s the filter's sigma (inv_square = 1 / s^2). `dc` receives
@@ -124,32 +98,55 @@ inline float LowPassOffset(const float tu[3], const float tv[3], const float tw[
   return -2.0f * std::log(area);
 }
 
-// The area-preserving low-pass offset c of every surfel a tile lists, once per surfel rather than
-// once per tile entry (a log and a 3x3 determinant; a surfel has about four entries per view):
-// table row i holds c and, with `with_gradient`, d c / d M (10 floats per surfel). Surfels in no
-// tile or too faint to blend get zeros. Evaluated by the same inline function as before, so the
-// offsets are the same to the bit.
-constexpr int kLowPassStride = 10;
-void LowPassTable(const ProjectedSurfels& p, float inv_square, bool with_gradient,
-                  std::vector<float>* table) {
+// Everything the pixel loops read about one surfel, packed into one row (AoS), so a tile's gather
+// touches one or two cache lines per surfel instead of eight scattered arrays (on the 100k-surfel
+// benchmark the gather's first load missed the cache for 45% of its samples).
+//
+// The row carries the area-preserving low-pass offset c too (`inv_square` > 0; 0 leaves it 0),
+// once per surfel rather than once per tile entry (a log and a 3x3 determinant; a surfel has
+// about four entries per view). It used to sit in a table of its own, read per entry by the
+// surfel's index: that one load, outside the tile's batched gather, missed the cache on the
+// trained model often enough to take 19% of the forward's and 15% of the backward's samples.
+// `dlow` (9 floats per surfel, or null): d c / d M of the rows that have an offset (the backward
+// reads no others). Surfels in no tile are skipped; too faint to blend get c = 0.
+void PackSurfels(const ProjectedSurfels& p, float inv_square, std::vector<float>* dlow,
+                 std::vector<float>* packed) {
   const int64_t n = static_cast<int64_t>(p.size());
-  ZeroFill(static_cast<size_t>(n) * kLowPassStride, table);
-  float* out = table->data();
+  packed->resize(static_cast<size_t>(n) * kNumFields);
+  if (dlow != nullptr) dlow->resize(static_cast<size_t>(n) * 9);
+  float* out = packed->data();
+  float* dc = dlow != nullptr ? dlow->data() : nullptr;
 #pragma omp parallel for schedule(static)
-  for (int64_t i = 0; i < n; ++i) {
-    if (p.rects[i].empty() || !(p.opacity[i] > kMinAlpha)) continue;
-    const float* m = &p.M[9 * i];
-    float* row = out + i * kLowPassStride;
-    row[0] = LowPassOffset(m, m + 3, m + 6, inv_square, with_gradient ? row + 1 : nullptr);
+  for (int64_t g = 0; g < n; ++g) {
+    if (p.rects[g].empty()) continue;  // never binned
+    float* f = out + g * kNumFields;
+    for (int q = 0; q < 9; ++q) f[kTu0 + q] = p.M[9 * g + q];
+    f[kMx] = p.center[2 * g];
+    f[kMy] = p.center[2 * g + 1];
+    f[kRad] = p.radius[g];
+    f[kOp] = p.opacity[g];
+    for (int c = 0; c < 3; ++c) {
+      f[kN0 + c] = p.normal[3 * g + c];
+      f[kC0 + c] = p.color[3 * g + c];
+    }
+    f[kMinPow] = p.min_power[g];
+    f[kEx] = p.extent[2 * g];
+    f[kEy] = p.extent[2 * g + 1];
+    f[kLowPass] = 0.0f;
+    if (inv_square > 0.0f && p.opacity[g] > kMinAlpha) {
+      const float* m = &p.M[9 * g];
+      f[kLowPass] =
+          LowPassOffset(m, m + 3, m + 6, inv_square, dc != nullptr ? dc + 9 * g : nullptr);
+    }
   }
 }
 
 struct Surfel {
   float tu[3], tv[3], tw[3], mx, my, rad, op, n[3], c[3];
-  float low_pass = 0;  // c: added to rho2d
-  float inv_square;    // 1 / sigma^2 of the screen low-pass
-  float min_power;     // below this exponent alpha < 1/255 (ProjectedSurfels::min_power)
-  float ex, ey;        // where a pixel may reach 1/255 (ProjectedSurfels::extent)
+  float low_pass;    // c: added to rho2d (PackSurfels)
+  float inv_square;  // 1 / sigma^2 of the screen low-pass
+  float min_power;   // below this exponent alpha < 1/255 (ProjectedSurfels::min_power)
+  float ex, ey;      // where a pixel may reach 1/255 (ProjectedSurfels::extent)
   // From the surfel's packed row (PackSurfels).
   Surfel(const float* f, float inv_square_) : inv_square(inv_square_) {
     for (int q = 0; q < 3; ++q) {
@@ -166,6 +163,7 @@ struct Surfel {
     min_power = f[kMinPow];
     ex = f[kEx];
     ey = f[kEy];
+    low_pass = f[kLowPass];
   }
 };
 
@@ -575,9 +573,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   const Eigen::Matrix3f Rt = o.camera.R.transpose().cast<float>();
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
-  if (area_preserving) LowPassTable(p, inv_square, false, &scratch->low_pass);
-  const float* low_pass = scratch->low_pass.data();
-  PackSurfels(p, &scratch->packed);
+  PackSurfels(p, area_preserving ? inv_square : 0.0f, nullptr, &scratch->packed);
   const float* packed = scratch->packed.data();
   // Per tile entry: the entry's summed blend weights (only when recording contributions).
   std::vector<float> entry_weight(o.record_contribution ? bins.ids.size() : 0, 0.0f);
@@ -610,7 +606,6 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
       if ((j & 31) == 0) GatherTile<kNumFields>(packed, ids, n, j, std::min(n, j + 32), &buffer);
       Surfel s(f + static_cast<size_t>(j) * kNumFields, inv_square);
       if (!(s.op > kMinAlpha)) continue;
-      if (area_preserving) s.low_pass = low_pass[static_cast<size_t>(ids[j]) * kLowPassStride];
       const float min_power = s.min_power;
       int ya, yb;
       BoxRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
@@ -690,9 +685,8 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
   const Eigen::Matrix3f Rc = o.camera.R.cast<float>();
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
-  if (area_preserving) LowPassTable(p, inv_square, true, &scratch->low_pass);
+  PackSurfels(p, area_preserving ? inv_square : 0.0f, &scratch->low_pass, &scratch->packed);
   const float* low_pass = scratch->low_pass.data();
-  PackSurfels(p, &scratch->packed);
   const float* packed = scratch->packed.data();
   // The distortion terms only where its output was rendered and has a gradient.
   const bool distortion = o.distortion && !g.distortion.empty();
@@ -791,12 +785,8 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
           continue;
         }
         static constexpr float kNoLowPass[9] = {};
-        const float* dlow = kNoLowPass;
-        if (area_preserving) {
-          const float* row = low_pass + static_cast<size_t>(ids[j]) * kLowPassStride;
-          s.low_pass = row[0];
-          dlow = row + 1;
-        }
+        const float* dlow =
+            area_preserving ? low_pass + static_cast<size_t>(ids[j]) * 9 : kNoLowPass;
         const float min_power = s.min_power;
         int ya, yb;
         BoxRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
