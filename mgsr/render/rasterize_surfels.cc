@@ -105,8 +105,9 @@ inline float LowPassOffset(const float tu[3], const float tv[3], const float tw[
 // The row carries the area-preserving low-pass offset c too (`inv_square` > 0; 0 leaves it 0),
 // once per surfel rather than once per tile entry (a log and a 3x3 determinant; a surfel has
 // about four entries per view). It used to sit in a table of its own, read per entry by the
-// surfel's index: that one load, outside the tile's batched gather, missed the cache on the
-// trained model often enough to take 19% of the forward's and 15% of the backward's samples.
+// surfel's index, a load outside the tile's batched gather that often missed the cache (perf put
+// 19% of the forward's samples on it, skid included; the trained model's forward and backward
+// got 3% and 1% faster without it).
 // `dlow` (9 floats per surfel, or null): d c / d M of the rows that have an offset (the backward
 // reads no others). Surfels in no tile are skipped; too faint to blend get c = 0.
 void PackSurfels(const ProjectedSurfels& p, float inv_square, std::vector<float>* dlow,
