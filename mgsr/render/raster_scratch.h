@@ -240,20 +240,21 @@ inline void SumEntriesPerPrimitive(const TileBins& bins, const std::vector<float
 }  // namespace raster_internal
 
 // Sums the per-entry gradients of every tile into per-primitive rows (N x stride), in tile and
-// entry order whatever the thread count, so backward passes are bitwise reproducible. Threads own
-// disjoint primitive ranges and each scans the entry list once. The row length is a compile-time
-// constant, so a row's sum is a few whole-vector adds.
+// entry order whatever the thread count, so backward passes are bitwise reproducible. The
+// primitives are split into one range per thread, each summed by one thread scanning the entry
+// list once (ranges, not threads, are the loop: a team smaller than omp_get_max_threads() says
+// still sums every range). The row length is a compile-time constant, so a row's sum is a few
+// whole-vector adds.
 template <int stride>
 inline void ReduceEntryGradients(const TileBins& bins, const std::vector<uint32_t>& tile_used,
                                  const std::vector<float>& entry_grads, size_t num,
                                  std::vector<float>* out) {
   out->resize(num * stride);
-  const int threads = omp_get_max_threads();
-#pragma omp parallel num_threads(threads)
-  {
-    const int t = omp_get_thread_num();
-    const uint32_t lo = static_cast<uint32_t>(num * t / threads),
-                   hi = static_cast<uint32_t>(num * (t + 1) / threads);
+  const int ranges = omp_get_max_threads();
+#pragma omp parallel for schedule(static) num_threads(ranges)
+  for (int t = 0; t < ranges; ++t) {
+    const uint32_t lo = static_cast<uint32_t>(num * t / ranges),
+                   hi = static_cast<uint32_t>(num * (t + 1) / ranges);
     // Each thread zeroes the rows it sums into (a serial fill left the others waiting).
     std::fill(out->data() + static_cast<size_t>(lo) * stride,
               out->data() + static_cast<size_t>(hi) * stride, 0.0f);

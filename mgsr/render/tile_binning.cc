@@ -65,17 +65,19 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
   }
   RadixSortByKey(&bins->order_keys, &bins->order, &bins->tmp_keys, &bins->tmp_ids);
   const int n = static_cast<int>(bins->order.size());
-  const int threads = omp_get_max_threads();
-  bins->thread_counts.assign(static_cast<size_t>(threads) * num_tiles, 0);
+  // One chunk of the depth order per thread. Chunks, not threads, own the counts: a team can be
+  // smaller than omp_get_max_threads() says (inside a caller's parallel region it has one
+  // thread), and every chunk must still be counted. Any chunk count gives the same lists.
+  const int chunks = omp_get_max_threads();
+  bins->thread_counts.assign(static_cast<size_t>(chunks) * num_tiles, 0);
   bins->tile_start.assign(num_tiles + 1, 0);
 
-  // 2. Per-thread tile histograms over consecutive chunks of the depth order.
-#pragma omp parallel num_threads(threads)
-  {
-    const int t = omp_get_thread_num();
+  // 2. Per-chunk tile histograms over consecutive chunks of the depth order.
+#pragma omp parallel for schedule(static) num_threads(chunks)
+  for (int t = 0; t < chunks; ++t) {
     uint32_t* counts = bins->thread_counts.data() + static_cast<size_t>(t) * num_tiles;
-    const int begin = static_cast<int>(static_cast<int64_t>(n) * t / threads);
-    const int end = static_cast<int>(static_cast<int64_t>(n) * (t + 1) / threads);
+    const int begin = static_cast<int>(static_cast<int64_t>(n) * t / chunks);
+    const int end = static_cast<int>(static_cast<int64_t>(n) * (t + 1) / chunks);
     for (int q = begin; q < end; ++q) {
       const TileRect& r = rects[bins->order[q]];
       for (int ty = r.y0; ty < r.y1; ++ty) {
@@ -83,12 +85,12 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
       }
     }
   }
-  // 3. Offsets: within a tile, thread t's (deeper) chunk follows the chunks of threads < t, so
-  //    every tile list comes out front to back.
+  // 3. Offsets: within a tile, chunk t's (deeper) entries follow those of chunks < t, so every
+  //    tile list comes out front to back.
   uint32_t total = 0;
   for (int tile = 0; tile < num_tiles; ++tile) {
     bins->tile_start[tile] = total;
-    for (int t = 0; t < threads; ++t) {
+    for (int t = 0; t < chunks; ++t) {
       uint32_t& c = bins->thread_counts[static_cast<size_t>(t) * num_tiles + tile];
       const uint32_t count = c;
       c = total;
@@ -97,12 +99,11 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
   }
   bins->tile_start[num_tiles] = total;
   bins->ids.resize(total);
-#pragma omp parallel num_threads(threads)
-  {
-    const int t = omp_get_thread_num();
+#pragma omp parallel for schedule(static) num_threads(chunks)
+  for (int t = 0; t < chunks; ++t) {
     uint32_t* offsets = bins->thread_counts.data() + static_cast<size_t>(t) * num_tiles;
-    const int begin = static_cast<int>(static_cast<int64_t>(n) * t / threads);
-    const int end = static_cast<int>(static_cast<int64_t>(n) * (t + 1) / threads);
+    const int begin = static_cast<int>(static_cast<int64_t>(n) * t / chunks);
+    const int end = static_cast<int>(static_cast<int64_t>(n) * (t + 1) / chunks);
     for (int q = begin; q < end; ++q) {
       const uint32_t id = bins->order[q];
       const TileRect& r = rects[id];

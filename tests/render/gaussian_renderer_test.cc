@@ -330,6 +330,45 @@ TEST(GaussianRendererThreadTest, ResultsDoNotDependOnTheThreadCount) {
   EXPECT_EQ(g[0].mean2d, g[1].mean2d);
 }
 
+// A render inside another parallel region (a caller rendering views in parallel) runs in a team
+// smaller than omp_get_max_threads() says: the binning and the gradient reduction split their
+// work by the team they get, so the results are the same as a render outside any region.
+TEST(GaussianRendererThreadTest, ResultsInsideAnotherParallelRegionAreTheSame) {
+  const Camera cam = testing::RenderTestCamera(64, 48);
+  const GaussianModel m = RandomScene(200, 22, 0.02, 0.15);
+  const GaussianRenderOptions o = Options(cam);
+  GaussianRenderGrad grad;
+  grad.color = Image(64, 48, 3);
+  Rng rng(4);
+  for (size_t i = 0; i < grad.color.size(); ++i)
+    grad.color.data()[i] = static_cast<float>(rng.Uniform(-1, 1));
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(2);
+  GaussianRender plain;
+  GaussianGradients plain_g;
+  GaussianRenderer renderer;
+  renderer.Forward(m, o, &plain);
+  renderer.Backward(m, o, plain, grad, &plain_g);
+  GaussianRender inner[2];
+  GaussianGradients inner_g[2];
+#pragma omp parallel num_threads(2)
+  {
+    const int t = omp_get_thread_num();
+    GaussianRenderer r;
+    r.Forward(m, o, &inner[t]);
+    r.Backward(m, o, inner[t], grad, &inner_g[t]);
+  }
+  omp_set_num_threads(saved);
+  const std::vector<ParamBlock> a = plain_g.params.Blocks();
+  for (int t = 0; t < 2; ++t) {
+    ASSERT_EQ(plain.color.size(), inner[t].color.size());
+    for (size_t i = 0; i < plain.color.size(); ++i)
+      ASSERT_EQ(plain.color.data()[i], inner[t].color.data()[i]) << "thread " << t << " at " << i;
+    const std::vector<ParamBlock> b = inner_g[t].params.Blocks();
+    for (size_t k = 0; k < a.size(); ++k) EXPECT_EQ(*a[k].data, *b[k].data) << a[k].name;
+  }
+}
+
 // The backward writes the SH blocks' gradient rows instead of adding to zeroed ones: whatever the
 // buffers held before (here NaN), every row comes out as a fresh buffer's, for Gaussians out of
 // view, coefficients above the current degree and the reflected colour when it is off.

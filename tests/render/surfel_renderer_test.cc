@@ -1,6 +1,7 @@
 #include "mgsr/render/surfel_renderer.h"
 
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -307,6 +308,45 @@ TEST(SurfelRendererTest, SkippingTheDistortionChangesNothingElse) {
   EXPECT_TRUE(same(g_on, g_off));
   EXPECT_TRUE(same(g_off, g_off_distortion));
   EXPECT_FALSE(same(g_on, g_on_distortion));
+}
+
+// One, two threads and a render inside another parallel region (a team smaller than
+// omp_get_max_threads() says): the same images and gradients to the bit.
+TEST(SurfelRendererTest, ResultsDoNotDependOnTheThreadsOrAnEnclosingParallelRegion) {
+  const Camera cam = testing::RenderTestCamera(64, 48);
+  const SurfelModel m = RandomSurfels(120, 8, 0.05, 0.2);
+  const SurfelRenderOptions o = Options(cam);
+  SurfelRenderGrad grad;
+  grad.color = Image(cam.width, cam.height, 3);
+  grad.depth = Image(cam.width, cam.height, 1);
+  Rng rng(5);
+  for (Image* im : {&grad.color, &grad.depth})
+    for (size_t i = 0; i < im->size(); ++i) im->data()[i] = static_cast<float>(rng.Uniform(-1, 1));
+  const auto render = [&](SurfelRender* out, SurfelGradients* g) {
+    SurfelRenderer renderer;
+    renderer.Forward(m, o, out);
+    renderer.Backward(m, o, *out, grad, g);
+  };
+  const int saved = omp_get_max_threads();
+  SurfelRender out[4];
+  SurfelGradients g[4];
+  for (int t = 0; t < 2; ++t) {
+    omp_set_num_threads(t + 1);
+    render(&out[t], &g[t]);
+  }
+#pragma omp parallel num_threads(2)
+  render(&out[2 + omp_get_thread_num()], &g[2 + omp_get_thread_num()]);
+  omp_set_num_threads(saved);
+  for (int t = 1; t < 4; ++t) {
+    for (auto image : {&SurfelRender::color, &SurfelRender::depth, &SurfelRender::normal}) {
+      const Image& a = out[0].*image;
+      const Image& b = out[t].*image;
+      ASSERT_EQ(a.size(), b.size());
+      EXPECT_TRUE(std::equal(a.data(), a.data() + a.size(), b.data())) << "render " << t;
+    }
+    const std::vector<ParamBlock> x = g[0].params.Blocks(), y = g[t].params.Blocks();
+    for (size_t k = 0; k < x.size(); ++k) EXPECT_EQ(*x[k].data, *y[k].data) << x[k].name;
+  }
 }
 
 TEST(SurfelRendererGradientTest, AllParametersAllOutputsMatchNumericDifferentiation) {
