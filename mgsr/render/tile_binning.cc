@@ -19,26 +19,41 @@ TileRect TileRectFromBox(float cx, float cy, float rx, float ry, int tiles_x, in
 
 namespace {
 
-// Stable LSD radix sort of (key, id) pairs by 32-bit key, 11 bits per pass.
+// Stable LSD radix sort of (key, id) pairs by 32-bit key, 11 bits per pass. The three passes'
+// histograms come from one read of the keys, and a pass whose digit is the same for every key
+// (it would not move anything) is skipped.
 void RadixSortByKey(std::vector<uint32_t>* keys, std::vector<uint32_t>* ids,
                     std::vector<uint32_t>* tmp_keys, std::vector<uint32_t>* tmp_ids) {
   const size_t n = keys->size();
   tmp_keys->resize(n);
   tmp_ids->resize(n);
-  constexpr int kBits = 11, kBuckets = 1 << kBits;
-  for (int shift = 0; shift < 32; shift += kBits) {
-    uint32_t count[kBuckets] = {};
-    for (uint32_t k : *keys) ++count[(k >> shift) & (kBuckets - 1)];
+  constexpr int kBits = 11, kBuckets = 1 << kBits, kPasses = (32 + kBits - 1) / kBits;
+  constexpr uint32_t kMask = kBuckets - 1;
+  static_assert(kPasses == 3, "the histogram loop below counts three digits");
+  uint32_t count[kPasses][kBuckets] = {};
+  for (const uint32_t k : *keys) {
+    ++count[0][k & kMask];
+    ++count[1][(k >> kBits) & kMask];
+    ++count[2][(k >> (2 * kBits)) & kMask];
+  }
+  for (int pass = 0; pass < kPasses; ++pass) {
+    const int shift = pass * kBits;
+    uint32_t* start = count[pass];
+    if (n == 0 || start[((*keys)[0] >> shift) & kMask] == n) continue;  // one digit: no move
     uint32_t sum = 0;
-    for (uint32_t& c : count) {
-      const uint32_t v = c;
-      c = sum;
+    for (int b = 0; b < kBuckets; ++b) {
+      const uint32_t v = start[b];
+      start[b] = sum;
       sum += v;
     }
+    const uint32_t* k_in = keys->data();
+    const uint32_t* id_in = ids->data();
+    uint32_t* k_out = tmp_keys->data();
+    uint32_t* id_out = tmp_ids->data();
     for (size_t i = 0; i < n; ++i) {
-      const uint32_t b = ((*keys)[i] >> shift) & (kBuckets - 1);
-      (*tmp_keys)[count[b]] = (*keys)[i];
-      (*tmp_ids)[count[b]++] = (*ids)[i];
+      const uint32_t at = start[(k_in[i] >> shift) & kMask]++;
+      k_out[at] = k_in[i];
+      id_out[at] = id_in[i];
     }
     keys->swap(*tmp_keys);
     ids->swap(*tmp_ids);
