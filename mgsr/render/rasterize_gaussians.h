@@ -55,6 +55,10 @@ struct GaussianRender {
   // With options.record_contribution, per Gaussian: the sum over pixels of its blend weights in
   // the transmitted chain plus those in the reflected chain (else empty).
   std::vector<float> contribution;
+  // Per tile entry of the bins rendered: 1 where the Gaussian blended a pixel of that tile (either
+  // chain), else 0. The backward skips the others, whose gradients are zero: a pixel takes part
+  // in the backward exactly where it blended in the forward.
+  std::vector<uint8_t> entry_blended;
 };
 
 // Upstream gradients; an empty image means zero.

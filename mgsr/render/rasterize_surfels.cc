@@ -568,6 +568,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   for (std::vector<float>* v : {&out->m1, &out->m2, &out->m_ref}) v->resize(distortion ? npix : 0);
   out->last.resize(npix);
   out->median_index.resize(npix);
+  out->entry_blended.resize(bins.ids.size());
   const int threads = omp_get_max_threads();
   EnsureScratch(scratch, threads, bins, kNumFields);
   const Image* bg_image = o.background_image;
@@ -587,6 +588,8 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
     const uint32_t begin = bins.tile_start[tile];
     const int n = static_cast<int>(bins.tile_start[tile + 1] - begin);
     float* const weights = o.record_contribution ? entry_weight.data() + begin : nullptr;
+    uint8_t* const blended = out->entry_blended.data() + begin;
+    std::fill(blended, blended + n, uint8_t{0});
     std::vector<float>& buffer = scratch->tile_data[thread];
     const uint32_t* ids = bins.ids.data() + begin;
     buffer.resize(static_cast<size_t>(kNumFields) * n);
@@ -620,6 +623,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
                        : BlendRows<F16, false>(s, j, min_power, ya, yb, y0, 0, tl, st);
       }
       if (weights != nullptr) weights[j] += sum;
+      blended[j] = sum > 0.0f;  // a blended pixel's weight is at least kMinAlpha kMinTransmittance
     }
     // The outputs, a tile row at a time (the same operations per pixel as a scalar loop; the
     // world normals per pixel, as before).
@@ -777,14 +781,15 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
       const int max_last = raster_internal::LargestLane(last_max);
       GatherTile<kNumFields>(packed, ids, n, 0, max_last, &buffer);
       const float* f = buffer.data();
+      const uint8_t* blended = r.entry_blended.data() + begin;
       for (int j = max_last - 1; j >= 0; --j) {
-        Surfel s(f + static_cast<size_t>(j) * kNumFields, inv_square);
-        if (!(s.op >
-              kMinAlpha)) {  // invisible everywhere: no gradient (the row must still be written)
+        // Blended no pixel here, or invisible everywhere: no gradient (the row is written).
+        if (!blended[j]) {
           std::fill(tg + static_cast<size_t>(j) * kGradStride,
                     tg + static_cast<size_t>(j + 1) * kGradStride, 0.0f);
           continue;
         }
+        Surfel s(f + static_cast<size_t>(j) * kNumFields, inv_square);
         static constexpr float kNoLowPass[9] = {};
         const float* dlow =
             area_preserving ? low_pass + static_cast<size_t>(ids[j]) * 9 : kNoLowPass;

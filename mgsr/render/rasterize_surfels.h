@@ -76,6 +76,10 @@ struct SurfelRender {
   // With options.record_contribution, per surfel: the sum over pixels of its blend weights (else
   // empty).
   std::vector<float> contribution;
+  // Per tile entry of the bins rendered: 1 where the surfel blended a pixel of that tile, else 0.
+  // The backward skips the others, whose gradients are zero: a pixel takes part in the backward
+  // exactly where it blended in the forward.
+  std::vector<uint8_t> entry_blended;
 };
 
 // Upstream gradients; an empty image means zero.
