@@ -310,96 +310,47 @@ TEST(GaussianRendererThreadTest, ResultsDoNotDependOnTheThreadCount) {
   Rng rng(3);
   for (size_t i = 0; i < grad.color.size(); ++i)
     grad.color.data()[i] = static_cast<float>(rng.Uniform(-1, 1));
-  GaussianRender out[2];
-  GaussianGradients g[2];
+  // One thread, two, and two renders inside a caller's parallel region of two threads (each
+  // then runs in a team smaller than omp_get_max_threads() says: the binning and the gradient
+  // reduction loop over chunks and ranges, not over the team's threads).
+  GaussianRender out[4];
+  GaussianGradients g[4];
+  const auto render = [&](int i) {
+    GaussianRenderer renderer;
+    renderer.Forward(m, o, &out[i]);
+    renderer.Backward(m, o, out[i], grad, &g[i]);
+  };
   const int saved = omp_get_max_threads();
   for (int t = 0; t < 2; ++t) {
     omp_set_num_threads(t + 1);
-    GaussianRenderer renderer;
-    renderer.Forward(m, o, &out[t]);
-    renderer.Backward(m, o, out[t], grad, &g[t]);
+    render(t);
   }
+#pragma omp parallel num_threads(2)
+  render(2 + omp_get_thread_num());
   omp_set_num_threads(saved);
-  // Forward: every pixel is computed by one thread in the same order: identical.
-  for (size_t i = 0; i < out[0].color.size(); ++i)
-    ASSERT_EQ(out[0].color.data()[i], out[1].color.data()[i]);
-  // Backward: per-tile gradients are reduced in tile order whatever the thread count: identical
-  // too.
-  const std::vector<ParamBlock> a = g[0].params.Blocks(), b = g[1].params.Blocks();
-  for (size_t k = 0; k < a.size(); ++k) EXPECT_EQ(*a[k].data, *b[k].data) << a[k].name;
-  EXPECT_EQ(g[0].mean2d, g[1].mean2d);
+  for (int t = 1; t < 4; ++t) {
+    // Forward: every pixel is computed by one thread in the same order: identical.
+    for (size_t i = 0; i < out[0].color.size(); ++i)
+      ASSERT_EQ(out[0].color.data()[i], out[t].color.data()[i]) << "render " << t;
+    // Backward: per-tile gradients are reduced in tile order whatever the thread count:
+    // identical too.
+    const std::vector<ParamBlock> a = g[0].params.Blocks(), b = g[t].params.Blocks();
+    for (size_t k = 0; k < a.size(); ++k) EXPECT_EQ(*a[k].data, *b[k].data) << a[k].name;
+    EXPECT_EQ(g[0].mean2d, g[t].mean2d);
+  }
 }
 
-// The backward skips the tile entries the forward marked as blending no pixel. Marking every
-// entry instead (nothing skipped) gives the same gradients to the bit, and in an occluded scene a
-// good share of the entries is skipped.
+// The backward skips the entries that blended no pixel (an occluded scene of opaque Gaussians).
 TEST(GaussianRendererGradientTest, SkippingEntriesThatBlendedNothingChangesNoGradient) {
   const Camera cam = testing::RenderTestCamera(64, 48);
   GaussianModel m = RandomScene(300, 23, 0.05, 0.2);
   for (size_t i = 0; i < m.size(); ++i) m.opacity_logits[i] = 4.0f;  // opaque: occlusion
-  const GaussianRenderOptions o = Options(cam);
   GaussianRenderGrad grad;
-  grad.color = Image(64, 48, 3);
-  grad.depth = Image(64, 48, 1);
-  Rng rng(6);
-  for (Image* im : {&grad.color, &grad.depth})
-    for (size_t i = 0; i < im->size(); ++i) im->data()[i] = static_cast<float>(rng.Uniform(-1, 1));
-  GaussianRenderer renderer;
-  GaussianRender out;
-  renderer.Forward(m, o, &out);
-  ASSERT_EQ(out.entry_blended.size(), renderer.bins().ids.size());
-  const size_t skipped =
-      static_cast<size_t>(std::count(out.entry_blended.begin(), out.entry_blended.end(), 0));
-  EXPECT_GT(skipped, out.entry_blended.size() / 10)
-      << skipped << " of " << out.entry_blended.size();
-  EXPECT_LT(skipped, out.entry_blended.size());
-  GaussianGradients skipping, all;
-  renderer.Backward(m, o, out, grad, &skipping);
-  GaussianRender every = out;
-  std::fill(every.entry_blended.begin(), every.entry_blended.end(), uint8_t{1});
-  renderer.Backward(m, o, every, grad, &all);
-  const std::vector<ParamBlock> a = skipping.params.Blocks(), b = all.params.Blocks();
-  for (size_t k = 0; k < a.size(); ++k) EXPECT_EQ(*a[k].data, *b[k].data) << a[k].name;
-  EXPECT_EQ(skipping.mean2d, all.mean2d);
-}
-
-// A render inside another parallel region (a caller rendering views in parallel) runs in a team
-// smaller than omp_get_max_threads() says: the binning and the gradient reduction split their
-// work by the team they get, so the results are the same as a render outside any region.
-TEST(GaussianRendererThreadTest, ResultsInsideAnotherParallelRegionAreTheSame) {
-  const Camera cam = testing::RenderTestCamera(64, 48);
-  const GaussianModel m = RandomScene(200, 22, 0.02, 0.15);
-  const GaussianRenderOptions o = Options(cam);
-  GaussianRenderGrad grad;
-  grad.color = Image(64, 48, 3);
-  Rng rng(4);
-  for (size_t i = 0; i < grad.color.size(); ++i)
-    grad.color.data()[i] = static_cast<float>(rng.Uniform(-1, 1));
-  const int saved = omp_get_max_threads();
-  omp_set_num_threads(2);
-  GaussianRender plain;
-  GaussianGradients plain_g;
-  GaussianRenderer renderer;
-  renderer.Forward(m, o, &plain);
-  renderer.Backward(m, o, plain, grad, &plain_g);
-  GaussianRender inner[2];
-  GaussianGradients inner_g[2];
-#pragma omp parallel num_threads(2)
-  {
-    const int t = omp_get_thread_num();
-    GaussianRenderer r;
-    r.Forward(m, o, &inner[t]);
-    r.Backward(m, o, inner[t], grad, &inner_g[t]);
-  }
-  omp_set_num_threads(saved);
-  const std::vector<ParamBlock> a = plain_g.params.Blocks();
-  for (int t = 0; t < 2; ++t) {
-    ASSERT_EQ(plain.color.size(), inner[t].color.size());
-    for (size_t i = 0; i < plain.color.size(); ++i)
-      ASSERT_EQ(plain.color.data()[i], inner[t].color.data()[i]) << "thread " << t << " at " << i;
-    const std::vector<ParamBlock> b = inner_g[t].params.Blocks();
-    for (size_t k = 0; k < a.size(); ++k) EXPECT_EQ(*a[k].data, *b[k].data) << a[k].name;
-  }
+  grad.color = testing::RandomImage(64, 48, 3, 6);
+  grad.depth = testing::RandomImage(64, 48, 1, 7);
+  testing::ExpectSkippedEntriesChangeNoGradient<GaussianRenderer, GaussianGradients, GaussianModel,
+                                                GaussianRenderOptions, GaussianRender>(
+      m, Options(cam), grad);
 }
 
 // The backward writes the SH blocks' gradient rows instead of adding to zeroed ones: whatever the

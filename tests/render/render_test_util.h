@@ -53,4 +53,27 @@ Gradients ExpectBackwardWritesEveryRow(Renderer* renderer, const Model& m, const
   return fresh;
 }
 
+// The backward skips the tile entries the forward marked as blending no pixel
+// (`Render::entry_blended`): marking every entry instead (nothing skipped) gives the same
+// gradients to the bit. Expects the scene to leave more than a tenth of the entries unblended.
+template <class Renderer, class Gradients, class Model, class Options, class Render, class Grad>
+void ExpectSkippedEntriesChangeNoGradient(const Model& m, const Options& o, const Grad& grad) {
+  Renderer renderer;
+  Render out;
+  renderer.Forward(m, o, &out);
+  ASSERT_EQ(out.entry_blended.size(), renderer.bins().ids.size());
+  const size_t skipped =
+      static_cast<size_t>(std::count(out.entry_blended.begin(), out.entry_blended.end(), 0));
+  EXPECT_GT(skipped, out.entry_blended.size() / 10)
+      << skipped << " of " << out.entry_blended.size();
+  EXPECT_LT(skipped, out.entry_blended.size());
+  Gradients skipping, all;
+  renderer.Backward(m, o, out, grad, &skipping);
+  Render every = out;
+  std::fill(every.entry_blended.begin(), every.entry_blended.end(), uint8_t{1});
+  renderer.Backward(m, o, every, grad, &all);
+  const std::vector<ParamBlock> a = skipping.params.Blocks(), b = all.params.Blocks();
+  for (size_t k = 0; k < a.size(); ++k) EXPECT_EQ(*a[k].data, *b[k].data) << a[k].name;
+}
+
 }  // namespace mgsr::testing

@@ -310,37 +310,18 @@ TEST(SurfelRendererTest, SkippingTheDistortionChangesNothingElse) {
   EXPECT_FALSE(same(g_on, g_on_distortion));
 }
 
-// The backward skips the tile entries the forward marked as blending no pixel. Marking every
-// entry instead (nothing skipped) gives the same gradients to the bit, and in an occluded scene a
-// good share of the entries is skipped.
+// The backward skips the entries that blended no pixel (an occluded scene of opaque surfels).
 TEST(SurfelRendererTest, SkippingEntriesThatBlendedNothingChangesNoGradient) {
   const Camera cam = testing::RenderTestCamera(64, 48);
   SurfelModel m = RandomSurfels(200, 9, 0.1, 0.3);
   for (size_t i = 0; i < m.size(); ++i) m.opacity_logits[i] = 4.0f;  // opaque: occlusion
-  const SurfelRenderOptions o = Options(cam);
   SurfelRenderGrad grad;
-  grad.color = Image(cam.width, cam.height, 3);
-  grad.depth = Image(cam.width, cam.height, 1);
-  grad.median_depth = Image(cam.width, cam.height, 1);
-  Rng rng(7);
-  for (Image* im : {&grad.color, &grad.depth, &grad.median_depth})
-    for (size_t i = 0; i < im->size(); ++i) im->data()[i] = static_cast<float>(rng.Uniform(-1, 1));
-  SurfelRenderer renderer;
-  SurfelRender out;
-  renderer.Forward(m, o, &out);
-  ASSERT_EQ(out.entry_blended.size(), renderer.bins().ids.size());
-  const size_t skipped =
-      static_cast<size_t>(std::count(out.entry_blended.begin(), out.entry_blended.end(), 0));
-  EXPECT_GT(skipped, out.entry_blended.size() / 10)
-      << skipped << " of " << out.entry_blended.size();
-  EXPECT_LT(skipped, out.entry_blended.size());
-  SurfelGradients skipping, all;
-  renderer.Backward(m, o, out, grad, &skipping);
-  SurfelRender every = out;
-  std::fill(every.entry_blended.begin(), every.entry_blended.end(), uint8_t{1});
-  renderer.Backward(m, o, every, grad, &all);
-  const std::vector<ParamBlock> a = skipping.params.Blocks(), b = all.params.Blocks();
-  for (size_t k = 0; k < a.size(); ++k) EXPECT_EQ(*a[k].data, *b[k].data) << a[k].name;
+  grad.color = testing::RandomImage(64, 48, 3, 7);
+  grad.depth = testing::RandomImage(64, 48, 1, 8);
+  grad.median_depth = testing::RandomImage(64, 48, 1, 9);
+  testing::ExpectSkippedEntriesChangeNoGradient<SurfelRenderer, SurfelGradients, SurfelModel,
+                                                SurfelRenderOptions, SurfelRender>(m, Options(cam),
+                                                                                   grad);
 }
 
 // One, two threads and a render inside another parallel region (a team smaller than
