@@ -19,8 +19,8 @@ namespace mgsr {
 struct RasterScratch {
   // Per primitive, what the pixel loops read about it, in one row (both rasterizers).
   std::vector<float> packed;
-  std::vector<float>
-      low_pass;  // d c / d M of the surfels' low-pass offsets (backward, area-preserving)
+  // d c / d M of the surfels' low-pass offsets (backward, area-preserving filter).
+  std::vector<float> low_pass;
   std::vector<std::vector<float>> pixel_state;  // per thread: pixel state of the current tile
   std::vector<std::vector<float>> tile_data;  // per thread: gathered primitives of the current tile
   std::vector<float> entry_grads;             // per tile entry: gradient fields (stride floats)
