@@ -84,13 +84,13 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
   // smaller than omp_get_max_threads() says (inside a caller's parallel region it has one
   // thread), and every chunk must still be counted. Any chunk count gives the same lists.
   const int chunks = omp_get_max_threads();
-  bins->thread_counts.assign(static_cast<size_t>(chunks) * num_tiles, 0);
+  bins->chunk_counts.assign(static_cast<size_t>(chunks) * num_tiles, 0);
   bins->tile_start.assign(num_tiles + 1, 0);
 
   // 2. Per-chunk tile histograms over consecutive chunks of the depth order.
 #pragma omp parallel for schedule(static) num_threads(chunks)
   for (int t = 0; t < chunks; ++t) {
-    uint32_t* counts = bins->thread_counts.data() + static_cast<size_t>(t) * num_tiles;
+    uint32_t* counts = bins->chunk_counts.data() + static_cast<size_t>(t) * num_tiles;
     const int begin = static_cast<int>(static_cast<int64_t>(n) * t / chunks);
     const int end = static_cast<int>(static_cast<int64_t>(n) * (t + 1) / chunks);
     for (int q = begin; q < end; ++q) {
@@ -106,7 +106,7 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
   for (int tile = 0; tile < num_tiles; ++tile) {
     bins->tile_start[tile] = total;
     for (int t = 0; t < chunks; ++t) {
-      uint32_t& c = bins->thread_counts[static_cast<size_t>(t) * num_tiles + tile];
+      uint32_t& c = bins->chunk_counts[static_cast<size_t>(t) * num_tiles + tile];
       const uint32_t count = c;
       c = total;
       total += count;
@@ -116,7 +116,7 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
   bins->ids.resize(total);
 #pragma omp parallel for schedule(static) num_threads(chunks)
   for (int t = 0; t < chunks; ++t) {
-    uint32_t* offsets = bins->thread_counts.data() + static_cast<size_t>(t) * num_tiles;
+    uint32_t* offsets = bins->chunk_counts.data() + static_cast<size_t>(t) * num_tiles;
     const int begin = static_cast<int>(static_cast<int64_t>(n) * t / chunks);
     const int end = static_cast<int>(static_cast<int64_t>(n) * (t + 1) / chunks);
     for (int q = begin; q < end; ++q) {

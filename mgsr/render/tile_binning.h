@@ -1,8 +1,8 @@
 // Tile binning shared by both rasterizers (gsplat's "tile intersection" stage): every primitive
 // covers a rectangle of 16x16-pixel tiles; each tile gets the list of primitives touching it,
 // sorted front to back by depth. Built from one radix sort of the primitives by depth (ties by id)
-// and a counting sort by tile over that order (parallel, per-thread histograms), so every tile's
-// list comes out in depth order: O(n), deterministic for any thread count.
+// and a counting sort by tile over that order (parallel, a histogram per chunk of the depth order),
+// so every tile's list comes out in depth order: O(n), deterministic for any thread count.
 #pragma once
 
 #include <cstdint>
@@ -33,7 +33,7 @@ struct TileBins {
 
   int num_tiles() const { return tiles_x * tiles_y; }
   // Scratch reused between calls (no allocation once warm).
-  std::vector<uint32_t> thread_counts;
+  std::vector<uint32_t> chunk_counts;
   std::vector<uint32_t> order, order_keys, tmp_ids, tmp_keys;
 };
 
