@@ -77,38 +77,48 @@ inline void EnsureImage(Image* im, int w, int h, int c) {
   if (im->width() != w || im->height() != h || im->channels() != c) *im = Image(w, h, c);
 }
 
-// Rows [lo, hi] (clamped to [first, last]) whose centres y + 0.5 may lie within radius r of m;
-// one row of slack on each side, the exact tests run per pixel.
+// Whether the pixel centre i + 0.5 of row or column i lies within `half_width` of `m`: the pixel
+// loops' own test, in the same float arithmetic.
+inline bool CentreReached(float m, float half_width, int i) {
+  return std::abs((static_cast<float>(i) + 0.5f) - m) <= half_width;
+}
+
+// The rows (or columns) [*lo, *hi] of [first, last] whose centres CentreReached accepts, exactly
+// (empty: *lo > *hi). An estimate, corrected by the exact test: the accepted indices are
+// contiguous, as the rounded |i + 0.5 - m| never decreases away from m.
+inline void ReachedRange(float m, float half_width, int first, int last, int* lo, int* hi) {
+  const float lo_f = std::clamp(std::ceil(m - half_width - 0.5f), first - 1.0f, last + 1.0f);
+  const float hi_f = std::clamp(std::floor(m + half_width - 0.5f), first - 1.0f, last + 1.0f);
+  int a = static_cast<int>(lo_f), b = static_cast<int>(hi_f);
+  while (a > first && CentreReached(m, half_width, a - 1)) --a;
+  while (a <= last && !CentreReached(m, half_width, a)) ++a;
+  while (b < last && CentreReached(m, half_width, b + 1)) ++b;
+  while (b >= first && !CentreReached(m, half_width, b)) --b;
+  *lo = std::max(a, first);
+  *hi = std::min(b, last);
+}
+
+// Rows [lo, hi] of [first, last] whose centres y + 0.5 lie within r of m: exactly those the pixel
+// loops' row test keeps. (With a row of slack on each side, as before 2026-11-27, a trained
+// splat's box had about 8 rows of which 5 passed; the backward computes every box row's exponent.)
 inline void BoxRange(float m, float r, int first, int last, int* lo, int* hi) {
-  *lo = std::max(first, static_cast<int>(std::floor(m - r - 0.5f)) - 1);
-  *hi = std::min(last, static_cast<int>(std::ceil(m - 0.5f + r)) + 1);
+  ReachedRange(m, r, first, last, lo, hi);
 }
 
 // Which columns of a tile row the pixel loops process for one primitive that reaches only pixels
-// whose centre x + 0.5 lies within `half_width` of `mx` (the lanes' own test, |x + 0.5 - mx| <=
-// half_width, in the same float arithmetic): a footprint of at most 8 columns of the tile takes
-// one 8-lane vector starting at `first`, anything wider the whole 16-lane row. Per pixel nothing
-// changes; a trained object's splats are mostly 3-8 px wide, so this halves the lanes that
-// compute nothing.
+// whose centre x + 0.5 lies within `half_width` of `mx` (the lanes' own test, CentreReached): a
+// footprint of at most 8 columns of the tile takes one 8-lane vector starting at `first`,
+// anything wider the whole 16-lane row. Per pixel nothing changes; a trained object's splats are
+// mostly 3-8 px wide, so this halves the lanes that compute nothing.
 struct ColumnWindow {
   int first = 0;
   bool half = false;
 };
-inline bool ColumnReached(float mx, float half_width, int x) {
-  return std::abs((static_cast<float>(x) + 0.5f) - mx) <= half_width;
-}
 inline ColumnWindow WindowFor(float mx, float half_width, int x0) {
-  const int x_last = x0 + kTileSize - 1;
-  // An estimate of the first and last reached columns, then corrected by the exact test.
-  const float lo_f = std::clamp(std::ceil(mx - half_width - 0.5f), x0 - 1.0f, x_last + 1.0f);
-  const float hi_f = std::clamp(std::floor(mx + half_width - 0.5f), x0 - 1.0f, x_last + 1.0f);
-  int lo = static_cast<int>(lo_f), hi = static_cast<int>(hi_f);
-  if (lo > x0 && ColumnReached(mx, half_width, lo - 1)) --lo;
-  if (lo <= x_last && !ColumnReached(mx, half_width, lo)) ++lo;
-  if (hi < x_last && ColumnReached(mx, half_width, hi + 1)) ++hi;
-  if (hi >= x0 && !ColumnReached(mx, half_width, hi)) --hi;
-  lo = std::max(lo, x0) - x0;
-  hi = std::min(hi, x_last) - x0;
+  int lo, hi;
+  ReachedRange(mx, half_width, x0, x0 + kTileSize - 1, &lo, &hi);
+  lo -= x0;
+  hi -= x0;
   if (hi - lo >= 8) return {};
   return {std::clamp(lo, 0, kTileSize - 8), true};
 }

@@ -213,7 +213,7 @@ float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const 
   int rows = 0;
   for (int y = ya; y <= yb; ++y) {
     const float dy = y + 0.5f - s.my;
-    if (std::abs(dy) > s.ey || !RowHitsEllipse(dy, s.ca, s.cb, s.cc, s.min_power)) continue;
+    if (!RowHitsEllipse(dy, s.ca, s.cb, s.cc, s.min_power)) continue;  // (BoxRange: |dy| <= ey)
     const int k = (y - y0) * kTileSize + first;
     // Pixels whose chains have both terminated take no part: a row of them costs the exponent's
     // argument, not the exponent and the blends (behind an opaque surface, most rows of a tile's
@@ -308,7 +308,7 @@ void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, cons
   // enough to cost more than the exponents they saved.
   for (int y = ya; y <= yb; ++y) {
     const float dy = y + 0.5f - s.my;
-    const bool row_hit = !(std::abs(dy) > s.ey) & RowHitsEllipse(dy, s.ca, s.cb, s.cc, s.min_power);
+    const bool row_hit = RowHitsEllipse(dy, s.ca, s.cb, s.cc, s.min_power);  // (|dy| <= ey)
     const int k = (y - y0) * kTileSize + first;
     const V last_t = simd::Load<V>(st[bLastT] + k), last_r = simd::Load<V>(st[bLastR] + k);
     const M blended = lanes_ok & ((jf < last_t) | (jf < last_r)) & (row_hit ? -1 : 0);

@@ -284,7 +284,6 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
   int rows = 0;
   for (int y = ya; y <= yb; ++y) {
     const float py = y + 0.5f;
-    if (std::abs(s.my - py) > s.ey) continue;
     const int k = (y - y0) * kTileSize + first;
     // A row whose pixels have all terminated costs one load, not the intersection and the exponent
     // (behind an opaque surface, most rows of a tile's later entries).
@@ -410,7 +409,6 @@ void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y
   int rows = 0;
   for (int y = ya; y <= yb; ++y) {
     const float py = y + 0.5f;
-    if (std::abs(s.my - py) > s.ey) continue;
     const int k = (y - y0) * kTileSize + first;
     // Only pixels that blended this surfel (j < last) take part; a row without any skips the
     // intersection.
