@@ -2,7 +2,9 @@
 // backward, tile binning against brute force, the rasterizers' per-thread scratch.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include "mgsr/core/rng.h"
@@ -159,6 +161,41 @@ TEST(RasterScratchTest, EnsureScratchSizesEveryThreadForAnyTileAndPass) {
     EXPECT_EQ(state->data(), before) << "thread " << t << "'s pixel state grew in the loop";
     EXPECT_EQ(st[raster_internal::kMaxPixelArrays - 1] + raster_internal::kTilePixels,
               state->data() + state->size());
+  }
+}
+
+// The rows (and columns) a primitive's loops visit are exactly those whose centres the pixel
+// test accepts: the loops no longer test each row's |y + 0.5 - m| <= r themselves. Boundaries
+// where m - r - 0.5 is an integer, empty ranges, and values so large that the estimate rounds by
+// more than one index, against brute force; and the 8-column window holds every reached column.
+TEST(RasterScratchTest, ReachedRangeIsExactlyTheCentresThePixelTestAccepts) {
+  Rng rng(9);
+  const int first = 16, last = 31;
+  std::vector<std::pair<float, float>> cases = {
+      {20.5f, 0.0f},        {20.5f, 3.0f},         {19.0f, 2.5f},
+      {5.0f, 3.0f},         {40.0f, 2.0f},         {24.0f, 1e9f},
+      {3e8f, 3e8f - 20.0f}, {-3e8f, 3e8f + 25.0f}, {1e8f, 1e8f - 24.5f}};
+  for (int i = 0; i < 20000; ++i) {
+    const float m = static_cast<float>(rng.Uniform(0, 48));
+    const float r = i % 3 == 0 ? std::floor(m) + 0.5f - m + static_cast<float>(rng.Uniform(0, 6))
+                               : static_cast<float>(rng.Uniform(0, 12));
+    cases.push_back({m, std::max(r, 0.0f)});
+  }
+  for (const auto& [m, r] : cases) {
+    int lo = 0, hi = 0;
+    raster_internal::ReachedRange(m, r, first, last, &lo, &hi);
+    for (int y = first; y <= last; ++y) {
+      const bool accepted = std::abs((static_cast<float>(y) + 0.5f) - m) <= r;
+      ASSERT_EQ(accepted, lo <= y && y <= hi) << "m " << m << " r " << r << " row " << y;
+    }
+    const raster_internal::ColumnWindow w = raster_internal::WindowFor(m, r, first);
+    if (w.half) {
+      for (int x = 0; x < kTileSize; ++x) {
+        if (raster_internal::CentreReached(m, r, first + x)) {
+          EXPECT_TRUE(w.first <= x && x < w.first + 8) << "m " << m << " r " << r << " col " << x;
+        }
+      }
+    }
   }
 }
 
