@@ -97,13 +97,6 @@ using simd::MaskOf;
 
 static_assert(kTileSize == 16, "one tile row is one 16-lane vector");
 
-// Whether row offset dy crosses the ellipse a dx^2 + 2 b dx dy + c dy^2 <= -2 min_power at all
-// (a conservative shortcut; the per-pixel tests decide).
-inline bool RowHitsEllipse(float dy, float a, float b, float c, float min_power) {
-  const float k = -2.0f * min_power;
-  return b * b * dy * dy - a * (c * dy * dy - k) >= -1e-6f * (1.0f + k * a);
-}
-
 // One Gaussian, as the pixel loops read it (from its packed row).
 struct Splat {
   float mx, my, ex, ey, min_power, ca, cb, cc, op, rop, beta, z, ct0, ct1, ct2, cr0, cr1, cr2;
@@ -213,7 +206,6 @@ float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const 
   int rows = 0;
   for (int y = ya; y <= yb; ++y) {
     const float dy = y + 0.5f - s.my;
-    if (!RowHitsEllipse(dy, s.ca, s.cb, s.cc, s.min_power)) continue;  // (BoxRange: |dy| <= ey)
     const int k = (y - y0) * kTileSize + first;
     // Pixels whose chains have both terminated take no part: a row of them costs the exponent's
     // argument, not the exponent and the blends (behind an opaque surface, most rows of a tile's
@@ -308,10 +300,9 @@ void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, cons
   // enough to cost more than the exponents they saved.
   for (int y = ya; y <= yb; ++y) {
     const float dy = y + 0.5f - s.my;
-    const bool row_hit = RowHitsEllipse(dy, s.ca, s.cb, s.cc, s.min_power);  // (|dy| <= ey)
     const int k = (y - y0) * kTileSize + first;
     const V last_t = simd::Load<V>(st[bLastT] + k), last_r = simd::Load<V>(st[bLastR] + k);
-    const M blended = lanes_ok & ((jf < last_t) | (jf < last_r)) & (row_hit ? -1 : 0);
+    const M blended = lanes_ok & ((jf < last_t) | (jf < last_r));
     const V power = RowPower(s, dx, dy, blended, &in_row[rows]);
     G_row[rows] = simd::Exp(simd::Max(power, simd::Splat<V>(-80.0f)));
     dy_row[rows] = dy;
