@@ -1,6 +1,7 @@
 // Stage tests of the render pipeline: SH evaluation and its backward, quaternion rotation and its
 // backward, tile binning against brute force, the rasterizers' per-thread scratch.
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -197,6 +198,53 @@ TEST(RasterScratchTest, ReachedRangeIsExactlyTheCentresThePixelTestAccepts) {
       }
     }
   }
+}
+
+// The gradient reduction against a plain serial sum in tile and entry order: the same bits, with
+// rows of 15 and 18 floats (the two rasterizers': overlapping 8-float vectors) and of 5 (scalar),
+// tiles that use only a prefix of their entries, tiles longer than the scan's 256-entry chunks,
+// and one, two and three ranges.
+template <int stride>
+void ExpectReductionMatchesSerialSums() {
+  Rng rng(11);
+  TileBins bins;
+  bins.tiles_x = 4;
+  bins.tiles_y = 1;
+  const size_t num = 97;
+  bins.tile_start = {0};
+  std::vector<uint32_t> used;
+  for (int tile = 0; tile < 4; ++tile) {
+    const uint32_t n = tile == 2 ? 700 : 40 + 13 * tile;
+    for (uint32_t j = 0; j < n; ++j) bins.ids.push_back(static_cast<uint32_t>(rng.Uniform(0, num)));
+    bins.tile_start.push_back(static_cast<uint32_t>(bins.ids.size()));
+    used.push_back(tile == 1 ? n / 2 : n);
+  }
+  std::vector<float> entry(bins.ids.size() * stride);
+  for (float& v : entry) v = static_cast<float>(rng.Normal());
+  std::vector<float> expected(num * stride, 0.0f);
+  for (int tile = 0; tile < 4; ++tile) {
+    for (uint32_t j = 0; j < used[tile]; ++j) {
+      const uint32_t e = bins.tile_start[tile] + j;
+      for (int q = 0; q < stride; ++q) expected[bins.ids[e] * stride + q] += entry[e * stride + q];
+    }
+  }
+  const int saved = omp_get_max_threads();
+  for (int threads : {1, 2, 3}) {
+    omp_set_num_threads(threads);
+    std::vector<float> sums(5, 1.0f);  // stale contents are overwritten
+    ReduceEntryGradients<stride>(bins, used, entry, num, &sums);
+    ASSERT_EQ(sums.size(), expected.size());
+    for (size_t k = 0; k < sums.size(); ++k)
+      ASSERT_EQ(sums[k], expected[k])
+          << "stride " << stride << ", " << threads << " threads, " << k;
+  }
+  omp_set_num_threads(saved);
+}
+
+TEST(RasterScratchTest, ReduceEntryGradientsEqualsTheSerialSumsInEntryOrder) {
+  ExpectReductionMatchesSerialSums<15>();
+  ExpectReductionMatchesSerialSums<18>();
+  ExpectReductionMatchesSerialSums<5>();
 }
 
 }  // namespace
