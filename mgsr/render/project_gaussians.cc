@@ -278,7 +278,7 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
       out->conic[3 * i + 2] = a / det;
       for (int k = 0; k < 3; ++k) out->view_dir[3 * i + k] = L.dir[k][l];
       float basis[kMaxShCoeffs];  // shared by the transmitted and the reflected colour
-      ShBasis(degree, &out->view_dir[3 * i], basis);
+      ShBasis(degree, L.dir[0][l], L.dir[1][l], L.dir[2][l], basis);
       EvalShColorFromBasis(n_coeffs, basis, &m.sh[static_cast<size_t>(i) * K * 3],
                            &out->color_t[3 * i], &out->clamp_t[3 * i]);
       if (reflection) {

@@ -299,8 +299,11 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
       out->rects[i] = opacity > kMinBlendAlpha
                           ? TileRectFromBox(mx, my, L.ex[l], L.ey[l], tiles_x, tiles_y)
                           : rect;
-      EvalShColor(degree, &m.sh[static_cast<size_t>(i) * Kc * 3], &out->view_dir[3 * i],
-                  &out->color[3 * i], &out->clamp[3 * i]);
+      float basis[kMaxShCoeffs];
+      ShBasis(degree, L.dir[0][l], L.dir[1][l], L.dir[2][l], basis);
+      EvalShColorFromBasis((degree + 1) * (degree + 1), basis,
+                           &m.sh[static_cast<size_t>(i) * Kc * 3], &out->color[3 * i],
+                           &out->clamp[3 * i]);
     }
   }
 }

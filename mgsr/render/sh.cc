@@ -17,8 +17,7 @@ constexpr float kC3[7] = {-0.5900435899266435f, 2.890611442640554f,   -0.4570457
 
 }  // namespace
 
-void ShBasis(int degree, const float d[3], float b[kMaxShCoeffs]) {
-  const float x = d[0], y = d[1], z = d[2];
+void ShBasis(int degree, float x, float y, float z, float b[kMaxShCoeffs]) {
   b[0] = kC0;
   if (degree < 1) return;
   b[1] = -kC1 * y;

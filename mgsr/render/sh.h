@@ -10,8 +10,14 @@ namespace mgsr {
 
 constexpr int kMaxShCoeffs = 16;
 
-// Basis values Y_k(dir) for k < (degree + 1)^2; `dir` must be unit length.
-void ShBasis(int degree, const float dir[3], float basis[kMaxShCoeffs]);
+// Basis values Y_k(dir) for k < (degree + 1)^2; dir = (x, y, z) must be unit length. (By value:
+// the projections call it with a direction they have just stored, and a pointer let the compiler
+// read y and z in one 8-byte load, which the processor cannot forward from two 4-byte stores: the
+// load waited for the stores to reach the cache, the largest cost of the SH basis in `perf`.)
+void ShBasis(int degree, float x, float y, float z, float basis[kMaxShCoeffs]);
+inline void ShBasis(int degree, const float dir[3], float basis[kMaxShCoeffs]) {
+  ShBasis(degree, dir[0], dir[1], dir[2], basis);
+}
 
 // The same and d Y_k / d dir (row k holds the 3 partial derivatives).
 void ShBasisWithGradient(int degree, const float dir[3], float basis[kMaxShCoeffs],
