@@ -19,6 +19,10 @@ namespace mgsr {
 struct RasterScratch {
   // Per primitive, what the pixel loops read about it, in one row (both rasterizers).
   std::vector<float> packed;
+  // The projection `packed` was packed from by the last forward pass, which the backward reuses
+  // when it is handed the same one (the renderers' pairing: a backward follows the forward of the
+  // same projection, whose render it already reads); null before any forward.
+  const void* packed_from = nullptr;
   // d c / d M of the surfels' low-pass offsets (backward, area-preserving filter).
   std::vector<float> low_pass;
   std::vector<std::vector<float>> pixel_state;  // per thread: pixel state of the current tile

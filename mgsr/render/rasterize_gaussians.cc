@@ -419,6 +419,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
   const bool refl = o.reflection;
   const Image* bg_image = o.background_image;
   PackGaussians(p, &scratch->packed);
+  scratch->packed_from = &p;
   const float* packed = scratch->packed.data();
   // Per tile entry: the entry's summed blend weights (only when recording contributions).
   std::vector<float> entry_weight(o.record_contribution ? bins.ids.size() : 0, 0.0f);
@@ -516,7 +517,10 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
   EnsureScratch(scratch, threads, bins, kNumFields);
   const bool refl = o.reflection;
   const Image* bg_image = o.background_image;
-  PackGaussians(p, &scratch->packed);
+  if (scratch->packed_from != &p) {  // not the forward's projection (see RasterScratch)
+    PackGaussians(p, &scratch->packed);
+    scratch->packed_from = &p;
+  }
   const float* packed = scratch->packed.data();
 
   scratch->entry_grads.resize(bins.ids.size() * kGradStride);

@@ -109,17 +109,25 @@ inline float LowPassOffset(const float tu[3], const float tv[3], const float tw[
 // 19% of the forward's samples on it, skid included; the trained model's forward and backward
 // got 3% and 1% faster without it).
 // `dlow` (9 floats per surfel, or null): d c / d M of the rows that have an offset (the backward
-// reads no others). Surfels in no tile are skipped; too faint to blend get c = 0.
+// reads no others). Surfels in no tile are skipped; too faint to blend get c = 0. With `packed`
+// null only `dlow` is computed (a backward reusing its forward's rows).
 void PackSurfels(const ProjectedSurfels& p, float inv_square, std::vector<float>* dlow,
                  std::vector<float>* packed) {
   const int64_t n = static_cast<int64_t>(p.size());
-  packed->resize(static_cast<size_t>(n) * kNumFields);
+  if (packed != nullptr) packed->resize(static_cast<size_t>(n) * kNumFields);
   if (dlow != nullptr) dlow->resize(static_cast<size_t>(n) * 9);
-  float* out = packed->data();
+  float* out = packed != nullptr ? packed->data() : nullptr;
   float* dc = dlow != nullptr ? dlow->data() : nullptr;
 #pragma omp parallel for schedule(static)
   for (int64_t g = 0; g < n; ++g) {
     if (p.rects[g].empty()) continue;  // never binned
+    if (out == nullptr) {
+      if (inv_square > 0.0f && p.opacity[g] > kMinAlpha) {
+        const float* m = &p.M[9 * g];
+        LowPassOffset(m, m + 3, m + 6, inv_square, dc + 9 * g);
+      }
+      continue;
+    }
     float* f = out + g * kNumFields;
     for (int q = 0; q < 9; ++q) f[kTu0 + q] = p.M[9 * g + q];
     f[kMx] = p.center[2 * g];
@@ -574,6 +582,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
   PackSurfels(p, area_preserving ? inv_square : 0.0f, nullptr, &scratch->packed);
+  scratch->packed_from = &p;
   const float* packed = scratch->packed.data();
   // Per tile entry: the entry's summed blend weights (only when recording contributions).
   std::vector<float> entry_weight(o.record_contribution ? bins.ids.size() : 0, 0.0f);
@@ -688,7 +697,12 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
   const Eigen::Matrix3f Rc = o.camera.R.cast<float>();
   const bool area_preserving = o.low_pass == SurfelLowPass::kAreaPreserving;
   const float inv_square = 1.0f / (o.filter_sigma * o.filter_sigma);
-  PackSurfels(p, area_preserving ? inv_square : 0.0f, &scratch->low_pass, &scratch->packed);
+  if (scratch->packed_from != &p) {  // not the forward's projection (see RasterScratch)
+    PackSurfels(p, area_preserving ? inv_square : 0.0f, &scratch->low_pass, &scratch->packed);
+    scratch->packed_from = &p;
+  } else if (area_preserving) {  // the forward's rows, and d c / d M
+    PackSurfels(p, inv_square, &scratch->low_pass, nullptr);
+  }
   const float* low_pass = scratch->low_pass.data();
   const float* packed = scratch->packed.data();
   // The distortion terms only where its output was rendered and has a gradient.

@@ -382,5 +382,43 @@ TEST(GaussianRendererGradientTest, BackwardWritesEveryRowWhateverTheBuffersHeld)
   }
 }
 
+// The backward reuses the rows its forward packed only for the projection that forward packed:
+// handed another (here the forward's with every colour changed, which the opacities' gradients
+// read), it packs that one, and its gradients are a fresh scratch's.
+TEST(GaussianRendererGradientTest, BackwardPacksAProjectionItsForwardDidNot) {
+  const int w = 32, h = 32;
+  const Camera cam = testing::RenderTestCamera(w, h);
+  const GaussianModel m = RandomScene(40, 37);
+  const GaussianRenderOptions o = Options(cam);
+  ProjectedGaussians p;
+  ProjectGaussians(m, cam, o.sh_degree, o.reflection, &p);
+  TileBins bins;
+  BinPrimitives(p.rects, p.depth.data(), w, h, &bins);
+  RasterScratch scratch;
+  GaussianRender out;
+  RasterizeGaussians(p, bins, o, &out, &scratch);
+  ProjectedGaussians other = p;
+  for (float& c : other.color_t) c = 1.0f - c;
+  for (float& c : other.color_r) c = 1.0f - c;
+  GaussianRenderGrad grad;
+  grad.color = testing::RandomImage(w, h, 3, 8);
+  const auto backward = [&](const ProjectedGaussians& proj, RasterScratch* s) {
+    ProjectedGaussiansGrad d;
+    d.ResizeAndZero(proj.size());
+    RasterizeGaussiansBackward(proj, bins, o, out, grad, &d, s);
+    return d;
+  };
+  const auto same = [](const ProjectedGaussiansGrad& a, const ProjectedGaussiansGrad& b) {
+    return a.opacity == b.opacity && a.ref_opacity == b.ref_opacity && a.mean2d == b.mean2d &&
+           a.conic == b.conic && a.color_t == b.color_t && a.beta == b.beta;
+  };
+  RasterScratch fresh_scratch, fresh_scratch2;
+  const ProjectedGaussiansGrad of_other = backward(other, &scratch);
+  EXPECT_TRUE(same(of_other, backward(other, &fresh_scratch)));
+  const ProjectedGaussiansGrad of_p = backward(p, &scratch);
+  EXPECT_TRUE(same(of_p, backward(p, &fresh_scratch2)));
+  EXPECT_FALSE(same(of_p, of_other));  // the colours do reach the gradients
+}
+
 }  // namespace
 }  // namespace mgsr

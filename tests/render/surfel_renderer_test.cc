@@ -589,5 +589,44 @@ TEST(SurfelRendererTest, BackwardWritesEveryRowWhateverTheBuffersHeld) {
   }
 }
 
+// The backward reuses the rows its forward packed, computing only the low-pass offsets' gradients
+// (d c / d M), for the projection that forward packed, and packs any other (here the forward's
+// with every colour changed): both give a fresh scratch's gradients. Small surfels, so the
+// area-preserving offsets reach the gradients.
+TEST(SurfelRendererTest, BackwardPacksAProjectionItsForwardDidNot) {
+  const int w = 32, h = 32;
+  const Camera cam = testing::RenderTestCamera(w, h);
+  const SurfelModel m = RandomSurfels(40, 14, 0.01, 0.2);
+  const SurfelRenderOptions o = Options(cam);
+  ProjectedSurfels p;
+  ProjectSurfels(m, cam, o.sh_degree, &p, o.filter_sigma);
+  TileBins bins;
+  BinPrimitives(p.rects, p.depth.data(), w, h, &bins);
+  RasterScratch scratch;
+  SurfelRender out;
+  RasterizeSurfels(p, bins, o, &out, &scratch);
+  ProjectedSurfels other = p;
+  for (float& c : other.color) c = 1.0f - c;
+  SurfelRenderGrad grad;
+  grad.color = testing::RandomImage(w, h, 3, 8);
+  grad.depth = testing::RandomImage(w, h, 1, 9);
+  const auto backward = [&](const ProjectedSurfels& proj, RasterScratch* s) {
+    ProjectedSurfelsGrad d;
+    d.ResizeAndZero(proj.size());
+    RasterizeSurfelsBackward(proj, bins, o, out, grad, &d, s);
+    return d;
+  };
+  const auto same = [](const ProjectedSurfelsGrad& a, const ProjectedSurfelsGrad& b) {
+    return a.M == b.M && a.center == b.center && a.normal == b.normal && a.opacity == b.opacity &&
+           a.color == b.color;
+  };
+  RasterScratch fresh_scratch, fresh_scratch2;
+  const ProjectedSurfelsGrad of_p = backward(p, &scratch);  // the forward's rows
+  EXPECT_TRUE(same(of_p, backward(p, &fresh_scratch)));
+  const ProjectedSurfelsGrad of_other = backward(other, &scratch);
+  EXPECT_TRUE(same(of_other, backward(other, &fresh_scratch2)));
+  EXPECT_FALSE(same(of_p, of_other));  // the colours do reach the gradients
+}
+
 }  // namespace
 }  // namespace mgsr
