@@ -195,6 +195,16 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
   const int n_coeffs = (degree + 1) * (degree + 1);
   const float fx = camera.fx, fy = camera.fy, cx = camera.cx, cy = camera.cy;
   const float lim_x = FovLimit(cam.width, cam.fx), lim_y = FovLimit(cam.height, cam.fy);
+  // The activations, in a loop of their own (as in the backward: the block loop streams through
+  // some twenty-five per-Gaussian arrays, more than the hardware prefetcher follows).
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    out->opacity[i] = Sigmoid(m.opacity_logits[i]);
+    if (reflection) {
+      out->ref_opacity[i] = Sigmoid(m.ref_opacity_logits[i]);
+      out->beta[i] = Sigmoid(m.beta_logits[i]);
+    }
+  }
   const int blocks = (n + kLanes - 1) / kLanes;
 #pragma omp parallel for schedule(static)
   for (int b = 0; b < blocks; ++b) {
@@ -259,8 +269,6 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
       // Visible (radius > 0, what density control reads) when the 3-sigma square meets the image.
       if (!L.ok[l] || TileRectFromBox(u, v, radius, radius, tiles_x, tiles_y).empty()) continue;
       out->radius[i] = radius;
-      out->opacity[i] = Sigmoid(m.opacity_logits[i]);
-      if (reflection) out->ref_opacity[i] = Sigmoid(m.ref_opacity_logits[i]);
       // Binned where it can blend: a primitive too faint for 1/255 anywhere gets no tiles.
       const float o = reflection ? std::max(out->opacity[i], out->ref_opacity[i]) : out->opacity[i];
       const float a = L.cov[0][l], bb = L.cov[1][l], c = L.cov[2][l], det = L.det[l];
@@ -282,7 +290,6 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
       EvalShColorFromBasis(n_coeffs, basis, &m.sh[static_cast<size_t>(i) * K * 3],
                            &out->color_t[3 * i], &out->clamp_t[3 * i]);
       if (reflection) {
-        out->beta[i] = Sigmoid(m.beta_logits[i]);
         EvalShColorFromBasis(n_coeffs, basis, &m.ref_sh[static_cast<size_t>(i) * K * 3],
                              &out->color_r[3 * i], &out->clamp_r[3 * i]);
       }
