@@ -89,7 +89,10 @@ using Mat3 = Eigen::Matrix<float, 3, 3, Eigen::RowMajor>;
 
 // Both passes run over blocks of kLanes Gaussians (see projection_lanes.h): scalar passes gather
 // and take the library calls and the SH colours (a row of coefficients per Gaussian), lane loops
-// GCC vectorises take the geometry and its chain rule, and a scalar pass writes out. This file is
+// GCC vectorises take the geometry and its chain rule, and a scalar pass writes out. The
+// activations (both passes) and the SH colours' backward run in loops of their own before the
+// blocks: a loop over some thirty per-Gaussian arrays follows more streams than the hardware
+// prefetcher does, and its loads waited on memory. This file is
 // built without contraction (-ffp-contract=off): every fused multiply-add is the one spelled out,
 // as GCC had fused the per-Gaussian Eigen code before it; every output and gradient was the same
 // to the bit as that code's on the benchmark scene and on scenes with zero quaternions, Gaussians
@@ -195,8 +198,7 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
   const int n_coeffs = (degree + 1) * (degree + 1);
   const float fx = camera.fx, fy = camera.fy, cx = camera.cx, cy = camera.cy;
   const float lim_x = FovLimit(cam.width, cam.fx), lim_y = FovLimit(cam.height, cam.fy);
-  // The activations, in a loop of their own (as in the backward: the block loop streams through
-  // some twenty-five per-Gaussian arrays, more than the hardware prefetcher follows).
+  // The activations, in a loop of their own (see the top of the file).
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     out->opacity[i] = Sigmoid(m.opacity_logits[i]);
@@ -252,7 +254,7 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
                 std::isfinite(L.u[l]) & std::isfinite(L.v[l]);
     }
     for (int l = 0; l < kLanes; ++l) L.radius[l] = std::ceil(L.radius[l]);  // (not vectorised)
-    // Pass 3: write out, with the opacities, the alpha box and the SH colours.
+    // Pass 3: write out, with the alpha box and the SH colours.
     for (int l = 0; l < count; ++l) {
       const int i = base + l;
       if (i + kPrefetchAhead < n) {  // the coefficients the colours read
@@ -300,7 +302,7 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
 namespace {
 
 // The backward's lanes: the geometry, the upstream gradients it needs beyond the SH colours', what
-// the scalar pass found for the view direction, and what it writes back.
+// the SH loop found for the view direction, and what it writes back.
 struct GaussianGradLanes {
   GaussianGeometry g;
   float conic[3][kLanes], d_conic[3][kLanes], d_mean2d[2][kLanes], d_depth[kLanes];
@@ -326,9 +328,9 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
   const int n_coeffs = (degree + 1) * (degree + 1);
   GaussianModel& G = grads->params;
   const size_t row = static_cast<size_t>(K) * 3;  // SH floats per Gaussian
-  // The activations' gradients and the screen-mean statistic, in a loop of their own: the block
-  // loop below already streams through some thirty per-Gaussian arrays, more than the hardware
-  // prefetcher follows, and these twelve had their loads wait on memory there (`perf annotate`).
+  // The activations' gradients and the screen-mean statistic, in a loop of their own (see the
+  // top of the file; in the block loop these twelve arrays' loads waited on memory, `perf
+  // annotate`).
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     if (p.radius[i] <= 0) continue;
@@ -340,23 +342,51 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
       AddSigmoidGradient(p.beta[i], d.beta[i], &G.beta_logits[i]);
     }
   }
+  // The SH colours' backward, in a loop of its own too: the coefficient rows read and the gradient
+  // rows written (three cache lines each per colour) and the direction's gradient, kept for the
+  // block loop.
+  thread_local std::vector<float> dir_grad_buffer;     // (the calling thread's; the loops' threads
+  dir_grad_buffer.resize(3 * static_cast<size_t>(n));  // reach it through this pointer)
+  float* const dir_grad = dir_grad_buffer.data();
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    if (i + kPrefetchAhead < n) {  // the coefficients read, the rows written
+      const size_t ahead = row * (i + kPrefetchAhead);
+      PrefetchRow(&m.sh[ahead], 3 * n_coeffs);
+      if (reflection) PrefetchRow(&m.ref_sh[ahead], 3 * n_coeffs);
+      PrefetchRow(&G.sh[ahead], row);
+      PrefetchRow(&G.ref_sh[ahead], row);
+    }
+    float* const d_sh = &G.sh[row * i];
+    float* const d_ref_sh = &G.ref_sh[row * i];
+    float* const sum_dir = &dir_grad[3 * i];
+    sum_dir[0] = sum_dir[1] = sum_dir[2] = 0.0f;
+    if (p.radius[i] <= 0) {  // not drawn: its SH rows are written zero, the rest stays zero
+      std::fill(d_sh, d_sh + row, 0.0f);
+      std::fill(d_ref_sh, d_ref_sh + row, 0.0f);
+      continue;
+    }
+    float basis[kMaxShCoeffs], dbasis[kMaxShCoeffs][3];
+    ShBasisWithGradient(degree, &p.view_dir[3 * i], basis, dbasis);
+    WriteShRowBackward(n_coeffs, basis, dbasis, &m.sh[row * i], &p.clamp_t[3 * i],
+                       &d.color_t[3 * i], row, d_sh, sum_dir);
+    if (reflection) {
+      WriteShRowBackward(n_coeffs, basis, dbasis, &m.ref_sh[row * i], &p.clamp_r[3 * i],
+                         &d.color_r[3 * i], row, d_ref_sh, sum_dir);
+    } else {
+      std::fill(d_ref_sh, d_ref_sh + row, 0.0f);
+    }
+  }
   const int blocks = (n + kLanes - 1) / kLanes;
 #pragma omp parallel for schedule(static)
   for (int b = 0; b < blocks; ++b) {
     GaussianGradLanes L;
     const int base = b * kLanes, count = std::min(kLanes, n - base);
-    // Pass 1: the activations' and the SH colours' backward, and the gathers. (Lanes past the end
-    // or not drawn compute on what they hold; pass 3 skips them.)
+    // Pass 1: the gathers, with the view direction's gradient from the SH loop above. (Lanes past
+    // the end or not drawn compute on what they hold; pass 3 skips them.)
     GatherGaussians(m, base, count, &L.g);
     for (int l = 0; l < kLanes; ++l) {
       const int i = base + (l < count ? l : 0);
-      if (l < count && i + kPrefetchAhead < n) {  // the coefficients read, the rows written
-        const size_t ahead = row * (i + kPrefetchAhead);
-        PrefetchRow(&m.sh[ahead], 3 * n_coeffs);
-        if (reflection) PrefetchRow(&m.ref_sh[ahead], 3 * n_coeffs);
-        PrefetchRow(&G.sh[ahead], row);
-        PrefetchRow(&G.ref_sh[ahead], row);
-      }
       for (int k = 0; k < 3; ++k) {
         L.conic[k][l] = p.conic[3 * i + k];
         L.d_conic[k][l] = d.conic[3 * i + k];
@@ -364,27 +394,8 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
       }
       for (int k = 0; k < 2; ++k) L.d_mean2d[k][l] = d.mean2d[2 * i + k];
       L.d_depth[l] = d.depth[i];
-      if (l >= count) continue;
-      float* const d_sh = &G.sh[row * i];
-      float* const d_ref_sh = &G.ref_sh[row * i];
-      if (p.radius[i] <= 0) {  // not drawn: its SH rows are written zero, the rest stays zero
-        std::fill(d_sh, d_sh + row, 0.0f);
-        std::fill(d_ref_sh, d_ref_sh + row, 0.0f);
-        continue;
-      }
-      // Colours -> SH coefficients and the view direction (from both colours).
-      float sum_dir[3] = {0, 0, 0};
-      float basis[kMaxShCoeffs], dbasis[kMaxShCoeffs][3];
-      ShBasisWithGradient(degree, &p.view_dir[3 * i], basis, dbasis);
-      WriteShRowBackward(n_coeffs, basis, dbasis, &m.sh[row * i], &p.clamp_t[3 * i],
-                         &d.color_t[3 * i], row, d_sh, sum_dir);
-      if (reflection) {
-        WriteShRowBackward(n_coeffs, basis, dbasis, &m.ref_sh[row * i], &p.clamp_r[3 * i],
-                           &d.color_r[3 * i], row, d_ref_sh, sum_dir);
-      } else {
-        std::fill(d_ref_sh, d_ref_sh + row, 0.0f);
-      }
-      for (int k = 0; k < 3; ++k) L.d_dir[k][l] = sum_dir[k];
+      if (l >= count || p.radius[i] <= 0) continue;
+      for (int k = 0; k < 3; ++k) L.d_dir[k][l] = dir_grad[3 * i + k];
     }
     // Pass 2: the geometry, and the chain from the conic, the screen mean and the depth to the
     // mean, the scales and the rotation.
