@@ -254,14 +254,9 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
                 std::isfinite(L.u[l]) & std::isfinite(L.v[l]);
     }
     for (int l = 0; l < kLanes; ++l) L.radius[l] = std::ceil(L.radius[l]);  // (not vectorised)
-    // Pass 3: write out, with the alpha box and the SH colours.
+    // Pass 3: write out, with the alpha box.
     for (int l = 0; l < count; ++l) {
       const int i = base + l;
-      if (i + kPrefetchAhead < n) {  // the coefficients the colours read
-        const size_t ahead = static_cast<size_t>(i + kPrefetchAhead) * K * 3;
-        PrefetchRow(&m.sh[ahead], 3 * n_coeffs);
-        if (reflection) PrefetchRow(&m.ref_sh[ahead], 3 * n_coeffs);
-      }
       out->depth[i] = L.g.t[2][l];
       out->radius[i] = 0;
       out->rects[i] = TileRect();
@@ -287,14 +282,24 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
       out->conic[3 * i + 1] = -bb / det;
       out->conic[3 * i + 2] = a / det;
       for (int k = 0; k < 3; ++k) out->view_dir[3 * i + k] = L.dir[k][l];
-      float basis[kMaxShCoeffs];  // shared by the transmitted and the reflected colour
-      ShBasis(degree, L.dir[0][l], L.dir[1][l], L.dir[2][l], basis);
-      EvalShColorFromBasis(n_coeffs, basis, &m.sh[static_cast<size_t>(i) * K * 3],
-                           &out->color_t[3 * i], &out->clamp_t[3 * i]);
-      if (reflection) {
-        EvalShColorFromBasis(n_coeffs, basis, &m.ref_sh[static_cast<size_t>(i) * K * 3],
-                             &out->color_r[3 * i], &out->clamp_r[3 * i]);
-      }
+    }
+  }
+  // The SH colours of the drawn Gaussians, in a loop of their own (see the top of the file).
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    if (i + kPrefetchAhead < n) {  // the coefficients the colours read
+      const size_t ahead = static_cast<size_t>(i + kPrefetchAhead) * K * 3;
+      PrefetchRow(&m.sh[ahead], 3 * n_coeffs);
+      if (reflection) PrefetchRow(&m.ref_sh[ahead], 3 * n_coeffs);
+    }
+    if (!(out->radius[i] > 0)) continue;
+    float basis[kMaxShCoeffs];  // shared by the transmitted and the reflected colour
+    ShBasis(degree, &out->view_dir[3 * i], basis);
+    EvalShColorFromBasis(n_coeffs, basis, &m.sh[static_cast<size_t>(i) * K * 3],
+                         &out->color_t[3 * i], &out->clamp_t[3 * i]);
+    if (reflection) {
+      EvalShColorFromBasis(n_coeffs, basis, &m.ref_sh[static_cast<size_t>(i) * K * 3],
+                           &out->color_r[3 * i], &out->clamp_r[3 * i]);
     }
   }
 }
