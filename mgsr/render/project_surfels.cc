@@ -273,8 +273,6 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
     // Pass 3: write out, and the SH colour.
     for (int l = 0; l < count; ++l) {
       const int i = base + l;
-      if (i + kPrefetchAhead < n)  // the coefficients the colour reads
-        PrefetchRow(&m.sh[static_cast<size_t>(i + kPrefetchAhead) * Kc * 3], 3 * n_coeffs);
       out->depth[i] = L.g.pv[2][l];
       out->radius[i] = 0;
       out->rects[i] = TileRect();
@@ -299,12 +297,19 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
       out->rects[i] = opacity > kMinBlendAlpha
                           ? TileRectFromBox(mx, my, L.ex[l], L.ey[l], tiles_x, tiles_y)
                           : rect;
-      float basis[kMaxShCoeffs];
-      ShBasis(degree, L.dir[0][l], L.dir[1][l], L.dir[2][l], basis);
-      EvalShColorFromBasis((degree + 1) * (degree + 1), basis,
-                           &m.sh[static_cast<size_t>(i) * Kc * 3], &out->color[3 * i],
-                           &out->clamp[3 * i]);
     }
+  }
+  // The SH colours of the drawn surfels, in a loop of their own: a loop over more per-surfel
+  // arrays than the hardware prefetcher follows waits on memory (as ProjectGaussians).
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    if (i + kPrefetchAhead < n)  // the coefficients the colour reads
+      PrefetchRow(&m.sh[static_cast<size_t>(i + kPrefetchAhead) * Kc * 3], 3 * n_coeffs);
+    if (!(out->radius[i] > 0)) continue;
+    float basis[kMaxShCoeffs];
+    ShBasis(degree, &out->view_dir[3 * i], basis);
+    EvalShColorFromBasis(n_coeffs, basis, &m.sh[static_cast<size_t>(i) * Kc * 3],
+                         &out->color[3 * i], &out->clamp[3 * i]);
   }
 }
 
@@ -322,10 +327,11 @@ struct SurfelGradLanes {
 
 }  // namespace
 
-// The backward runs over the forward's blocks of kLanes surfels: a scalar pass takes the SH
-// colour's backward (a row of coefficients per surfel) and gathers, the geometry and the chain to
-// the parameters run in lane loops, and a scalar pass adds what each drawn surfel got into the
-// model's gradients, as the per-surfel loop before it did (the same sums in the same order).
+// The backward takes the SH colour's backward (a row of coefficients per surfel) in a loop of its
+// own, then runs over the forward's blocks of kLanes surfels: a scalar pass gathers, the geometry
+// and the chain to the parameters run in lane loops, and a scalar pass adds what each drawn surfel
+// got into the model's gradients, as the per-surfel loop before it did (the same sums in the same
+// order).
 void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degree,
                             const ProjectedSurfels& p, const ProjectedSurfelsGrad& d,
                             SurfelGradients* grads) {
@@ -339,20 +345,39 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
   SurfelModel& G = grads->params;
   const size_t row = static_cast<size_t>(Kc) * 3;  // SH floats per surfel
   const int n_coeffs = (degree + 1) * (degree + 1);
+  // The SH colour's backward in a loop of its own (as ProjectGaussiansBackward), the direction's
+  // gradient kept for the blocks.
+  thread_local std::vector<float> dir_grad_buffer;     // (the calling thread's; the loops' threads
+  dir_grad_buffer.resize(3 * static_cast<size_t>(n));  // reach it through this pointer)
+  float* const dir_grad = dir_grad_buffer.data();
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    if (i + kPrefetchAhead < n) {  // the coefficients read, the gradient row written
+      PrefetchRow(&m.sh[row * (i + kPrefetchAhead)], 3 * n_coeffs);
+      PrefetchRow(&G.sh[row * (i + kPrefetchAhead)], row);
+    }
+    float* const d_sh = &G.sh[row * i];
+    float* const d_dir = &dir_grad[3 * i];
+    d_dir[0] = d_dir[1] = d_dir[2] = 0.0f;
+    if (p.radius[i] <= 0) {  // not drawn: its SH row is written zero, the rest stays zero
+      std::fill(d_sh, d_sh + row, 0.0f);
+      continue;
+    }
+    float basis[kMaxShCoeffs], dbasis[kMaxShCoeffs][3];
+    ShBasisWithGradient(degree, &p.view_dir[3 * i], basis, dbasis);
+    WriteShRowBackward(n_coeffs, basis, dbasis, &m.sh[row * i], &p.clamp[3 * i], &d.color[3 * i],
+                       row, d_sh, d_dir);
+  }
   const int blocks = (n + kLanes - 1) / kLanes;
 #pragma omp parallel for schedule(static)
   for (int b = 0; b < blocks; ++b) {
     SurfelGradLanes L;
     const int base = b * kLanes, count = std::min(kLanes, n - base);
-    // Pass 1: the SH colour's backward and the gathers. (Lanes past the end repeat the block's
-    // first surfel, lanes not drawn get no direction gradient; pass 3 skips both.)
+    // Pass 1: the gathers and the opacity's gradient. (Lanes past the end repeat the block's first
+    // surfel, lanes not drawn get no direction gradient; pass 3 skips both.)
     GatherSurfels(m, base, count, &L.g);
     for (int l = 0; l < kLanes; ++l) {
       const int i = base + (l < count ? l : 0);
-      if (l < count && i + kPrefetchAhead < n) {  // the coefficients read, the gradient row written
-        PrefetchRow(&m.sh[row * (i + kPrefetchAhead)], 3 * n_coeffs);
-        PrefetchRow(&G.sh[row * (i + kPrefetchAhead)], row);
-      }
       for (int k = 0; k < 9; ++k) L.dM[k][l] = d.M[9 * i + k];
       for (int k = 0; k < 2; ++k) {
         L.center[k][l] = p.center[2 * i + k];
@@ -361,20 +386,9 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
       for (int k = 0; k < 3; ++k) L.d_normal[k][l] = d.normal[3 * i + k];
       L.sign[l] = p.normal_sign[i];
       for (int k = 0; k < 3; ++k) L.d_dir[k][l] = 0.0f;
-      if (l >= count) continue;
-      float* const d_sh = &G.sh[row * i];
-      if (p.radius[i] <= 0) {  // not drawn: its SH row is written zero, the rest stays zero
-        std::fill(d_sh, d_sh + row, 0.0f);
-        continue;
-      }
+      if (l >= count || p.radius[i] <= 0) continue;
       AddSigmoidGradient(p.opacity[i], d.opacity[i], &G.opacity_logits[i]);
-      // Colour -> SH and the view direction.
-      float d_dir[3] = {0, 0, 0};
-      float basis[kMaxShCoeffs], dbasis[kMaxShCoeffs][3];
-      ShBasisWithGradient(degree, &p.view_dir[3 * i], basis, dbasis);
-      WriteShRowBackward(n_coeffs, basis, dbasis, &m.sh[row * i], &p.clamp[3 * i], &d.color[3 * i],
-                         row, d_sh, d_dir);
-      for (int k = 0; k < 3; ++k) L.d_dir[k][l] = d_dir[k];
+      for (int k = 0; k < 3; ++k) L.d_dir[k][l] = dir_grad[3 * i + k];
     }
     // Pass 2: the geometry, and the chain from M, the centre and the normal to the parameters.
     SurfelGeometryLanes(camera, &L.g);
