@@ -51,6 +51,12 @@ void ProjectedGaussians::Resize(size_t n) {
   view_dir.resize(3 * n);
 }
 
+void ProjectedGaussiansGrad::Resize(size_t n) {
+  mean2d.resize(2 * n);
+  for (auto* v : {&conic, &color_t, &color_r}) v->resize(3 * n);
+  for (auto* v : {&depth, &opacity, &ref_opacity, &beta}) v->resize(n);
+}
+
 void ProjectedGaussiansGrad::ResizeAndZero(size_t n) {
   for (auto* v : {&mean2d}) ZeroFill(2 * n, v);
   for (auto* v : {&conic, &color_t, &color_r}) ZeroFill(3 * n, v);

@@ -51,6 +51,7 @@ struct ProjectedGaussians {
 struct ProjectedGaussiansGrad {
   std::vector<float> mean2d, conic, depth, opacity, ref_opacity, beta, color_t, color_r;
   void ResizeAndZero(size_t n);
+  void Resize(size_t n);  // sized, not zeroed
 };
 
 // `reflection` false: the reflected quantities are not computed (plain 3DGS).

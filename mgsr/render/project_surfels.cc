@@ -29,6 +29,14 @@ void ProjectedSurfels::Resize(size_t n) {
   extent.resize(2 * n);
 }
 
+void ProjectedSurfelsGrad::Resize(size_t n) {
+  M.resize(9 * n);
+  center.resize(2 * n);
+  normal.resize(3 * n);
+  opacity.resize(n);
+  color.resize(3 * n);
+}
+
 void ProjectedSurfelsGrad::ResizeAndZero(size_t n) {
   ZeroFill(9 * n, &M);
   ZeroFill(2 * n, &center);

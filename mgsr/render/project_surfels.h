@@ -50,6 +50,7 @@ struct ProjectedSurfels {
 struct ProjectedSurfelsGrad {
   std::vector<float> M, center, normal, opacity, color;
   void ResizeAndZero(size_t n);
+  void Resize(size_t n);  // sized, not zeroed
 };
 
 struct SurfelGradients {

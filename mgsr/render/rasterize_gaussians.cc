@@ -523,6 +523,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
   }
   const float* packed = scratch->packed.data();
 
+  d->Resize(num);  // every entry is written below
   scratch->entry_grads.resize(bins.ids.size() * kGradStride);
   scratch->tile_used.assign(bins.num_tiles(), 0);
 #pragma omp parallel num_threads(threads)
@@ -622,18 +623,18 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < static_cast<int64_t>(num); ++i) {
     const float* s = scratch->per_primitive.data() + static_cast<size_t>(i) * kGradStride;
-    d->mean2d[2 * i] += s[gMx];
-    d->mean2d[2 * i + 1] += s[gMy];
-    d->conic[3 * i] += s[gCa];
-    d->conic[3 * i + 1] += s[gCb];
-    d->conic[3 * i + 2] += s[gCc];
-    d->opacity[i] += s[gOp];
-    d->ref_opacity[i] += s[gRefOp];
-    d->beta[i] += s[gBeta];
-    d->depth[i] += s[gZ];
+    d->mean2d[2 * i] = 0.0f + s[gMx];
+    d->mean2d[2 * i + 1] = 0.0f + s[gMy];
+    d->conic[3 * i] = 0.0f + s[gCa];
+    d->conic[3 * i + 1] = 0.0f + s[gCb];
+    d->conic[3 * i + 2] = 0.0f + s[gCc];
+    d->opacity[i] = 0.0f + s[gOp];
+    d->ref_opacity[i] = 0.0f + s[gRefOp];
+    d->beta[i] = 0.0f + s[gBeta];
+    d->depth[i] = 0.0f + s[gZ];
     for (int c = 0; c < 3; ++c) {
-      d->color_t[3 * i + c] += s[gCt0 + c];
-      d->color_r[3 * i + c] += s[gCr0 + c];
+      d->color_t[3 * i + c] = 0.0f + s[gCt0 + c];
+      d->color_r[3 * i + c] = 0.0f + s[gCr0 + c];
     }
   }
 }

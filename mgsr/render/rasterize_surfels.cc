@@ -708,6 +708,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
   // The distortion terms only where its output was rendered and has a gradient.
   const bool distortion = o.distortion && !g.distortion.empty();
 
+  d->Resize(num);  // every entry is written below
   scratch->entry_grads.resize(bins.ids.size() * kGradStride);
   scratch->tile_used.assign(bins.num_tiles(), 0);
 #pragma omp parallel num_threads(threads)
@@ -831,13 +832,13 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < static_cast<int64_t>(num); ++i) {
     const float* s = scratch->per_primitive.data() + static_cast<size_t>(i) * kGradStride;
-    for (int q = 0; q < 9; ++q) d->M[9 * i + q] += s[gTu0 + q];
-    d->center[2 * i] += s[gMx];
-    d->center[2 * i + 1] += s[gMy];
-    d->opacity[i] += s[gOp];
+    for (int q = 0; q < 9; ++q) d->M[9 * i + q] = 0.0f + s[gTu0 + q];
+    d->center[2 * i] = 0.0f + s[gMx];
+    d->center[2 * i + 1] = 0.0f + s[gMy];
+    d->opacity[i] = 0.0f + s[gOp];
     for (int c = 0; c < 3; ++c) {
-      d->normal[3 * i + c] += s[gN0 + c];
-      d->color[3 * i + c] += s[gC0 + c];
+      d->normal[3 * i + c] = 0.0f + s[gN0 + c];
+      d->color[3 * i + c] = 0.0f + s[gC0 + c];
     }
   }
 }

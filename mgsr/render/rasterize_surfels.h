@@ -95,6 +95,7 @@ void RasterizeSurfels(const ProjectedSurfels& projected, const TileBins& bins,
 void SurfelBackgroundGradient(const SurfelRender& render, const SurfelRenderGrad& grad,
                               Image* d_background);
 
+// Writes d loss / d projected quantities into `d_projected` (sized here; every entry written).
 void RasterizeSurfelsBackward(const ProjectedSurfels& projected, const TileBins& bins,
                               const SurfelRenderOptions& options, const SurfelRender& render,
                               const SurfelRenderGrad& grad, ProjectedSurfelsGrad* d_projected,

@@ -27,7 +27,6 @@ void SurfelRenderer::Backward(const SurfelModel& model, const SurfelRenderOption
   CHECK_EQ(projected_.size(), model.size()) << "Backward without a matching Forward";
   {
     ProfileScope scope("raster backward");
-    d_projected_.ResizeAndZero(model.size());
     RasterizeSurfelsBackward(projected_, bins_, options, render, grad, &d_projected_, &scratch_);
   }
   ProfileScope scope("projection & SH backward");

@@ -384,7 +384,8 @@ TEST(GaussianRendererGradientTest, BackwardWritesEveryRowWhateverTheBuffersHeld)
 
 // The backward reuses the rows its forward packed only for the projection that forward packed:
 // handed another (here the forward's with every colour changed, which the opacities' gradients
-// read), it packs that one, and its gradients are a fresh scratch's.
+// read), it packs that one, and its gradients are a fresh scratch's. (It writes every gradient
+// entry: the buffers start as NaN, which would compare unequal.)
 TEST(GaussianRendererGradientTest, BackwardPacksAProjectionItsForwardDidNot) {
   const int w = 32, h = 32;
   const Camera cam = testing::RenderTestCamera(w, h);
@@ -403,14 +404,18 @@ TEST(GaussianRendererGradientTest, BackwardPacksAProjectionItsForwardDidNot) {
   GaussianRenderGrad grad;
   grad.color = testing::RandomImage(w, h, 3, 8);
   const auto backward = [&](const ProjectedGaussians& proj, RasterScratch* s) {
-    ProjectedGaussiansGrad d;
-    d.ResizeAndZero(proj.size());
+    ProjectedGaussiansGrad d;  // (it holds NaN: the backward writes every entry)
+    d.Resize(proj.size());
+    for (auto* v : {&d.mean2d, &d.conic, &d.depth, &d.opacity, &d.ref_opacity, &d.beta, &d.color_t,
+                    &d.color_r})
+      std::fill(v->begin(), v->end(), std::nanf(""));
     RasterizeGaussiansBackward(proj, bins, o, out, grad, &d, s);
     return d;
   };
   const auto same = [](const ProjectedGaussiansGrad& a, const ProjectedGaussiansGrad& b) {
     return a.opacity == b.opacity && a.ref_opacity == b.ref_opacity && a.mean2d == b.mean2d &&
-           a.conic == b.conic && a.color_t == b.color_t && a.beta == b.beta;
+           a.conic == b.conic && a.color_t == b.color_t && a.color_r == b.color_r &&
+           a.beta == b.beta && a.depth == b.depth;
   };
   RasterScratch fresh_scratch, fresh_scratch2;
   const ProjectedGaussiansGrad of_other = backward(other, &scratch);

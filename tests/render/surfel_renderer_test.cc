@@ -592,7 +592,8 @@ TEST(SurfelRendererTest, BackwardWritesEveryRowWhateverTheBuffersHeld) {
 // The backward reuses the rows its forward packed, computing only the low-pass offsets' gradients
 // (d c / d M), for the projection that forward packed, and packs any other (here the forward's
 // with every colour changed): both give a fresh scratch's gradients. Small surfels, so the
-// area-preserving offsets reach the gradients.
+// area-preserving offsets reach the gradients. (It writes every gradient entry: the buffers start
+// as NaN, which would compare unequal.)
 TEST(SurfelRendererTest, BackwardPacksAProjectionItsForwardDidNot) {
   const int w = 32, h = 32;
   const Camera cam = testing::RenderTestCamera(w, h);
@@ -611,8 +612,10 @@ TEST(SurfelRendererTest, BackwardPacksAProjectionItsForwardDidNot) {
   grad.color = testing::RandomImage(w, h, 3, 8);
   grad.depth = testing::RandomImage(w, h, 1, 9);
   const auto backward = [&](const ProjectedSurfels& proj, RasterScratch* s) {
-    ProjectedSurfelsGrad d;
-    d.ResizeAndZero(proj.size());
+    ProjectedSurfelsGrad d;  // (it holds NaN: the backward writes every entry)
+    d.Resize(proj.size());
+    for (auto* v : {&d.M, &d.center, &d.normal, &d.opacity, &d.color})
+      std::fill(v->begin(), v->end(), std::nanf(""));
     RasterizeSurfelsBackward(proj, bins, o, out, grad, &d, s);
     return d;
   };
