@@ -12,7 +12,6 @@
 
 namespace mgsr {
 
-using projection_lanes::AddSigmoidGradient;
 using projection_lanes::CameraLanes;
 using projection_lanes::DotPackedOrder;
 using projection_lanes::DotScalarOrder;
@@ -21,6 +20,7 @@ using projection_lanes::kLanes;
 using projection_lanes::LaneNormalizeBackward;
 using projection_lanes::LaneRotationBackward;
 using projection_lanes::MaxValue;
+using projection_lanes::SigmoidGradient;
 
 bool AlphaExtent(float cov_xx, float cov_yy, float opacity, float radius, float* ex, float* ey) {
   if (!(opacity > kMinBlendAlpha)) return false;
@@ -65,18 +65,19 @@ void ProjectedGaussiansGrad::ResizeAndZero(size_t n) {
 
 void GaussianGradients::ResizeAndZero(const GaussianModel& model) {
   ResizeForBackward(model);
-  for (auto* v : {&params.sh, &params.ref_sh}) ZeroFill(v->size(), v);
+  for (ParamBlock& b : params.Blocks()) ZeroFill(b.data->size(), b.data);
+  ZeroFill(mean2d.size(), &mean2d);
 }
 
 void GaussianGradients::ResizeForBackward(const GaussianModel& model) {
   params.max_sh_degree = model.max_sh_degree;
   const size_t n = model.size(), k3 = 3 * static_cast<size_t>(params.sh_coeffs());
-  for (auto* v : {&params.means, &params.log_scales}) ZeroFill(3 * n, v);
-  ZeroFill(4 * n, &params.quats);
+  for (auto* v : {&params.means, &params.log_scales}) v->resize(3 * n);
+  params.quats.resize(4 * n);
   for (auto* v : {&params.sh, &params.ref_sh}) v->resize(k3 * n);
   for (auto* v : {&params.opacity_logits, &params.ref_opacity_logits, &params.beta_logits})
-    ZeroFill(n, v);
-  ZeroFill(2 * n, &mean2d);
+    v->resize(n);
+  mean2d.resize(2 * n);
 }
 
 void ScreenGradientNorms(const std::vector<float>& mean2d, int width, int height,
@@ -344,14 +345,13 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
   // annotate`).
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
-    if (p.radius[i] <= 0) continue;
-    grads->mean2d[2 * i] += d.mean2d[2 * i];
-    grads->mean2d[2 * i + 1] += d.mean2d[2 * i + 1];
-    AddSigmoidGradient(p.opacity[i], d.opacity[i], &G.opacity_logits[i]);
-    if (reflection) {
-      AddSigmoidGradient(p.ref_opacity[i], d.ref_opacity[i], &G.ref_opacity_logits[i]);
-      AddSigmoidGradient(p.beta[i], d.beta[i], &G.beta_logits[i]);
-    }
+    const bool drawn = p.radius[i] > 0;
+    grads->mean2d[2 * i] = drawn ? 0.0f + d.mean2d[2 * i] : 0.0f;
+    grads->mean2d[2 * i + 1] = drawn ? 0.0f + d.mean2d[2 * i + 1] : 0.0f;
+    G.opacity_logits[i] = drawn ? SigmoidGradient(p.opacity[i], d.opacity[i]) : 0.0f;
+    G.ref_opacity_logits[i] =
+        drawn && reflection ? SigmoidGradient(p.ref_opacity[i], d.ref_opacity[i]) : 0.0f;
+    G.beta_logits[i] = drawn && reflection ? SigmoidGradient(p.beta[i], d.beta[i]) : 0.0f;
   }
   // The SH colours' backward, in a loop of its own too: the coefficient rows read and the gradient
   // rows written (three cache lines each per colour) and the direction's gradient, kept for the
@@ -545,13 +545,17 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
     // Pass 3: into the model's gradients.
     for (int l = 0; l < count; ++l) {
       const int i = base + l;
-      if (p.radius[i] <= 0) continue;
-      for (int k = 0; k < 3; ++k) {
-        G.means[3 * i + k] += L.d_mean[k][l];
-        G.log_scales[3 * i + k] =
-            FusedMultiplyAdd(L.ds[k][l], L.g.s[k][l], G.log_scales[3 * i + k]);
+      if (p.radius[i] <= 0) {  // not drawn: zero
+        std::fill(&G.means[3 * i], &G.means[3 * i] + 3, 0.0f);
+        std::fill(&G.log_scales[3 * i], &G.log_scales[3 * i] + 3, 0.0f);
+        std::fill(&G.quats[4 * i], &G.quats[4 * i] + 4, 0.0f);
+        continue;
       }
-      for (int k = 0; k < 4; ++k) G.quats[4 * i + k] += L.dq[k][l];
+      for (int k = 0; k < 3; ++k) {
+        G.means[3 * i + k] = 0.0f + L.d_mean[k][l];
+        G.log_scales[3 * i + k] = FusedMultiplyAdd(L.ds[k][l], L.g.s[k][l], 0.0f);
+      }
+      for (int k = 0; k < 4; ++k) G.quats[4 * i + k] = 0.0f + L.dq[k][l];
     }
   }
 }

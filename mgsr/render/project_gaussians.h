@@ -65,8 +65,7 @@ struct GaussianGradients {
   std::vector<float> mean2d;  // N x 2
 
   void ResizeAndZero(const GaussianModel& model);
-  // The same, except that the SH blocks (sh, ref_sh) are only sized: ProjectGaussiansBackward
-  // writes every row of them.
+  // Only sized: ProjectGaussiansBackward writes every entry (no 10 MB zero-fill per 100k step).
   void ResizeForBackward(const GaussianModel& model);
 };
 
@@ -76,8 +75,8 @@ struct GaussianGradients {
 void ScreenGradientNorms(const std::vector<float>& mean2d_grads, int width, int height,
                          std::vector<float>* norms);
 
-// Adds the chain from projected-quantity gradients to every raw parameter into `grads`; the SH
-// blocks' rows it writes instead (so they need no zeroing: GaussianGradients::ResizeForBackward).
+// Writes the chain from projected-quantity gradients to every raw parameter into `grads` (sized
+// by GaussianGradients::ResizeForBackward; every entry, zero for Gaussians not drawn).
 void ProjectGaussiansBackward(const GaussianModel& model, const Camera& camera, int sh_degree,
                               bool reflection, const ProjectedGaussians& projected,
                               const ProjectedGaussiansGrad& d_projected, GaussianGradients* grads);

@@ -35,6 +35,10 @@ inline T FusedMultiplyAdd(T a, T b, T c) {
 inline void AddSigmoidGradient(float s, float d, float* g) {
   *g = FusedMultiplyAdd(SigmoidGradFromValue(s), d, *g);
 }
+// d sigmoid'(s) itself: the bits AddSigmoidGradient leaves in a zero.
+inline float SigmoidGradient(float s, float d) {
+  return FusedMultiplyAdd(SigmoidGradFromValue(s), d, 0.0f);
+}
 
 // Three-term dot products. A fixed-size product of row-major floats sums a0 b0 + (a1 b1 + a2 b2),
 // which GCC fused as fma(a0, b0, fma(a2, b2, a1 b1)); where it had packed several such sums into

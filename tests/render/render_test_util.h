@@ -35,9 +35,10 @@ inline Image RandomImage(int w, int h, int channels, uint64_t seed) {
   return im;
 }
 
-// A renderer's backward into gradient buffers that held NaN everywhere gives what it gives into
-// fresh ones (it writes every row the forward's primitives own); `Gradients` is the renderer's
-// gradient type (params: a model with Blocks(); ResizeAndZero). Returns the fresh gradients.
+// A renderer's backward into gradient buffers that held NaN everywhere (the parameter blocks and
+// the screen-mean statistic) gives what it gives into fresh ones (it writes every entry);
+// `Gradients` is the renderer's gradient type (params: a model with Blocks(); ResizeAndZero).
+// Returns the fresh gradients.
 template <class Renderer, class Gradients, class Model, class Options, class Render, class Grad>
 Gradients ExpectBackwardWritesEveryRow(Renderer* renderer, const Model& m, const Options& o,
                                        const Render& out, const Grad& grad,
@@ -47,9 +48,11 @@ Gradients ExpectBackwardWritesEveryRow(Renderer* renderer, const Model& m, const
   reused.ResizeAndZero(m);
   for (const ParamBlock& b : reused.params.Blocks())
     std::fill(b.data->begin(), b.data->end(), std::nanf(""));
+  std::fill(reused.mean2d.begin(), reused.mean2d.end(), std::nanf(""));
   renderer->Backward(m, o, out, grad, &reused);
   const std::vector<ParamBlock> a = fresh.params.Blocks(), b = reused.params.Blocks();
   for (size_t k = 0; k < a.size(); ++k) EXPECT_EQ(*a[k].data, *b[k].data) << a[k].name << what;
+  EXPECT_EQ(fresh.mean2d, reused.mean2d) << "mean2d" << what;
   return fresh;
 }
 
