@@ -47,18 +47,19 @@ void ProjectedSurfelsGrad::ResizeAndZero(size_t n) {
 
 void SurfelGradients::ResizeAndZero(const SurfelModel& model) {
   ResizeForBackward(model);
-  ZeroFill(params.sh.size(), &params.sh);
+  for (ParamBlock& b : params.Blocks()) ZeroFill(b.data->size(), b.data);
+  ZeroFill(mean2d.size(), &mean2d);
 }
 
 void SurfelGradients::ResizeForBackward(const SurfelModel& model) {
   params.max_sh_degree = model.max_sh_degree;
   const size_t n = model.size();
-  ZeroFill(3 * n, &params.means);
-  ZeroFill(2 * n, &params.log_scales);
-  ZeroFill(4 * n, &params.quats);
-  ZeroFill(n, &params.opacity_logits);
+  params.means.resize(3 * n);
+  params.log_scales.resize(2 * n);
+  params.quats.resize(4 * n);
+  params.opacity_logits.resize(n);
   params.sh.resize(3 * static_cast<size_t>(params.sh_coeffs()) * n);
-  ZeroFill(2 * n, &mean2d);
+  mean2d.resize(2 * n);
 }
 
 namespace {
@@ -72,7 +73,6 @@ namespace {
 // built without contraction): every output was the same to the bit on the benchmark scene and on
 // scenes with zero quaternions, surfels behind the camera, huge and tiny scales, all four SH
 // degrees.
-using projection_lanes::AddSigmoidGradient;
 using projection_lanes::CameraLanes;
 using projection_lanes::DotColumnMajorRow;
 using projection_lanes::DotPackedOrder;
@@ -82,6 +82,7 @@ using projection_lanes::kLanes;
 using projection_lanes::LaneNormalizeBackward;
 using projection_lanes::LaneRotationBackward;
 using projection_lanes::MaxValue;
+using projection_lanes::SigmoidGradient;
 
 using Mat3 = Eigen::Matrix<float, 3, 3, Eigen::RowMajor>;
 
@@ -394,8 +395,9 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
       for (int k = 0; k < 3; ++k) L.d_normal[k][l] = d.normal[3 * i + k];
       L.sign[l] = p.normal_sign[i];
       for (int k = 0; k < 3; ++k) L.d_dir[k][l] = 0.0f;
-      if (l >= count || p.radius[i] <= 0) continue;
-      AddSigmoidGradient(p.opacity[i], d.opacity[i], &G.opacity_logits[i]);
+      if (l >= count) continue;
+      G.opacity_logits[i] = p.radius[i] > 0 ? SigmoidGradient(p.opacity[i], d.opacity[i]) : 0.0f;
+      if (p.radius[i] <= 0) continue;
       for (int k = 0; k < 3; ++k) L.d_dir[k][l] = dir_grad[3 * i + k];
     }
     // Pass 2: the geometry, and the chain from M, the centre and the normal to the parameters.
@@ -482,13 +484,19 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
     // Pass 3: into the model's gradients.
     for (int l = 0; l < count; ++l) {
       const int i = base + l;
-      if (p.radius[i] <= 0) continue;
+      if (p.radius[i] <= 0) {  // not drawn: zero
+        std::fill(&grads->mean2d[2 * i], &grads->mean2d[2 * i] + 2, 0.0f);
+        std::fill(&G.log_scales[2 * i], &G.log_scales[2 * i] + 2, 0.0f);
+        std::fill(&G.quats[4 * i], &G.quats[4 * i] + 4, 0.0f);
+        std::fill(&G.means[3 * i], &G.means[3 * i] + 3, 0.0f);
+        continue;
+      }
       grads->mean2d[2 * i] = L.mean2d[0][l];
       grads->mean2d[2 * i + 1] = L.mean2d[1][l];
-      G.log_scales[2 * i] = FusedMultiplyAdd(L.ds[0][l], L.g.su[l], G.log_scales[2 * i]);
-      G.log_scales[2 * i + 1] = FusedMultiplyAdd(L.ds[1][l], L.g.sv[l], G.log_scales[2 * i + 1]);
-      for (int k = 0; k < 4; ++k) G.quats[4 * i + k] += L.dq[k][l];
-      for (int k = 0; k < 3; ++k) G.means[3 * i + k] += L.d_p[k][l];
+      G.log_scales[2 * i] = FusedMultiplyAdd(L.ds[0][l], L.g.su[l], 0.0f);
+      G.log_scales[2 * i + 1] = FusedMultiplyAdd(L.ds[1][l], L.g.sv[l], 0.0f);
+      for (int k = 0; k < 4; ++k) G.quats[4 * i + k] = 0.0f + L.dq[k][l];
+      for (int k = 0; k < 3; ++k) G.means[3 * i + k] = 0.0f + L.d_p[k][l];
     }
   }
 }

@@ -57,7 +57,7 @@ struct SurfelGradients {
   SurfelModel params;         // d loss / d raw parameter, model layout
   std::vector<float> mean2d;  // N x 2: the densification statistic of reference 3.8(5), pixels
   void ResizeAndZero(const SurfelModel& model);
-  // The same, except that the SH block is only sized: ProjectSurfelsBackward writes every row.
+  // Only sized: ProjectSurfelsBackward writes every entry.
   void ResizeForBackward(const SurfelModel& model);
 };
 
@@ -65,6 +65,8 @@ struct SurfelGradients {
 void ProjectSurfels(const SurfelModel& model, const Camera& camera, int sh_degree,
                     ProjectedSurfels* out, float filter_sigma = kReferenceSurfelFilterSigma);
 
+// Writes the chain from projected-quantity gradients to every raw parameter into `grads` (sized
+// by SurfelGradients::ResizeForBackward; every entry, zero for surfels not drawn).
 void ProjectSurfelsBackward(const SurfelModel& model, const Camera& camera, int sh_degree,
                             const ProjectedSurfels& projected,
                             const ProjectedSurfelsGrad& d_projected, SurfelGradients* grads);
