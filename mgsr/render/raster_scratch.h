@@ -88,8 +88,11 @@ inline bool CentreReached(float m, float half_width, int i) {
 }
 
 // The rows (or columns) [*lo, *hi] of [first, last] whose centres CentreReached accepts, exactly
-// (empty: *lo > *hi). An estimate, corrected by the exact test: the accepted indices are
-// contiguous, as the rounded |i + 0.5 - m| never decreases away from m.
+// (empty: *lo > *hi): a primitive's box rows in a tile, so the pixel loops need no row test of
+// their own. An estimate, corrected by the exact test: the accepted indices are contiguous, as the
+// rounded |i + 0.5 - m| never decreases away from m. (With a row of slack on each side, as before
+// 2026-11-27, a splat's box had about 8 rows of which 5 passed, and the 3DGS backward took every
+// box row's exponent.)
 inline void ReachedRange(float m, float half_width, int first, int last, int* lo, int* hi) {
   const float lo_f = std::clamp(std::ceil(m - half_width - 0.5f), first - 1.0f, last + 1.0f);
   const float hi_f = std::clamp(std::floor(m + half_width - 0.5f), first - 1.0f, last + 1.0f);
@@ -100,13 +103,6 @@ inline void ReachedRange(float m, float half_width, int first, int last, int* lo
   while (b >= first && !CentreReached(m, half_width, b)) --b;
   *lo = std::max(a, first);
   *hi = std::min(b, last);
-}
-
-// Rows [lo, hi] of [first, last] whose centres y + 0.5 lie within r of m: exactly those the pixel
-// loops' row test keeps. (With a row of slack on each side, as before 2026-11-27, a trained
-// splat's box had about 8 rows of which 5 passed; the backward computes every box row's exponent.)
-inline void BoxRange(float m, float r, int first, int last, int* lo, int* hi) {
-  ReachedRange(m, r, first, last, lo, hi);
 }
 
 // Which columns of a tile row the pixel loops process for one primitive that reaches only pixels
@@ -251,19 +247,6 @@ inline void SumEntriesPerPrimitive(const TileBins& bins, const std::vector<float
   for (size_t k = 0; k < entry.size(); ++k) (*out)[bins.ids[k]] += entry[k];
 }
 
-}  // namespace raster_internal
-
-// Sums the per-entry gradients of every tile into per-primitive rows (N x stride), in tile and
-// entry order whatever the thread count, so backward passes are bitwise reproducible. The
-// primitives are split into one range per thread, each summed by one thread scanning the entry
-// list once (ranges, not threads, are the loop: a team smaller than omp_get_max_threads() says
-// still sums every range).
-//
-// The scan first lists, without a branch, a chunk's entries of its own range, then adds their
-// rows, fetching the destination rows a few entries ahead. The destination rows are in random
-// order and mostly outside the core's cache; with a branch per entry (half of them taken, at
-// random) each mispredict emptied the pipeline and every row's miss stood alone: the first add of
-// a row took over half the reduction's samples (`perf annotate`, 100k benchmark).
 // dst[q] += src[q] for a row of `stride` floats, in 8-float vectors; where the row is not a whole
 // number of them the last one overlaps the one before (all are loaded before any is stored, so the
 // shared floats get the same sum twice).
@@ -283,6 +266,19 @@ inline void AddRow(float* __restrict dst, const float* __restrict src) {
   }
 }
 
+}  // namespace raster_internal
+
+// Sums the per-entry gradients of every tile into per-primitive rows (N x stride), in tile and
+// entry order whatever the thread count, so backward passes are bitwise reproducible. The
+// primitives are split into one range per thread, each summed by one thread scanning the entry
+// list once (ranges, not threads, are the loop: a team smaller than omp_get_max_threads() says
+// still sums every range).
+//
+// The scan first lists, without a branch, a chunk's entries of its own range, then adds their
+// rows, fetching the destination rows a few entries ahead. The destination rows are in random
+// order and mostly outside the core's cache; with a branch per entry (half of them taken, at
+// random) each mispredict emptied the pipeline and every row's miss stood alone: the first add of
+// a row took over half the reduction's samples (`perf annotate`, 100k benchmark).
 template <int stride>
 inline void ReduceEntryGradients(const TileBins& bins, const std::vector<uint32_t>& tile_used,
                                  const std::vector<float>& entry_grads, size_t num,
@@ -316,7 +312,7 @@ inline void ReduceEntryGradients(const TileBins& bins, const std::vector<uint32_
           const uint32_t e = own[k];
           const float* src = rows + static_cast<size_t>(e) * stride;
           float* dst = sums + static_cast<size_t>(ids[e]) * stride;
-          AddRow<stride>(dst, src);
+          raster_internal::AddRow<stride>(dst, src);
         }
       }
     }

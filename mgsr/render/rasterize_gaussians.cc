@@ -81,13 +81,13 @@ void PackGaussians(const ProjectedGaussians& p, std::vector<float>* packed) {
   }
 }
 
-using raster_internal::BoxRange;
 using raster_internal::ColumnWindow;
 using raster_internal::EnsureImage;
 using raster_internal::EnsureScratch;
 using raster_internal::GatherTile;
 using raster_internal::kTilePixels;
 using raster_internal::PixelArrays;
+using raster_internal::ReachedRange;
 using raster_internal::SumEntriesPerPrimitive;
 using raster_internal::TileLanes;
 using raster_internal::WindowFor;
@@ -459,7 +459,7 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
       const Splat s(f + static_cast<size_t>(j) * kNumFields);
       if (!(s.min_power < 0.0f)) continue;  // too transparent to reach 1/255 anywhere
       int ya, yb;
-      BoxRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
+      ReachedRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
       const ColumnWindow w = WindowFor(s.mx, s.ex, x0);
       const float sum = w.half ? BlendRows<F8>(s, j, ya, yb, y0, w.first, tl, refl, st)
                                : BlendRows<F16>(s, j, ya, yb, y0, 0, tl, refl, st);
@@ -606,7 +606,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
         }
         const Splat s(f + static_cast<size_t>(j) * kNumFields);
         int ya, yb;
-        BoxRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
+        ReachedRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
         const ColumnWindow w = WindowFor(s.mx, s.ex, x0);
         if (w.half) {
           GradientRows<F8>(s, j, ya, yb, y0, w.first, tl, refl, st, dst);
@@ -623,6 +623,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < static_cast<int64_t>(num); ++i) {
     const float* s = scratch->per_primitive.data() + static_cast<size_t>(i) * kGradStride;
+    // (0 + g: a -0 sum comes out +0, as it did added into a zeroed buffer.)
     d->mean2d[2 * i] = 0.0f + s[gMx];
     d->mean2d[2 * i + 1] = 0.0f + s[gMy];
     d->conic[3 * i] = 0.0f + s[gCa];

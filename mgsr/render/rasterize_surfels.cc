@@ -10,13 +10,13 @@
 namespace mgsr {
 namespace {
 
-using raster_internal::BoxRange;
 using raster_internal::ColumnWindow;
 using raster_internal::EnsureImage;
 using raster_internal::EnsureScratch;
 using raster_internal::GatherTile;
 using raster_internal::kTilePixels;
 using raster_internal::PixelArrays;
+using raster_internal::ReachedRange;
 using raster_internal::SumEntriesPerPrimitive;
 using raster_internal::TileLanes;
 using raster_internal::WindowFor;
@@ -619,7 +619,7 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
       if (!(s.op > kMinAlpha)) continue;
       const float min_power = s.min_power;
       int ya, yb;
-      BoxRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
+      ReachedRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
       const ColumnWindow win = WindowFor(s.mx, s.ex, x0);
       float sum;
       if (distortion) {
@@ -808,7 +808,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
             area_preserving ? low_pass + static_cast<size_t>(ids[j]) * 9 : kNoLowPass;
         const float min_power = s.min_power;
         int ya, yb;
-        BoxRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
+        ReachedRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
         float* dst = tg + static_cast<size_t>(j) * kGradStride;
         const ColumnWindow win = WindowFor(s.mx, s.ex, x0);
         if (distortion) {
@@ -832,6 +832,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
 #pragma omp parallel for schedule(static)
   for (int64_t i = 0; i < static_cast<int64_t>(num); ++i) {
     const float* s = scratch->per_primitive.data() + static_cast<size_t>(i) * kGradStride;
+    // (0 + g: a -0 sum comes out +0, as it did added into a zeroed buffer.)
     for (int q = 0; q < 9; ++q) d->M[9 * i + q] = 0.0f + s[gTu0 + q];
     d->center[2 * i] = 0.0f + s[gMx];
     d->center[2 * i + 1] = 0.0f + s[gMy];
