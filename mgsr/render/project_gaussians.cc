@@ -97,9 +97,9 @@ using Mat3 = Eigen::Matrix<float, 3, 3, Eigen::RowMajor>;
 // Both passes run over blocks of kLanes Gaussians (see projection_lanes.h): scalar passes gather
 // and take the library calls and the SH colours (a row of coefficients per Gaussian), lane loops
 // GCC vectorises take the geometry and its chain rule, and a scalar pass writes out. The
-// activations (both passes) and the SH colours' backward run in loops of their own before the
-// blocks: a loop over some thirty per-Gaussian arrays follows more streams than the hardware
-// prefetcher does, and its loads waited on memory. This file is
+// activations and the SH colours run in loops of their own (the forward's colours after the
+// blocks, everything else before them): a loop over some thirty per-Gaussian arrays follows more
+// streams than the hardware prefetcher does, and its loads waited on memory. This file is
 // built without contraction (-ffp-contract=off): every fused multiply-add is the one spelled out,
 // as GCC had fused the per-Gaussian Eigen code before it; every output and gradient was the same
 // to the bit as that code's on the benchmark scene and on scenes with zero quaternions, Gaussians
@@ -372,7 +372,7 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
     float* const d_ref_sh = &G.ref_sh[row * i];
     float* const sum_dir = &dir_grad[3 * i];
     sum_dir[0] = sum_dir[1] = sum_dir[2] = 0.0f;
-    if (p.radius[i] <= 0) {  // not drawn: its SH rows are written zero, the rest stays zero
+    if (p.radius[i] <= 0) {  // not drawn: zero (as its other gradients)
       std::fill(d_sh, d_sh + row, 0.0f);
       std::fill(d_ref_sh, d_ref_sh + row, 0.0f);
       continue;
@@ -401,12 +401,10 @@ void ProjectGaussiansBackward(const GaussianModel& m, const Camera& cam, int sh_
       for (int k = 0; k < 3; ++k) {
         L.conic[k][l] = p.conic[3 * i + k];
         L.d_conic[k][l] = d.conic[3 * i + k];
-        L.d_dir[k][l] = 0.0f;
+        L.d_dir[k][l] = dir_grad[3 * i + k];  // (zero where not drawn)
       }
       for (int k = 0; k < 2; ++k) L.d_mean2d[k][l] = d.mean2d[2 * i + k];
       L.d_depth[l] = d.depth[i];
-      if (l >= count || p.radius[i] <= 0) continue;
-      for (int k = 0; k < 3; ++k) L.d_dir[k][l] = dir_grad[3 * i + k];
     }
     // Pass 2: the geometry, and the chain from the conic, the screen mean and the depth to the
     // mean, the scales and the rotation.

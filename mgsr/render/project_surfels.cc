@@ -368,7 +368,7 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
     float* const d_sh = &G.sh[row * i];
     float* const d_dir = &dir_grad[3 * i];
     d_dir[0] = d_dir[1] = d_dir[2] = 0.0f;
-    if (p.radius[i] <= 0) {  // not drawn: its SH row is written zero, the rest stays zero
+    if (p.radius[i] <= 0) {  // not drawn: zero (as its other gradients)
       std::fill(d_sh, d_sh + row, 0.0f);
       continue;
     }
@@ -383,7 +383,7 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
     SurfelGradLanes L;
     const int base = b * kLanes, count = std::min(kLanes, n - base);
     // Pass 1: the gathers and the opacity's gradient. (Lanes past the end repeat the block's first
-    // surfel, lanes not drawn get no direction gradient; pass 3 skips both.)
+    // surfel; pass 3 skips them and the surfels not drawn.)
     GatherSurfels(m, base, count, &L.g);
     for (int l = 0; l < kLanes; ++l) {
       const int i = base + (l < count ? l : 0);
@@ -394,11 +394,9 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
       }
       for (int k = 0; k < 3; ++k) L.d_normal[k][l] = d.normal[3 * i + k];
       L.sign[l] = p.normal_sign[i];
-      for (int k = 0; k < 3; ++k) L.d_dir[k][l] = 0.0f;
-      if (l >= count) continue;
-      G.opacity_logits[i] = p.radius[i] > 0 ? SigmoidGradient(p.opacity[i], d.opacity[i]) : 0.0f;
-      if (p.radius[i] <= 0) continue;
-      for (int k = 0; k < 3; ++k) L.d_dir[k][l] = dir_grad[3 * i + k];
+      for (int k = 0; k < 3; ++k) L.d_dir[k][l] = dir_grad[3 * i + k];  // (zero where not drawn)
+      if (l < count)
+        G.opacity_logits[i] = p.radius[i] > 0 ? SigmoidGradient(p.opacity[i], d.opacity[i]) : 0.0f;
     }
     // Pass 2: the geometry, and the chain from M, the centre and the normal to the parameters.
     SurfelGeometryLanes(camera, &L.g);
