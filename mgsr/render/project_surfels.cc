@@ -279,7 +279,7 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
       projection_lanes::LaneNormalize(L.g.p[0][l] - center[0], L.g.p[1][l] - center[1],
                                       L.g.p[2][l] - center[2], L.dir, l);
     }
-    // Pass 3: write out, and the SH colour.
+    // Pass 3: write out.
     for (int l = 0; l < count; ++l) {
       const int i = base + l;
       out->depth[i] = L.g.pv[2][l];
@@ -338,9 +338,9 @@ struct SurfelGradLanes {
 
 // The backward takes the SH colour's backward (a row of coefficients per surfel) in a loop of its
 // own, then runs over the forward's blocks of kLanes surfels: a scalar pass gathers, the geometry
-// and the chain to the parameters run in lane loops, and a scalar pass adds what each drawn surfel
-// got into the model's gradients, as the per-surfel loop before it did (the same sums in the same
-// order).
+// and the chain to the parameters run in lane loops, and a scalar pass writes what each surfel got
+// into the model's gradients (zero where not drawn; the bits the per-surfel loop before it added
+// into zeroed buffers).
 void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degree,
                             const ProjectedSurfels& p, const ProjectedSurfelsGrad& d,
                             SurfelGradients* grads) {
