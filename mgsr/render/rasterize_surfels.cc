@@ -121,13 +121,12 @@ void PackSurfels(const ProjectedSurfels& p, float inv_square, std::vector<float>
 #pragma omp parallel for schedule(static)
   for (int64_t g = 0; g < n; ++g) {
     if (p.rects[g].empty()) continue;  // never binned
-    if (out == nullptr) {
-      if (inv_square > 0.0f && p.opacity[g] > kMinAlpha) {
-        const float* m = &p.M[9 * g];
-        LowPassOffset(m, m + 3, m + 6, inv_square, dc + 9 * g);
-      }
-      continue;
+    float low_pass = 0.0f;
+    if (inv_square > 0.0f && p.opacity[g] > kMinAlpha) {
+      const float* m = &p.M[9 * g];
+      low_pass = LowPassOffset(m, m + 3, m + 6, inv_square, dc != nullptr ? dc + 9 * g : nullptr);
     }
+    if (out == nullptr) continue;
     float* f = out + g * kNumFields;
     for (int q = 0; q < 9; ++q) f[kTu0 + q] = p.M[9 * g + q];
     f[kMx] = p.center[2 * g];
@@ -141,12 +140,7 @@ void PackSurfels(const ProjectedSurfels& p, float inv_square, std::vector<float>
     f[kMinPow] = p.min_power[g];
     f[kEx] = p.extent[2 * g];
     f[kEy] = p.extent[2 * g + 1];
-    f[kLowPass] = 0.0f;
-    if (inv_square > 0.0f && p.opacity[g] > kMinAlpha) {
-      const float* m = &p.M[9 * g];
-      f[kLowPass] =
-          LowPassOffset(m, m + 3, m + 6, inv_square, dc != nullptr ? dc + 9 * g : nullptr);
-    }
+    f[kLowPass] = low_pass;
   }
 }
 
