@@ -353,9 +353,9 @@ TEST(GaussianRendererGradientTest, SkippingEntriesThatBlendedNothingChangesNoGra
       m, Options(cam), grad);
 }
 
-// The backward writes the SH blocks' gradient rows instead of adding to zeroed ones: whatever the
-// buffers held before (here NaN), every row comes out as a fresh buffer's, for Gaussians out of
-// view, coefficients above the current degree and the reflected colour when it is off.
+// The backward writes every gradient entry instead of adding to zeroed ones: whatever the buffers
+// held before (here NaN), every row comes out as a fresh buffer's, for Gaussians out of view,
+// coefficients above the current degree and the reflected colour when it is off.
 TEST(GaussianRendererGradientTest, BackwardWritesEveryRowWhateverTheBuffersHeld) {
   const Camera cam = testing::RenderTestCamera(32, 32);
   GaussianModel m = RandomScene(40, 31);

@@ -566,9 +566,9 @@ TEST(SurfelRendererEdgeCaseTest, EmptyBehindWholeImageAndDegenerate) {
   check(weird, "degenerate");
 }
 
-// The backward writes the SH block's gradient rows instead of adding to zeroed ones: whatever the
-// buffers held before (here NaN), every row comes out as a fresh buffer's, for surfels out of view
-// and coefficients above the current degree.
+// The backward writes every gradient entry instead of adding to zeroed ones: whatever the buffers
+// held before (here NaN), every row comes out as a fresh buffer's, for surfels out of view and
+// coefficients above the current degree.
 TEST(SurfelRendererTest, BackwardWritesEveryRowWhateverTheBuffersHeld) {
   const Camera cam = testing::RenderTestCamera(32, 32);
   SurfelModel m = RandomSurfels(40, 31);
