@@ -245,17 +245,20 @@ float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const 
 // accumulators, the upstream gradients folded onto the chains (C = C_tran + W C_ref,
 // D = Dsum / A) and the last-blended indices. Pixels outside the image keep last = 0 and take no
 // part.
+//
+// A chain's "behind" accumulator is kept as one number per pixel, not one per blended quantity.
+// Un-blending Gaussian i needs S_i . g, where S_i = sum_{k>i} q_k a_k prod_{i<m<k} (1 - a_m) is
+// what the Gaussians behind it blend of the quantities q (colour, and for the transmitted chain
+// beta and depth) and g the pixel's upstream gradients of those outputs. g is the same for every
+// Gaussian of the pixel, so S_i . g follows the same recursion as S_i:
+//   S_{i-1} . g = a_i (q_i . g) + (1 - a_i) (S_i . g),
+// and d loss / d a_i = T_i (q_i . g - S_i . g) + (the T_N terms). One array per chain instead of
+// five and three: per row of the un-blending 6 loads and 6 stores fewer.
 enum BackwardArray {
   bT,
   bTr,
-  bSt0,
-  bSt1,
-  bSt2,
-  bSr0,
-  bSr1,
-  bSr2,
-  bSb,
-  bSz,
+  bSt,  // S . g of the transmitted chain (colour, beta, depth)
+  bSr,  // S . g of the reflected chain (colour)
   bGt0,
   bGt1,
   bGt2,
@@ -340,18 +343,11 @@ void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, cons
       g_ct2 += wt * gt2;
       g_beta += wt * gW;
       g_z += wt * gN;
-      const V St0 = simd::Load<V>(st[bSt0] + k), St1 = simd::Load<V>(st[bSt1] + k),
-              St2 = simd::Load<V>(st[bSt2] + k);
-      const V Sb = simd::Load<V>(st[bSb] + k), Sz = simd::Load<V>(st[bSz] + k);
-      V da_t = (s.ct0 - St0) * gt0 + (s.ct1 - St1) * gt1 + (s.ct2 - St2) * gt2 +
-               (s.beta - Sb) * gW + (s.z - Sz) * gN;
-      da_t = da_t * T + simd::Load<V>(st[bTfin] + k) * inv_t * simd::Load<V>(st[bGA] + k);
-      const V keep_t = 1.0f - at;
-      simd::Store(st[bSt0] + k, simd::Select(vt, at * s.ct0 + keep_t * St0, St0));
-      simd::Store(st[bSt1] + k, simd::Select(vt, at * s.ct1 + keep_t * St1, St1));
-      simd::Store(st[bSt2] + k, simd::Select(vt, at * s.ct2 + keep_t * St2, St2));
-      simd::Store(st[bSb] + k, simd::Select(vt, at * s.beta + keep_t * Sb, Sb));
-      simd::Store(st[bSz] + k, simd::Select(vt, at * s.z + keep_t * Sz, Sz));
+      const V qg = s.ct0 * gt0 + s.ct1 * gt1 + s.ct2 * gt2 + s.beta * gW + s.z * gN;  // q_i . g
+      const V St = simd::Load<V>(st[bSt] + k);
+      const V da_t =
+          (qg - St) * T + simd::Load<V>(st[bTfin] + k) * inv_t * simd::Load<V>(st[bGA] + k);
+      simd::Store(st[bSt] + k, simd::Select(vt, at * qg + (1.0f - at) * St, St));
       const M slope_t = vt & (raw_t < kMaxAlpha);  // the clamp at 0.99 has zero slope
       g_op += simd::Masked(slope_t, G * da_t);
       dG = simd::Masked(slope_t, s.op * da_t);
@@ -367,13 +363,10 @@ void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, cons
       g_cr0 += wr * gr0;
       g_cr1 += wr * gr1;
       g_cr2 += wr * gr2;
-      const V Sr0 = simd::Load<V>(st[bSr0] + k), Sr1 = simd::Load<V>(st[bSr1] + k),
-              Sr2 = simd::Load<V>(st[bSr2] + k);
-      const V da_r = ((s.cr0 - Sr0) * gr0 + (s.cr1 - Sr1) * gr1 + (s.cr2 - Sr2) * gr2) * Tr;
-      const V keep_r = 1.0f - ar;
-      simd::Store(st[bSr0] + k, simd::Select(vr, ar * s.cr0 + keep_r * Sr0, Sr0));
-      simd::Store(st[bSr1] + k, simd::Select(vr, ar * s.cr1 + keep_r * Sr1, Sr1));
-      simd::Store(st[bSr2] + k, simd::Select(vr, ar * s.cr2 + keep_r * Sr2, Sr2));
+      const V qg = s.cr0 * gr0 + s.cr1 * gr1 + s.cr2 * gr2;
+      const V Sr = simd::Load<V>(st[bSr] + k);
+      const V da_r = (qg - Sr) * Tr;
+      simd::Store(st[bSr] + k, simd::Select(vr, ar * qg + (1.0f - ar) * Sr, Sr));
       const M slope_r = vr & (raw_r < kMaxAlpha);
       g_rop += simd::Masked(slope_r, G * da_r);
       dG += simd::Masked(slope_r, s.rop * da_r);
@@ -544,7 +537,7 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
       const TileLanes tl(x0, x_end - x0);
 
       const PixelArrays st(&scratch->pixel_state[thread], kBackwardArrays);
-      raster_internal::ClearBackwardState(st, kBackwardArrays, bSt0, bSz + 1,
+      raster_internal::ClearBackwardState(st, kBackwardArrays, bSt, bSr + 1,
                                           x_end - x0 < kTileSize || y_end - y0 < kTileSize);
       // The upstream gradients folded onto the chains, a tile row at a time (the same operations
       // per pixel as a scalar loop; an output without a gradient reads as zeros and is added all

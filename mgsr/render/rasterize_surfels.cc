@@ -348,17 +348,13 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
 // d m / d z of the NDC depth m the distortion term reads.
 constexpr float kDmDzScale = kSurfelFar * kSurfelNear / (kSurfelFar - kSurfelNear);
 
-// Backward per-pixel state of a tile.
+// Backward per-pixel state of a tile. The "behind" accumulator is one number per pixel, S . g
+// (as in the 3DGS backward, see rasterize_gaussians.cc): what the surfels behind blend of the
+// colour, depth and normal, dotted with the pixel's gradients of those outputs, plus, with the
+// distortion term, what they blend of d dist / d w.
 enum BackwardArray {
   bT,
-  bSc0,
-  bSc1,
-  bSc2,
-  bSz,
-  bSn0,
-  bSn1,
-  bSn2,
-  bSw,
+  bS,
   bGc0,
   bGc1,
   bGc2,
@@ -469,28 +465,14 @@ void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y
       const V dm = 2.0f * w * GDist * (m * AN - M1N);
       dz += dm * (kDmDzScale / (zz * zz));
     }
-    // d loss / d a through every output (the "behind" accumulators S).
-    const V Sc0 = simd::Load<V>(st[bSc0] + k), Sc1 = simd::Load<V>(st[bSc1] + k),
-            Sc2 = simd::Load<V>(st[bSc2] + k);
-    const V Sn0 = simd::Load<V>(st[bSn0] + k), Sn1 = simd::Load<V>(st[bSn1] + k),
-            Sn2 = simd::Load<V>(st[bSn2] + k);
-    const V Sz = simd::Load<V>(st[bSz] + k);
-    V da = (s.c[0] - Sc0) * Gc0 + (s.c[1] - Sc1) * Gc1 + (s.c[2] - Sc2) * Gc2 + (h.z - Sz) * GDs +
-           (s.n[0] - Sn0) * Gn0 + (s.n[1] - Sn1) * Gn1 + (s.n[2] - Sn2) * Gn2;
-    if constexpr (kDistortion) {
-      const V Sw = simd::Load<V>(st[bSw] + k);
-      da += gw_dist - Sw;
-      simd::Store(st[bSw] + k, simd::Select(valid, a * gw_dist + (1.0f - a) * Sw, Sw));
-    }
-    da = da * T + simd::Load<V>(st[bTfin] + k) * inv * simd::Load<V>(st[bGA] + k);
-    const V keep = 1.0f - a;
-    simd::Store(st[bSc0] + k, simd::Select(valid, a * s.c[0] + keep * Sc0, Sc0));
-    simd::Store(st[bSc1] + k, simd::Select(valid, a * s.c[1] + keep * Sc1, Sc1));
-    simd::Store(st[bSc2] + k, simd::Select(valid, a * s.c[2] + keep * Sc2, Sc2));
-    simd::Store(st[bSn0] + k, simd::Select(valid, a * s.n[0] + keep * Sn0, Sn0));
-    simd::Store(st[bSn1] + k, simd::Select(valid, a * s.n[1] + keep * Sn1, Sn1));
-    simd::Store(st[bSn2] + k, simd::Select(valid, a * s.n[2] + keep * Sn2, Sn2));
-    simd::Store(st[bSz] + k, simd::Select(valid, a * h.z + keep * Sz, Sz));
+    // d loss / d a through every output: T (q . g - S . g) plus the T_N terms, where q . g is
+    // what this surfel blends (colour, depth, normal, d dist / d w) dotted with the gradients.
+    V qg = s.c[0] * Gc0 + s.c[1] * Gc1 + s.c[2] * Gc2 + h.z * GDs + s.n[0] * Gn0 + s.n[1] * Gn1 +
+           s.n[2] * Gn2;
+    if constexpr (kDistortion) qg += gw_dist;
+    const V S = simd::Load<V>(st[bS] + k);
+    const V da = (qg - S) * T + simd::Load<V>(st[bTfin] + k) * inv * simd::Load<V>(st[bGA] + k);
+    simd::Store(st[bS] + k, simd::Select(valid, a * qg + (1.0f - a) * S, S));
     const M slope = valid & (raw < kMaxAlpha);  // the clamp at 0.99 has zero slope
     gop += simd::Masked(slope, h.G * da);
     const V dG = simd::Masked(slope, s.op * da);
@@ -723,7 +705,7 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
       const TileLanes tl(x0, x_end - x0);
 
       const PixelArrays st(&scratch->pixel_state[thread], kBackwardArrays);
-      raster_internal::ClearBackwardState(st, kBackwardArrays, bSc0, bSw + 1,
+      raster_internal::ClearBackwardState(st, kBackwardArrays, bS, bS + 1,
                                           x_end - x0 < kTileSize || y_end - y0 < kTileSize);
       // The upstream gradients, a tile row at a time (the same operations per pixel as a scalar
       // loop; an output without a gradient reads as zeros; the normals per pixel, as before).
