@@ -198,7 +198,11 @@ float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const 
   using M = MaskOf<V>;
   const float jp1 = static_cast<float>(j + 1);
   const V dx = tl.Px<V>(first) - s.mx;
-  const M lanes_ok = tl.Ok<V>(first);
+  // A chain whose opacity is below kMinAlpha blends nothing anywhere (its alpha is at most the
+  // opacity), so its pixels take no part: on a trained object, most rows on which a chain blended
+  // nothing were those of such Gaussians (89% of the transmitted chain's, 69% of the reflected's).
+  const M lanes_t = s.op >= kMinAlpha ? tl.Ok<V>(first) : M{};
+  const M lanes_r = s.rop >= kMinAlpha ? tl.Ok<V>(first) : M{};
   // The rows that blend anything: their exponent, masks and pixel index.
   V G[kTileSize];
   M in[kTileSize], live_t[kTileSize], live_r[kTileSize];
@@ -215,8 +219,8 @@ float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const 
     // sees.) (Unlike the backward's first loop this one keeps its branches: computing every row's
     // exponent without them was slower here, 6.1-6.4 -> 6.5-6.9 ms per trained view, as most rows
     // behind an opaque surface are skipped.)
-    const M lt = lanes_ok & (simd::Load<V>(st[aT] + k) > 0.0f);
-    const M lr = lanes_ok & (simd::Load<V>(st[aTr] + k) > 0.0f);
+    const M lt = lanes_t & (simd::Load<V>(st[aT] + k) > 0.0f);
+    const M lr = lanes_r & (simd::Load<V>(st[aTr] + k) > 0.0f);
     const V power = RowPower(s, dx, dy, lt | lr, &in[rows]);
     if (!simd::Any(in[rows])) continue;
     G[rows] = simd::Exp(simd::Max(power, simd::Splat<V>(-80.0f)));
@@ -287,7 +291,9 @@ void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, cons
   using M = MaskOf<V>;
   const float jf = static_cast<float>(j);
   const V dx = tl.Px<V>(first) - s.mx;
-  const M lanes_ok = tl.Ok<V>(first);
+  // The lanes of each chain as in BlendRows: none for a chain too transparent to blend anywhere.
+  const M lanes_t = s.op >= kMinAlpha ? tl.Ok<V>(first) : M{};
+  const M lanes_r = s.rop >= kMinAlpha ? tl.Ok<V>(first) : M{};
   // Row-invariant products, rounded once before the loops (never fused into a multiply-add there,
   // so the gradients are those of the one-loop pass to the bit).
   const V ca_dx = s.ca * dx, cb_dx = s.cb * dx;
@@ -305,7 +311,7 @@ void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, cons
     const float dy = y + 0.5f - s.my;
     const int k = (y - y0) * kTileSize + first;
     const V last_t = simd::Load<V>(st[bLastT] + k), last_r = simd::Load<V>(st[bLastR] + k);
-    const M blended = lanes_ok & ((jf < last_t) | (jf < last_r));
+    const M blended = (lanes_t & (jf < last_t)) | (lanes_r & (jf < last_r));
     const V power = RowPower(s, dx, dy, blended, &in_row[rows]);
     G_row[rows] = simd::Exp(simd::Max(power, simd::Splat<V>(-80.0f)));
     dy_row[rows] = dy;
