@@ -91,9 +91,17 @@ TEST(QuaternionTest, RotationBackwardMatchesNumericDifferences) {
   }
 }
 
-TEST(TileBinningTest, MatchesBruteForceSortsByDepthAndOrdersTilesBySize) {
+// The lists against a brute force: every tile's primitives sorted by (depth, id). With ties (half
+// the depths on a coarse grid), primitives that touch no tile, and each thread count (the radix
+// sort and the tile counts run in one chunk per thread).
+class TileBinningTest : public ::testing::TestWithParam<int> {};
+
+TEST_P(TileBinningTest, MatchesBruteForceSortsByDepthAndOrdersTilesBySize) {
+  const int threads = GetParam();
+  const int saved_threads = omp_get_max_threads();
+  omp_set_num_threads(threads);
   Rng rng(2);
-  const int W = 100, H = 70, n = 500;
+  const int W = 100, H = 70, n = 5000;
   std::vector<TileRect> rects(n);
   std::vector<float> depths(n);
   const int tx = (W + 15) / 16, ty = (H + 15) / 16;
@@ -102,9 +110,11 @@ TEST(TileBinningTest, MatchesBruteForceSortsByDepthAndOrdersTilesBySize) {
         static_cast<float>(rng.Uniform(-20, 120)), static_cast<float>(rng.Uniform(-20, 90)),
         static_cast<float>(rng.Uniform(0, 30)), static_cast<float>(rng.Uniform(0, 30)), tx, ty);
     depths[i] = static_cast<float>(rng.Uniform(0.2, 10));
+    if (i % 2 == 0) depths[i] = std::round(depths[i] * 4) / 4;  // ties
   }
   TileBins bins;
   BinPrimitives(rects, depths.data(), W, H, &bins);
+  omp_set_num_threads(saved_threads);
   ASSERT_EQ(bins.tiles_x, tx);
   ASSERT_EQ(bins.tiles_y, ty);
   for (int tile = 0; tile < tx * ty; ++tile) {
@@ -137,6 +147,8 @@ TEST(TileBinningTest, MatchesBruteForceSortsByDepthAndOrdersTilesBySize) {
   EXPECT_TRUE(TileRectFromBox(-50, -50, 10, 10, tx, ty).empty());
   EXPECT_TRUE(TileRectFromBox(200, 20, 10, 10, tx, ty).empty());
 }
+
+INSTANTIATE_TEST_SUITE_P(Threads, TileBinningTest, ::testing::Values(1, 2, 3));
 
 // Which thread draws which tile depends on scheduling, so every thread's buffers must be sized
 // before the parallel loops: for the largest tile's primitives and for the most pixel arrays a
