@@ -4,6 +4,8 @@
 #include <cmath>
 #include <type_traits>
 
+#include "mgsr/render/simd16.h"
+
 namespace mgsr {
 namespace {
 
@@ -89,6 +91,101 @@ void WithCoefficientCount(int n, F&& f) {
   }
 }
 
+#if defined(__AVX512F__) && defined(__FMA__)
+// Degree 3 (16 coefficient rows, the count training spends nearly all its steps at) in vectors:
+// the 48 floats of a row block as three 16-lane vectors. Each lane computes what the scalar loops
+// below compute, in the same order, with the multiply-adds GCC forms there spelled out, so the
+// results are the same to the bit (the trained-render digests do not move); the scalar loops took
+// one instruction per coefficient and channel, and were most of the SH cost in `perf`.
+using simd::F16;
+using simd::F4;
+
+inline F16 Fma16(F16 a, F16 b, F16 c) { return simd::Fma(a, b, c); }
+inline F4 Fma4(F4 a, F4 b, F4 c) { return _mm_fmadd_ps(a, b, c); }
+
+// x[3k + c] for k < 16, from x = [x0 | x1 | x2].
+inline F16 Channel0(F16 x0, F16 x1, F16 x2) {
+  const F16 t =
+      __builtin_shufflevector(x0, x1, 0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 0, 0, 0, 0, 0);
+  return __builtin_shufflevector(t, x2, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 17, 20, 23, 26, 29);
+}
+inline F16 Channel1(F16 x0, F16 x1, F16 x2) {
+  const F16 t =
+      __builtin_shufflevector(x0, x1, 1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31, 0, 0, 0, 0, 0);
+  return __builtin_shufflevector(t, x2, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30);
+}
+inline F16 Channel2(F16 x0, F16 x1, F16 x2) {
+  const F16 t =
+      __builtin_shufflevector(x0, x1, 2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0);
+  return __builtin_shufflevector(t, x2, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31);
+}
+
+// sum_k a_k b_k over 16 rows in the scalar loops' order: four partial sums (k mod 4), each a
+// multiply-add chain from zero over k = r, r + 4, r + 8, r + 12, then (p0 + p1) + (p2 + p3).
+inline float SumOfProducts16(F16 a, F16 b) {
+  const auto quarter = [](F16 v, auto q) {
+    constexpr int o = 4 * decltype(q)::value;
+    return __builtin_shufflevector(v, v, o, o + 1, o + 2, o + 3);
+  };
+  F4 acc = Fma4(quarter(a, std::integral_constant<int, 0>{}),
+                quarter(b, std::integral_constant<int, 0>{}), F4{});
+  acc = Fma4(quarter(a, std::integral_constant<int, 1>{}),
+             quarter(b, std::integral_constant<int, 1>{}), acc);
+  acc = Fma4(quarter(a, std::integral_constant<int, 2>{}),
+             quarter(b, std::integral_constant<int, 2>{}), acc);
+  acc = Fma4(quarter(a, std::integral_constant<int, 3>{}),
+             quarter(b, std::integral_constant<int, 3>{}), acc);
+  return (acc[0] + acc[1]) + (acc[2] + acc[3]);
+}
+
+void EvalFromBasis16(const float* b, const float* coeffs, float rgb[3], uint8_t clamped[3]) {
+  const F16 basis = simd::Load<F16>(b);
+  const F16 x0 = simd::Load<F16>(coeffs), x1 = simd::Load<F16>(coeffs + 16),
+            x2 = simd::Load<F16>(coeffs + 32);
+  const F16 channel[3] = {Channel0(x0, x1, x2), Channel1(x0, x1, x2), Channel2(x0, x1, x2)};
+  for (int c = 0; c < 3; ++c) {
+    const float v = 0.5f + SumOfProducts16(basis, channel[c]);
+    clamped[c] = v < 0.0f;
+    rgb[c] = v < 0.0f ? 0.0f : v;
+  }
+}
+
+// The kWrite backward for 16 rows.
+void WriteBackwardFromBasis16(const float* b, const float (*g)[3], const float* coeffs,
+                              const float dc[3], float* d_coeffs, float d_dir[3]) {
+  const F16 basis = simd::Load<F16>(b);
+  const F16 dc_lanes = {dc[0], dc[1], dc[2]};
+  // d coeffs[3k + c] = 0 + b_k dc_c.
+  const F16 b0 =
+      __builtin_shufflevector(basis, basis, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5);
+  const F16 b1 =
+      __builtin_shufflevector(basis, basis, 5, 5, 6, 6, 6, 7, 7, 7, 8, 8, 8, 9, 9, 9, 10, 10);
+  const F16 b2 = __builtin_shufflevector(basis, basis, 10, 11, 11, 11, 12, 12, 12, 13, 13, 13, 14,
+                                         14, 14, 15, 15, 15);
+  const F16 d0 =
+      __builtin_shufflevector(dc_lanes, dc_lanes, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0);
+  const F16 d1 =
+      __builtin_shufflevector(dc_lanes, dc_lanes, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1);
+  const F16 d2 =
+      __builtin_shufflevector(dc_lanes, dc_lanes, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2);
+  simd::Store(d_coeffs, Fma16(b0, d0, F16{}));
+  simd::Store(d_coeffs + 16, Fma16(b1, d1, F16{}));
+  simd::Store(d_coeffs + 32, Fma16(b2, d2, F16{}));
+  // s_k = sum_c coeffs[k][c] dc_c, as GCC fuses the scalar expression: (c1 dc1 + c0 dc0) + c2 dc2.
+  const F16 x0 = simd::Load<F16>(coeffs), x1 = simd::Load<F16>(coeffs + 16),
+            x2 = simd::Load<F16>(coeffs + 32);
+  const F16 s =
+      Fma16(Channel2(x0, x1, x2), simd::Splat<F16>(dc[2]),
+            Fma16(Channel0(x0, x1, x2), simd::Splat<F16>(dc[0]), Channel1(x0, x1, x2) * dc[1]));
+  // d dir_c += sum_k s_k g[k][c].
+  const float* gf = &g[0][0];
+  const F16 y0 = simd::Load<F16>(gf), y1 = simd::Load<F16>(gf + 16), y2 = simd::Load<F16>(gf + 32);
+  d_dir[0] += SumOfProducts16(s, Channel0(y0, y1, y2));
+  d_dir[1] += SumOfProducts16(s, Channel1(y0, y1, y2));
+  d_dir[2] += SumOfProducts16(s, Channel2(y0, y1, y2));
+}
+#endif
+
 // The sums over coefficients run in four interleaved partial sums (k mod 4): sixteen dependent
 // multiply-adds per channel would otherwise be one long latency chain per primitive. The count is
 // a template argument so the loops unroll and the twelve partial sums stay in registers (with a
@@ -96,6 +193,9 @@ void WithCoefficientCount(int n, F&& f) {
 template <int N>
 void EvalFromBasis(const float* __restrict b, const float* __restrict coeffs, float rgb[3],
                    uint8_t clamped[3]) {
+#if defined(__AVX512F__) && defined(__FMA__)
+  if constexpr (N == 16) return EvalFromBasis16(b, coeffs, rgb, clamped);
+#endif
   float acc[4][3] = {};
 #pragma GCC unroll 16
   for (int k = 0; k < N; ++k) {
@@ -132,6 +232,10 @@ void ShColorBackwardFromBasis(const float* __restrict b, const float (*__restric
                               const float d_rgb[3], float* __restrict d_coeffs, float d_dir[3]) {
   const float dc[3] = {clamped[0] ? 0.0f : d_rgb[0], clamped[1] ? 0.0f : d_rgb[1],
                        clamped[2] ? 0.0f : d_rgb[2]};
+#if defined(__AVX512F__) && defined(__FMA__)
+  if constexpr (kWrite && N == 16)
+    return WriteBackwardFromBasis16(b, g, coeffs, dc, d_coeffs, d_dir);
+#endif
   float acc[4][3] = {};
 #pragma GCC unroll 16
   for (int k = 0; k < N; ++k) {

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <utility>
 #include <vector>
 
@@ -61,6 +62,44 @@ TEST(ShTest, MatchesTheReferenceAndItsBackwardMatchesNumericDifferences) {
       const double basis = out_one[k % 3] - out_base[k % 3];
       const double expected = clamped[k % 3] ? 0.0 : d_rgb[k % 3] * basis;
       EXPECT_NEAR(d_coeffs[k], expected, 1e-6);
+    }
+  }
+}
+
+// The writing backward the projections call (vectorised for 16 coefficients where the build has
+// AVX-512) gives the adding form's bits on a zeroed row, for every coefficient count, with and
+// without clamped channels, and adds d/d dir to what d_dir holds.
+TEST(ShTest, WritingBackwardEqualsTheAddingFormToTheBit) {
+  Rng rng(9);
+  for (int trial = 0; trial < 200; ++trial) {
+    const int degree = trial % 4, n = (degree + 1) * (degree + 1);
+    float coeffs[48];
+    for (float& c : coeffs) c = static_cast<float>(rng.Normal(0, 0.4));
+    Eigen::Vector3d v(rng.Normal(), rng.Normal(), rng.Normal());
+    const Eigen::Vector3f dir = v.normalized().cast<float>();
+    float basis[kMaxShCoeffs], dbasis[kMaxShCoeffs][3];
+    ShBasisWithGradient(degree, dir.data(), basis, dbasis);
+    const uint8_t clamped[3] = {static_cast<uint8_t>(trial % 3 == 0), 0,
+                                static_cast<uint8_t>(trial % 5 == 0)};
+    const float d_rgb[3] = {static_cast<float>(rng.Normal()), static_cast<float>(rng.Normal()),
+                            static_cast<float>(rng.Normal())};
+    float added[48] = {}, written[48];
+    std::fill(written, written + 48, std::nanf(""));
+    float dir_added[3] = {0.25f, -1.5f, 3.0f}, dir_written[3] = {0.25f, -1.5f, 3.0f};
+    EvalShColorBackwardFromBasis(n, basis, dbasis, coeffs, clamped, d_rgb, added, dir_added);
+    WriteShColorBackwardFromBasis(n, basis, dbasis, coeffs, clamped, d_rgb, written, dir_written);
+    for (int k = 0; k < 3 * n; ++k)
+      ASSERT_EQ(std::memcmp(&added[k], &written[k], 4), 0) << "degree " << degree << " k " << k;
+    for (int c = 0; c < 3; ++c)
+      ASSERT_EQ(std::memcmp(&dir_added[c], &dir_written[c], 4), 0) << "degree " << degree;
+    // And the colour from the basis is EvalShColor's.
+    float rgb[3], rgb_basis[3];
+    uint8_t cl[3], cl_basis[3];
+    EvalShColor(degree, coeffs, dir.data(), rgb, cl);
+    EvalShColorFromBasis(n, basis, coeffs, rgb_basis, cl_basis);
+    for (int c = 0; c < 3; ++c) {
+      ASSERT_EQ(std::memcmp(&rgb[c], &rgb_basis[c], 4), 0);
+      ASSERT_EQ(cl[c], cl_basis[c]);
     }
   }
 }
