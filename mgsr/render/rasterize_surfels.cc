@@ -362,10 +362,9 @@ enum BackwardArray {
   bGn0,
   bGn1,
   bGn2,
-  bGA,
+  bTGA,  // T_N d loss / d A - T_N bg . g: the T_N terms of every d loss / d a_i, times 1 - a_i
   bGZmed,
   bGDist,
-  bTfin,
   bAN,
   bM1N,
   bM2N,
@@ -471,7 +470,7 @@ void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y
            s.n[2] * Gn2;
     if constexpr (kDistortion) qg += gw_dist;
     const V S = simd::Load<V>(st[bS] + k);
-    const V da = (qg - S) * T + simd::Load<V>(st[bTfin] + k) * inv * simd::Load<V>(st[bGA] + k);
+    const V da = (qg - S) * T + simd::Load<V>(st[bTGA] + k) * inv;
     simd::Store(st[bS] + k, simd::Select(valid, a * qg + (1.0f - a) * S, S));
     const M slope = valid & (raw < kMaxAlpha);  // the clamp at 0.99 has zero slope
     gop += simd::Masked(slope, h.G * da);
@@ -750,11 +749,10 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
         simd::Store(st[bGDs] + k, ds_grad);
         // The background and A terms share d T_N / d a_i = -T_N / (1 - a_i).
         const F16 bg_dot = raster_internal::BackgroundDot(bg_image, o.background, gc, pix, cols);
-        simd::Store(st[bGA] + k, a_grad - bg_dot);
+        simd::Store(st[bTGA] + k, T_final * (a_grad - bg_dot));
         simd::Store(st[bGZmed] + k,
                     g.median_depth.empty() ? F16{} : LoadRow(g.median_depth.plane(0) + pix, cols));
         simd::Store(st[bT] + k, T_final);
-        simd::Store(st[bTfin] + k, T_final);
         if (distortion) {
           simd::Store(st[bGDist] + k, LoadRow(g.distortion.plane(0) + pix, cols));
           simd::Store(st[bAN] + k, A);
