@@ -81,6 +81,18 @@ inline void EnsureImage(Image* im, int w, int h, int c) {
   if (im->width() != w || im->height() != h || im->channels() != c) *im = Image(w, h, c);
 }
 
+// A lower bound of log(min_alpha / o) for an opacity o in [min_alpha, 1]: the exponent below which
+// o G, G = exp(exponent), stays under min_alpha (the 3DGS backward's per-chain row filter). No
+// logarithm: log2(o) is at most the float's bits read as a number (exponent and mantissa fraction)
+// plus 0.0861 (the largest log2(1 + f) - f on [0, 1)); margins cover the bits' conversion and the
+// exponent's rounding.
+inline float FaintPowerBound(float o, float log_min_alpha) {
+  uint32_t bits;
+  std::memcpy(&bits, &o, sizeof(bits));
+  const float log2_upper = static_cast<float>(bits) * (1.0f / 8388608.0f) - 127.0f + 0.0862f;
+  return log_min_alpha - 0.6931472f * log2_upper - 1e-4f;
+}
+
 // Whether the pixel centre i + 0.5 of row or column i lies within `half_width` of `m`: the pixel
 // loops' own test, in the same float arithmetic.
 inline bool CentreReached(float m, float half_width, int i) {

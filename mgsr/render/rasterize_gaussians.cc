@@ -16,7 +16,8 @@ enum Field {
   kMy,
   kEx,
   kEy,
-  kMinPow,
+  kPowT,  // the exponent below which the transmitted chain's alpha stays under kMinAlpha (or less)
+  kPowR,  // the same for the reflected chain
   kCa,
   kCb,
   kCc,
@@ -52,6 +53,8 @@ enum GradField {
   kGradStride
 };
 
+constexpr float kLogMinAlpha = -5.5413f;  // log(kMinAlpha) = -5.54126, rounded down
+
 // Everything the pixel loops read about one Gaussian, packed into one row (AoS), so a tile's loop
 // touches one or two cache lines per Gaussian instead of 18 scattered arrays.
 void PackGaussians(const ProjectedGaussians& p, std::vector<float>* packed) {
@@ -71,7 +74,14 @@ void PackGaussians(const ProjectedGaussians& p, std::vector<float>* packed) {
     f[kCc] = p.conic[3 * g + 2];
     f[kOp] = p.opacity[g];
     f[kRefOp] = p.ref_opacity[g];
-    f[kMinPow] = p.min_power[g];
+    // Each chain's own threshold (the backward's row filter): the projection's min_power (exact,
+    // from the larger opacity) for the stronger chain, a lower bound of the weaker one's (no lower
+    // than min_power), so no pixel that blends is left out.
+    const float min_power = p.min_power[g], op = p.opacity[g], rop = p.ref_opacity[g];
+    f[kPowT] = op >= rop ? min_power
+                         : std::max(min_power, raster_internal::FaintPowerBound(op, kLogMinAlpha));
+    f[kPowR] = rop > op ? min_power
+                        : std::max(min_power, raster_internal::FaintPowerBound(rop, kLogMinAlpha));
     f[kBeta] = p.beta[g];
     f[kZ] = p.depth[g];
     for (int c = 0; c < 3; ++c) {
@@ -99,13 +109,16 @@ static_assert(kTileSize == 16, "one tile row is one 16-lane vector");
 
 // One Gaussian, as the pixel loops read it (from its packed row).
 struct Splat {
-  float mx, my, ex, ey, min_power, ca, cb, cc, op, rop, beta, z, ct0, ct1, ct2, cr0, cr1, cr2;
+  float mx, my, ex, ey, pow_t, pow_r, min_power, ca, cb, cc, op, rop, beta, z, ct0, ct1, ct2, cr0,
+      cr1, cr2;
   explicit Splat(const float* f)
       : mx(f[kMx]),
         my(f[kMy]),
         ex(f[kEx]),
         ey(f[kEy]),
-        min_power(f[kMinPow]),
+        pow_t(f[kPowT]),
+        pow_r(f[kPowR]),
+        min_power(std::min(pow_t, pow_r)),  // the projection's (that of the larger opacity)
         ca(f[kCa]),
         cb(f[kCb]),
         cc(f[kCc]),
@@ -307,8 +320,13 @@ void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, cons
     const float dy = y + 0.5f - s.my;
     const int k = (y - y0) * kTileSize + first;
     const V last_t = simd::Load<V>(st[bLastT] + k), last_r = simd::Load<V>(st[bLastR] + k);
-    const M blended = (lanes_t & (jf < last_t)) | (lanes_r & (jf < last_r));
-    const V power = RowPower(s, dx, dy, blended, &in_row[rows]);
+    const M blended_t = lanes_t & (jf < last_t), blended_r = lanes_r & (jf < last_r);
+    const V power = RowPower(s, dx, dy, blended_t | blended_r, &in_row[rows]);
+    // Each chain's pixels within its own threshold (the weaker chain's footprint is the smaller
+    // one): rows that only the weaker chain blended, outside its footprint, are not kept. (The
+    // forward keeps the one test for both chains: there the compares cost more than the rows they
+    // dropped, 100k raster forward 11.3 -> 12.0 ms.)
+    in_row[rows] &= (blended_t & (power >= s.pow_t)) | (blended_r & (power >= s.pow_r));
     G_row[rows] = simd::Exp(simd::Max(power, simd::Splat<V>(-80.0f)));
     dy_row[rows] = dy;
     row_k[rows] = k;

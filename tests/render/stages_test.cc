@@ -220,6 +220,31 @@ TEST(RasterScratchTest, EnsureScratchSizesEveryThreadForAnyTileAndPass) {
 // test accepts: the loops no longer test each row's |y + 0.5 - m| <= r themselves. Boundaries
 // where m - r - 0.5 is an integer, empty ranges, and values so large that the estimate rounds by
 // more than one index, against brute force; and the 8-column window holds every reached column.
+// The 3DGS backward drops a chain's pixels whose exponent is below FaintPowerBound: there its
+// alpha o exp(power), as the rasterizer computes it, must be below 1/255, for every opacity; and
+// the bound should not be loose by much more than its 0.086 (log2) slack.
+TEST(RasterScratchTest, FaintPowerBoundLeavesOutOnlyPixelsThatDoNotBlend) {
+  const float min_alpha = 1.0f / 255.0f, log_min_alpha = -5.5413f;
+  int checked = 0;
+  for (int i = 0; i <= 2000000; ++i) {
+    const float o = min_alpha + (1.0f - min_alpha) * static_cast<float>(i) / 2000000.0f;
+    const float bound = raster_internal::FaintPowerBound(o, log_min_alpha);
+    const float alpha = o * simd::Exp(simd::Splat<simd::F16>(bound))[0];
+    ASSERT_LT(alpha, min_alpha) << "opacity " << o;
+    ASSERT_GT(bound, std::log(static_cast<double>(min_alpha) / o) - 0.065) << "opacity " << o;
+    ++checked;
+  }
+  // Powers of two and their neighbours (the bits' approximation is exact at powers of two).
+  for (float o = 1.0f; o >= min_alpha; o *= 0.5f) {
+    for (const float v : {o, std::nextafter(o, 0.0f), std::nextafter(o, 2.0f)}) {
+      if (v < min_alpha || v > 1.0f) continue;
+      const float bound = raster_internal::FaintPowerBound(v, log_min_alpha);
+      ASSERT_LT(v * simd::Exp(simd::Splat<simd::F16>(bound))[0], min_alpha) << "opacity " << v;
+    }
+  }
+  EXPECT_GT(checked, 2000000);
+}
+
 TEST(RasterScratchTest, ReachedRangeIsExactlyTheCentresThePixelTestAccepts) {
   Rng rng(9);
   const int first = 16, last = 31;
