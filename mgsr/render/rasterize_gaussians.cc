@@ -16,8 +16,8 @@ enum Field {
   kMy,
   kEx,
   kEy,
-  kPowT,  // the exponent below which the transmitted chain's alpha stays under kMinAlpha (or less)
-  kPowR,  // the same for the reflected chain
+  kPowT,  // an exponent below which the transmitted chain's alpha stays under kMinAlpha
+  kPowR,  // the same for the reflected chain (see PackGaussians)
   kCa,
   kCb,
   kCc,

@@ -100,7 +100,6 @@ void WithCoefficientCount(int n, F&& f) {
 using simd::F16;
 using simd::F4;
 
-inline F16 Fma16(F16 a, F16 b, F16 c) { return simd::Fma(a, b, c); }
 inline F4 Fma4(F4 a, F4 b, F4 c) { return _mm_fmadd_ps(a, b, c); }
 
 // x[3k + c] for k < 16, from x = [x0 | x1 | x2].
@@ -168,15 +167,15 @@ void WriteBackwardFromBasis16(const float* b, const float (*g)[3], const float* 
       __builtin_shufflevector(dc_lanes, dc_lanes, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1);
   const F16 d2 =
       __builtin_shufflevector(dc_lanes, dc_lanes, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2, 0, 1, 2);
-  simd::Store(d_coeffs, Fma16(b0, d0, F16{}));
-  simd::Store(d_coeffs + 16, Fma16(b1, d1, F16{}));
-  simd::Store(d_coeffs + 32, Fma16(b2, d2, F16{}));
+  simd::Store(d_coeffs, simd::Fma(b0, d0, F16{}));
+  simd::Store(d_coeffs + 16, simd::Fma(b1, d1, F16{}));
+  simd::Store(d_coeffs + 32, simd::Fma(b2, d2, F16{}));
   // s_k = sum_c coeffs[k][c] dc_c, as GCC fuses the scalar expression: (c1 dc1 + c0 dc0) + c2 dc2.
   const F16 x0 = simd::Load<F16>(coeffs), x1 = simd::Load<F16>(coeffs + 16),
             x2 = simd::Load<F16>(coeffs + 32);
-  const F16 s =
-      Fma16(Channel2(x0, x1, x2), simd::Splat<F16>(dc[2]),
-            Fma16(Channel0(x0, x1, x2), simd::Splat<F16>(dc[0]), Channel1(x0, x1, x2) * dc[1]));
+  const F16 s = simd::Fma(
+      Channel2(x0, x1, x2), simd::Splat<F16>(dc[2]),
+      simd::Fma(Channel0(x0, x1, x2), simd::Splat<F16>(dc[0]), Channel1(x0, x1, x2) * dc[1]));
   // d dir_c += sum_k s_k g[k][c].
   const float* gf = &g[0][0];
   const F16 y0 = simd::Load<F16>(gf), y1 = simd::Load<F16>(gf + 16), y2 = simd::Load<F16>(gf + 32);

@@ -143,7 +143,7 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
   bins->order.resize(drawn);
   RadixSortByKey(chunks, &bins->order_keys, &bins->order, &bins->tmp_keys, &bins->tmp_ids,
                  &bins->chunk_counts);
-  const int n = static_cast<int>(bins->order.size());
+  const size_t n = bins->order.size();
   bins->chunk_counts.assign(static_cast<size_t>(chunks) * num_tiles, 0);
   bins->tile_start.assign(num_tiles + 1, 0);
 
@@ -153,9 +153,9 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
 #pragma omp parallel for schedule(static) num_threads(chunks)
   for (int t = 0; t < chunks; ++t) {
     uint32_t* counts = bins->chunk_counts.data() + static_cast<size_t>(t) * num_tiles;
-    const int begin = static_cast<int>(static_cast<int64_t>(n) * t / chunks);
-    const int end = static_cast<int>(static_cast<int64_t>(n) * (t + 1) / chunks);
-    for (int q = begin; q < end; ++q) {
+    size_t begin, end;
+    ChunkRange(n, chunks, t, &begin, &end);
+    for (size_t q = begin; q < end; ++q) {
       const TileRect r = rects[bins->order[q]];
       bins->sorted_rects[q] = r;
       for (int ty = r.y0; ty < r.y1; ++ty) {
@@ -180,9 +180,9 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
 #pragma omp parallel for schedule(static) num_threads(chunks)
   for (int t = 0; t < chunks; ++t) {
     uint32_t* offsets = bins->chunk_counts.data() + static_cast<size_t>(t) * num_tiles;
-    const int begin = static_cast<int>(static_cast<int64_t>(n) * t / chunks);
-    const int end = static_cast<int>(static_cast<int64_t>(n) * (t + 1) / chunks);
-    for (int q = begin; q < end; ++q) {
+    size_t begin, end;
+    ChunkRange(n, chunks, t, &begin, &end);
+    for (size_t q = begin; q < end; ++q) {
       const uint32_t id = bins->order[q];
       const TileRect& r = bins->sorted_rects[q];
       for (int ty = r.y0; ty < r.y1; ++ty) {
