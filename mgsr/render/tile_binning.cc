@@ -135,8 +135,10 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
     size_t begin, end;
     ChunkRange(num, chunks, t, &begin, &end);
     const size_t c = bins->chunk_counts[t];
-    std::memmove(bins->order_keys.data() + drawn, bins->order_keys.data() + begin, c * 4);
-    std::memmove(bins->order.data() + drawn, bins->order.data() + begin, c * 4);
+    if (c > 0 && drawn != begin) {  // (no move, and no pointer into an empty vector, otherwise)
+      std::memmove(bins->order_keys.data() + drawn, bins->order_keys.data() + begin, c * 4);
+      std::memmove(bins->order.data() + drawn, bins->order.data() + begin, c * 4);
+    }
     drawn += c;
   }
   bins->order_keys.resize(drawn);
