@@ -31,6 +31,24 @@ inline void ChunkRange(size_t n, int chunks, int t, size_t* begin, size_t* end) 
   *end = n * (t + 1) / chunks;
 }
 
+// Turns per-chunk counts (`chunks` rows of `buckets`) into each (chunk, bucket)'s first place in
+// bucket order, then chunk order: what keeps both counting sorts below stable. Writes each
+// bucket's first place to bucket_start when given; returns the total.
+uint32_t PlacesByBucketThenChunk(uint32_t* counts, int chunks, int buckets,
+                                 uint32_t* bucket_start = nullptr) {
+  uint32_t total = 0;
+  for (int b = 0; b < buckets; ++b) {
+    if (bucket_start != nullptr) bucket_start[b] = total;
+    for (int t = 0; t < chunks; ++t) {
+      uint32_t& c = counts[static_cast<size_t>(t) * buckets + b];
+      const uint32_t count = c;
+      c = total;
+      total += count;
+    }
+  }
+  return total;
+}
+
 // Stable LSD radix sort of (key, id) pairs by 32-bit key, 11 bits per pass, in `chunks`
 // consecutive chunks in parallel: per pass, each chunk counts its digits, every (digit, chunk)
 // gets its place in digit order and then chunk order, and each chunk moves its pairs there in
@@ -66,15 +84,7 @@ void RadixSortByKey(int chunks, std::vector<uint32_t>* keys, std::vector<uint32_
     }
     if (!differs) continue;
     // 2. Places: digit by digit, chunk by chunk.
-    uint32_t sum = 0;
-    for (int b = 0; b < kBuckets; ++b) {
-      for (int t = 0; t < chunks; ++t) {
-        uint32_t& c = (*counts)[static_cast<size_t>(t) * kBuckets + b];
-        const uint32_t v = c;
-        c = sum;
-        sum += v;
-      }
-    }
+    PlacesByBucketThenChunk(counts->data(), chunks, kBuckets);
     // 3. Each chunk moves its pairs, in order.
 #pragma omp parallel for schedule(static) num_threads(chunks)
     for (int t = 0; t < chunks; ++t) {
@@ -167,16 +177,8 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
   }
   // 3. Offsets: within a tile, chunk t's (deeper) entries follow those of chunks < t, so every
   //    tile list comes out front to back.
-  uint32_t total = 0;
-  for (int tile = 0; tile < num_tiles; ++tile) {
-    bins->tile_start[tile] = total;
-    for (int t = 0; t < chunks; ++t) {
-      uint32_t& c = bins->chunk_counts[static_cast<size_t>(t) * num_tiles + tile];
-      const uint32_t count = c;
-      c = total;
-      total += count;
-    }
-  }
+  const uint32_t total = PlacesByBucketThenChunk(bins->chunk_counts.data(), chunks, num_tiles,
+                                                 bins->tile_start.data());
   bins->tile_start[num_tiles] = total;
   bins->ids.resize(total);
 #pragma omp parallel for schedule(static) num_threads(chunks)
