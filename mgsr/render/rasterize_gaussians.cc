@@ -148,6 +148,17 @@ inline V RowPower(const Splat& s, V dx, float dy, MaskOf<V> lanes_ok, MaskOf<V>*
   return power;
 }
 
+// The lanes (pixels inside the image) each chain of a Gaussian takes part in, one definition for
+// both passes: none for a chain whose opacity is below kMinAlpha, which blends nothing anywhere
+// (its alpha is at most the opacity). On a trained object, most rows on which a chain blended
+// nothing were those of such Gaussians (89% of the transmitted chain's, 69% of the reflected's).
+template <class V>
+inline void ChainLanes(const Splat& s, const TileLanes& tl, int first, MaskOf<V>* lanes_t,
+                       MaskOf<V>* lanes_r) {
+  *lanes_t = s.op >= kMinAlpha ? tl.Ok<V>(first) : MaskOf<V>{};
+  *lanes_r = s.rop >= kMinAlpha ? tl.Ok<V>(first) : MaskOf<V>{};
+}
+
 // Forward per-pixel state of a tile: T, Tr, colours, W and D sums and 1 + index of the last
 // blended Gaussian (as float, exact below 2^24). A chain that has stopped blending (terminated,
 // or the reflected chain of a render without reflection) keeps its transmittance negated: a
@@ -211,11 +222,8 @@ float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const 
   using M = MaskOf<V>;
   const float jp1 = static_cast<float>(j + 1);
   const V dx = tl.Px<V>(first) - s.mx;
-  // A chain whose opacity is below kMinAlpha blends nothing anywhere (its alpha is at most the
-  // opacity), so its pixels take no part: on a trained object, most rows on which a chain blended
-  // nothing were those of such Gaussians (89% of the transmitted chain's, 69% of the reflected's).
-  const M lanes_t = s.op >= kMinAlpha ? tl.Ok<V>(first) : M{};
-  const M lanes_r = s.rop >= kMinAlpha ? tl.Ok<V>(first) : M{};
+  M lanes_t, lanes_r;
+  ChainLanes<V>(s, tl, first, &lanes_t, &lanes_r);
   // The rows that blend anything: their exponent, masks and pixel index.
   V G[kTileSize];
   M in[kTileSize], live_t[kTileSize], live_r[kTileSize];
@@ -303,9 +311,8 @@ void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, cons
   using M = MaskOf<V>;
   const float jf = static_cast<float>(j);
   const V dx = tl.Px<V>(first) - s.mx;
-  // The lanes of each chain as in BlendRows: none for a chain too transparent to blend anywhere.
-  const M lanes_t = s.op >= kMinAlpha ? tl.Ok<V>(first) : M{};
-  const M lanes_r = s.rop >= kMinAlpha ? tl.Ok<V>(first) : M{};
+  M lanes_t, lanes_r;
+  ChainLanes<V>(s, tl, first, &lanes_t, &lanes_r);
   // The rows where a pixel blended this Gaussian: exponent, mask, offset and index.
   V G_row[kTileSize];
   M in_row[kTileSize];
