@@ -135,6 +135,25 @@ inline ColumnWindow WindowFor(float mx, float half_width, int x0) {
   return {std::clamp(lo, 0, kTileSize - 8), true};
 }
 
+// One primitive's pass over whole 16-column tile rows. `lanes(tag, first, out)` runs the pass over
+// the columns [first, first + lanes of decltype(tag)) and writes its N per-lane results (blend
+// weights, gradient sums) to `out`. Where the build has AVX-512 that is one 16-lane pass; otherwise
+// two 8-lane passes, over columns 0-7 and 8-15, whose results are joined lane for lane. Pixels are
+// independent and every result is per lane, so the joined results are the 16-lane pass's to the
+// bit; but each half skips its own empty rows, and keeps half as many registers live (AVX2 has 16
+// vector registers and a 16-lane vector takes two of them).
+template <int N, class Lanes>
+inline void WholeRows(Lanes lanes, simd::F16 out[N]) {
+#if MGSR_SIMD_NATIVE16
+  lanes(simd::F16{}, 0, out);
+#else
+  simd::F8 lo[N], hi[N];
+  lanes(simd::F8{}, 0, lo);
+  lanes(simd::F8{}, 8, hi);
+  for (int i = 0; i < N; ++i) out[i] = {lo[i], hi[i]};
+#endif
+}
+
 // The pixel lanes of a tile: centres and "inside the image" masks at both widths.
 struct TileLanes {
   simd::F16 px16;
@@ -183,10 +202,10 @@ inline void StoreRow(float* p, simd::F16 v, int n) {
 inline simd::F16 LoadRowOfUint(const uint32_t* p, int n) {
   simd::U16 u{};
   std::memcpy(&u, p, sizeof(uint32_t) * n);
-  return __builtin_convertvector(u, simd::F16);
+  return simd::ToFloat(u);
 }
 inline void StoreRowAsUint(uint32_t* p, simd::F16 v, int n) {
-  const simd::U16 u = __builtin_convertvector(v, simd::U16);
+  const simd::U16 u = simd::ToUint(v);
   std::memcpy(p, &u, sizeof(uint32_t) * n);
 }
 // Channel c of the background behind a tile row: the per-pixel image where there is one, else

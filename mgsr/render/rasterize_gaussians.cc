@@ -100,6 +100,7 @@ using raster_internal::PixelArrays;
 using raster_internal::ReachedRange;
 using raster_internal::SumEntriesPerPrimitive;
 using raster_internal::TileLanes;
+using raster_internal::WholeRows;
 using raster_internal::WindowFor;
 using simd::F16;
 using simd::F8;
@@ -209,7 +210,7 @@ inline V BlendChain(const ChainArrays& a, const PixelArrays& st, int k, MaskOf<V
 }
 
 // Blends Gaussian j (row `s`) into tile rows [ya, yb], columns [first, first + lanes of V).
-// Returns the sum of its blend weights there (both chains).
+// Returns its blend weights there per lane, summed over the rows (both chains).
 //
 // In two loops: first every row's exponent (which reads no state a blend writes), then the blends.
 // In one loop each row's blend waited on its exponent's long dependency chain (the polynomial) and
@@ -217,8 +218,8 @@ inline V BlendChain(const ChainArrays& a, const PixelArrays& st, int k, MaskOf<V
 // of all rows overlap and the blends are short chains (on a trained object's 3DGS branch, ms per
 // view: forward 12.2 -> 10.4, backward 16.7 -> 12.0; mgsr_trained_render_bench).
 template <class V>
-float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const TileLanes& tl,
-                bool refl, const PixelArrays& st) {
+V BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const TileLanes& tl,
+            bool refl, const PixelArrays& st) {
   using M = MaskOf<V>;
   const float jp1 = static_cast<float>(j + 1);
   const V dx = tl.Px<V>(first) - s.mx;
@@ -263,7 +264,7 @@ float BlendRows(const Splat& s, int j, int ya, int yb, int y0, int first, const 
       weight_sum +=
           BlendChain(kReflectedChain, st, k, in[r], G[r], s.rop, s.cr0, s.cr1, s.cr2, jp1);
   }
-  return simd::Sum(weight_sum);
+  return weight_sum;
 }
 
 // Backward per-pixel state of a tile, walking back to front: transmittances, "behind"
@@ -302,12 +303,13 @@ static_assert(kForwardArrays <= raster_internal::kMaxPixelArrays &&
               "EnsureScratch sizes the pixel state for kMaxPixelArrays arrays");
 
 // Gradients of Gaussian j (row `s`) over tile rows [ya, yb], columns [first, first + lanes of
-// V), written to its gradient row `dst` (kGradStride floats); un-blends it from the pixel state.
-// In two loops, as BlendRows: the rows' exponents (which read only the last-blended indices, which
-// this pass does not write), then the un-blending and the gradients.
+// V), per lane in the order of GradField (summed over the rows; `acc[15]` pads), for
+// WriteGradients; un-blends it from the pixel state. In two loops, as BlendRows: the rows'
+// exponents (which read only the last-blended indices, which this pass does not write), then the
+// un-blending and the gradients.
 template <class V>
 void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, const TileLanes& tl,
-                  bool refl, const PixelArrays& st, float* dst) {
+                  bool refl, const PixelArrays& st, V acc[16]) {
   using M = MaskOf<V>;
   const float jf = static_cast<float>(j);
   const V dx = tl.Px<V>(first) - s.mx;
@@ -418,8 +420,14 @@ void GradientRows(const Splat& s, int j, int ya, int yb, int y0, int first, cons
   const V g_cb = -dx * sum_dp_dy;
   const V g_cc = -0.5f * sum_dp_dy2;
   // In the order of GradField (the 16th vector pads).
-  const V acc[16] = {g_mx, g_my,  g_ca,  g_cb,  g_cc,  g_op,  g_rop, g_beta,
-                     g_z,  g_ct0, g_ct1, g_ct2, g_cr0, g_cr1, g_cr2, V{}};
+  const V lanes[16] = {g_mx, g_my,  g_ca,  g_cb,  g_cc,  g_op,  g_rop, g_beta,
+                       g_z,  g_ct0, g_ct1, g_ct2, g_cr0, g_cr1, g_cr2, V{}};
+  std::copy(lanes, lanes + 16, acc);
+}
+
+// An entry's gradient row `dst` (kGradStride floats) from GradientRows' per-lane sums.
+template <class V>
+void WriteGradients(const V acc[16], float* dst) {
   static_assert(kGradStride == 15, "one SumEach closes the entry");
   float sums[16];
   simd::SumEach(acc, sums);
@@ -492,8 +500,18 @@ void RasterizeGaussians(const ProjectedGaussians& p, const TileBins& bins,
       int ya, yb;
       ReachedRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
       const ColumnWindow w = WindowFor(s.mx, s.ex, x0);
-      const float sum = w.half ? BlendRows<F8>(s, j, ya, yb, y0, w.first, tl, refl, st)
-                               : BlendRows<F16>(s, j, ya, yb, y0, 0, tl, refl, st);
+      float sum;
+      if (w.half) {
+        sum = simd::Sum(BlendRows<F8>(s, j, ya, yb, y0, w.first, tl, refl, st));
+      } else {
+        F16 weights_by_lane[1];
+        WholeRows<1>(
+            [&](auto lanes, int first, decltype(lanes)* out) {
+              *out = BlendRows<decltype(lanes)>(s, j, ya, yb, y0, first, tl, refl, st);
+            },
+            weights_by_lane);
+        sum = simd::Sum(weights_by_lane[0]);
+      }
       if (weights != nullptr) weights[j] += sum;
       blended[j] = sum > 0.0f;  // a blended pixel's weight is at least kMinAlpha kMinTransmittance
     }
@@ -639,9 +657,17 @@ void RasterizeGaussiansBackward(const ProjectedGaussians& p, const TileBins& bin
         ReachedRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
         const ColumnWindow w = WindowFor(s.mx, s.ex, x0);
         if (w.half) {
-          GradientRows<F8>(s, j, ya, yb, y0, w.first, tl, refl, st, dst);
+          F8 acc[16];
+          GradientRows<F8>(s, j, ya, yb, y0, w.first, tl, refl, st, acc);
+          WriteGradients(acc, dst);
         } else {
-          GradientRows<F16>(s, j, ya, yb, y0, 0, tl, refl, st, dst);
+          F16 acc[16];
+          WholeRows<16>(
+              [&](auto lanes, int first, decltype(lanes)* out) {
+                GradientRows<decltype(lanes)>(s, j, ya, yb, y0, first, tl, refl, st, out);
+              },
+              acc);
+          WriteGradients(acc, dst);
         }
       }
       scratch->tile_used[tile] = static_cast<uint32_t>(max_last);

@@ -19,6 +19,7 @@ using raster_internal::PixelArrays;
 using raster_internal::ReachedRange;
 using raster_internal::SumEntriesPerPrimitive;
 using raster_internal::TileLanes;
+using raster_internal::WholeRows;
 using raster_internal::WindowFor;
 using simd::F16;
 using simd::F8;
@@ -269,8 +270,8 @@ enum ForwardArray {
 // Blends surfel j into tile rows [ya, yb], columns [first, first + lanes of V); returns the sum of
 // its blend weights there. kDistortion: also the distortion sums (SurfelRenderOptions::distortion).
 template <class V, bool kDistortion>
-float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0, int first,
-                const TileLanes& tl, const PixelArrays& st) {
+V BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0, int first,
+            const TileLanes& tl, const PixelArrays& st) {
   using M = simd::MaskOf<V>;
   const M lanes_ok = tl.Ok<V>(first);
   RowHit<V> cols;
@@ -342,7 +343,7 @@ float BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0,
     simd::StoreMasked(st[aLast] + k, blend, simd::Splat<V>(jp1));
     weight_sum += w;
   }
-  return simd::Sum(weight_sum);
+  return weight_sum;
 }
 
 // d m / d z of the NDC depth m the distortion term reads.
@@ -377,12 +378,14 @@ static_assert(kForwardArrays <= raster_internal::kMaxPixelArrays &&
                   kBackwardArrays <= raster_internal::kMaxPixelArrays,
               "EnsureScratch sizes the pixel state for kMaxPixelArrays arrays");
 
-// Gradients of surfel j over tile rows [ya, yb], columns [first, first + lanes of V), written to
-// its gradient row `dst` (`dlow`: d c / d M of its low-pass offset); un-blends it from the state.
-// kDistortion: the distortion output has a gradient (else its terms are zero and skipped).
+// Gradients of surfel j over tile rows [ya, yb], columns [first, first + lanes of V), per lane
+// (summed over the rows) in `acc`: the kGradStride fields in the order of GradField, then d loss /
+// d c of the low-pass offset (for WriteGradients); un-blends it from the state. kDistortion: the
+// distortion output has a gradient (else its terms are zero and skipped).
+constexpr int kLaneSums = 19;
 template <class V, bool kDistortion>
 void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0, int first,
-                  const TileLanes& tl, const PixelArrays& st, const float dlow[9], float* dst) {
+                  const TileLanes& tl, const PixelArrays& st, V acc[kLaneSums]) {
   using M = simd::MaskOf<V>;
   const M lanes_ok = tl.Ok<V>(first);
   RowHit<V> cols;
@@ -513,15 +516,22 @@ void GradientRows(const Surfel& s, int j, float min_power, int ya, int yb, int y
     gmx -= s.tw[0] * dk0 + s.tw[1] * dk1 + s.tw[2] * dk2;
     gmy -= s.tw[0] * dl0 + s.tw[1] * dl1 + s.tw[2] * dl2;
   }
-  // In the order of GradField: the first 16 sums at once, the last two alone.
-  const V acc[16] = {gTu0, gTu1, gTu2, gTv0, gTv1, gTv2, gTw0, gTw1,
-                     gTw2, gmx,  gmy,  gop,  gn0,  gn1,  gn2,  gc0};
+  // In the order of GradField, then the low-pass offset's.
+  const V lanes[kLaneSums] = {gTu0, gTu1, gTu2, gTv0, gTv1, gTv2, gTw0, gTw1, gTw2, gmx,
+                              gmy,  gop,  gn0,  gn1,  gn2,  gc0,  gc1,  gc2,  glow};
+  std::copy(lanes, lanes + kLaneSums, acc);
+}
+
+// Surfel `s`'s gradient row `dst` from GradientRows' per-lane sums (`dlow`: d c / d M of its
+// low-pass offset).
+template <class V>
+void WriteGradients(const Surfel& s, const V acc[kLaneSums], const float dlow[9], float* dst) {
   static_assert(kGradStride == 18, "16 sums at once, then gC1 and gC2");
   simd::SumEach(acc, dst);
-  dst[gC1] = simd::Sum(gc1);
-  dst[gC2] = simd::Sum(gc2);
+  dst[gC1] = simd::Sum(acc[gC1]);
+  dst[gC2] = simd::Sum(acc[gC2]);
   if (s.low_pass > 0) {  // area-preserving low-pass only
-    const float gl = simd::Sum(glow);
+    const float gl = simd::Sum(acc[kGradStride]);
     // The rows T_u, T_v, T_w lead the gradient stride (gTu0 = 0).
     for (int q = 0; q < 9; ++q) dst[q] += gl * dlow[q];
   }
@@ -596,13 +606,20 @@ void RasterizeSurfels(const ProjectedSurfels& p, const TileBins& bins, const Sur
       int ya, yb;
       ReachedRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
       const ColumnWindow win = WindowFor(s.mx, s.ex, x0);
+      const auto blend = [&](auto lanes, int first, decltype(lanes)* out) {
+        using V = decltype(lanes);
+        *out = distortion ? BlendRows<V, true>(s, j, min_power, ya, yb, y0, first, tl, st)
+                          : BlendRows<V, false>(s, j, min_power, ya, yb, y0, first, tl, st);
+      };
       float sum;
-      if (distortion) {
-        sum = win.half ? BlendRows<F8, true>(s, j, min_power, ya, yb, y0, win.first, tl, st)
-                       : BlendRows<F16, true>(s, j, min_power, ya, yb, y0, 0, tl, st);
+      if (win.half) {
+        F8 weights_by_lane;
+        blend(F8{}, win.first, &weights_by_lane);
+        sum = simd::Sum(weights_by_lane);
       } else {
-        sum = win.half ? BlendRows<F8, false>(s, j, min_power, ya, yb, y0, win.first, tl, st)
-                       : BlendRows<F16, false>(s, j, min_power, ya, yb, y0, 0, tl, st);
+        F16 weights_by_lane[1];
+        WholeRows<1>(blend, weights_by_lane);
+        sum = simd::Sum(weights_by_lane[0]);
       }
       if (weights != nullptr) weights[j] += sum;
       blended[j] = sum > 0.0f;  // a blended pixel's weight is at least kMinAlpha kMinTransmittance
@@ -785,16 +802,22 @@ void RasterizeSurfelsBackward(const ProjectedSurfels& p, const TileBins& bins,
         ReachedRange(s.my, s.ey, y0, y_end - 1, &ya, &yb);
         float* dst = tg + static_cast<size_t>(j) * kGradStride;
         const ColumnWindow win = WindowFor(s.mx, s.ex, x0);
-        if (distortion) {
-          if (win.half) {
-            GradientRows<F8, true>(s, j, min_power, ya, yb, y0, win.first, tl, st, dlow, dst);
+        const auto gradients = [&](auto lanes, int first, decltype(lanes)* out) {
+          using V = decltype(lanes);
+          if (distortion) {
+            GradientRows<V, true>(s, j, min_power, ya, yb, y0, first, tl, st, out);
           } else {
-            GradientRows<F16, true>(s, j, min_power, ya, yb, y0, 0, tl, st, dlow, dst);
+            GradientRows<V, false>(s, j, min_power, ya, yb, y0, first, tl, st, out);
           }
-        } else if (win.half) {
-          GradientRows<F8, false>(s, j, min_power, ya, yb, y0, win.first, tl, st, dlow, dst);
+        };
+        if (win.half) {
+          F8 acc[kLaneSums];
+          gradients(F8{}, win.first, acc);
+          WriteGradients(s, acc, dlow, dst);
         } else {
-          GradientRows<F16, false>(s, j, min_power, ya, yb, y0, 0, tl, st, dlow, dst);
+          F16 acc[kLaneSums];
+          WholeRows<kLaneSums>(gradients, acc);
+          WriteGradients(s, acc, dlow, dst);
         }
       }
       scratch->tile_used[tile] = static_cast<uint32_t>(max_last);

@@ -7,6 +7,11 @@
 #include <random>
 #include <vector>
 
+// The suite's name, so that simd16_portable_test.cc can compile the same checks a second time.
+#ifndef MGSR_SIMD16_SUITE
+#define MGSR_SIMD16_SUITE Simd16
+#endif
+
 namespace mgsr::simd {
 namespace {
 
@@ -32,11 +37,11 @@ void ExpectSumEachMatchesSum(uint32_t seed) {
   }
 }
 
-TEST(Simd16, SumEachIsSumToTheBit16Lanes) {
+TEST(MGSR_SIMD16_SUITE, SumEachIsSumToTheBit16Lanes) {
   for (uint32_t seed = 1; seed <= 50; ++seed) ExpectSumEachMatchesSum<F16>(seed);
 }
 
-TEST(Simd16, SumEachIsSumToTheBit8Lanes) {
+TEST(MGSR_SIMD16_SUITE, SumEachIsSumToTheBit8Lanes) {
   for (uint32_t seed = 1; seed <= 50; ++seed) ExpectSumEachMatchesSum<F8>(seed);
 }
 
@@ -59,7 +64,7 @@ void ExpectStoreMaskedWritesOnlyMaskedLanes() {
     EXPECT_EQ(memory[1 + l], l % 3 == 1 ? 100.0f + l : -2.0f - l) << "lane " << l;
 }
 
-TEST(Simd16, StoreMaskedWritesOnlyMaskedLanes) {
+TEST(MGSR_SIMD16_SUITE, StoreMaskedWritesOnlyMaskedLanes) {
   ExpectStoreMaskedWritesOnlyMaskedLanes<F16>();
   ExpectStoreMaskedWritesOnlyMaskedLanes<F8>();
 }
@@ -67,7 +72,7 @@ TEST(Simd16, StoreMaskedWritesOnlyMaskedLanes) {
 // Exp gives the same bits at every width: the 16- and 8-lane forms use the instruction set's floor
 // and scale instructions where the build has them, the 4-lane form the portable ones. Over a dense
 // sweep of the rasterizers' argument range [-80, 0] plus the range ends.
-TEST(Simd16, ExpIsTheSameAtEveryWidth) {
+TEST(MGSR_SIMD16_SUITE, ExpIsTheSameAtEveryWidth) {
   std::vector<float> xs = {0.0f, -0.0f, -80.0f, -1e-30f, -0.5f, -1.0f, -69.31472f};
   for (int i = 0; i <= 400000; ++i) xs.push_back(-80.0f * i / 400000.0f);
   int checked = 0;
@@ -97,7 +102,7 @@ TEST(Simd16, ExpIsTheSameAtEveryWidth) {
   EXPECT_GE(checked, 400000);
 }
 
-TEST(Simd16, FloorAndScaleAreExact) {
+TEST(MGSR_SIMD16_SUITE, FloorAndScaleAreExact) {
   for (int i = -2000; i <= 2000; ++i) {
     const float f = i * 0.0625f - 0.03125f * (i % 3);
     F16 v16 = Splat<F16>(f);
@@ -118,7 +123,7 @@ TEST(Simd16, FloorAndScaleAreExact) {
 
 // Fma / Fms round once where the build has FMA instructions (the rasterizers' two passes rely on
 // the same fusing), and are the plain expression otherwise.
-TEST(Simd16, FmaAndFmsRoundOnce) {
+TEST(MGSR_SIMD16_SUITE, FmaAndFmsRoundOnce) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> u(-2.0f, 2.0f);
   for (int trial = 0; trial < 200; ++trial) {
@@ -137,7 +142,7 @@ TEST(Simd16, FmaAndFmsRoundOnce) {
     const F16 f = Fma(a, b, c), g = Fms(a, b, c);
     const F8 f8 = Fma(a8, b8, c8), g8 = Fms(a8, b8, c8);
     for (int l = 0; l < 16; ++l) {
-#if defined(__AVX512F__)
+#if defined(__FMA__)
       EXPECT_EQ(f[l], std::fma(a[l], b[l], c[l]));
       EXPECT_EQ(g[l], std::fma(a[l], b[l], -c[l]));
 #else
@@ -159,7 +164,7 @@ TEST(Simd16, FmaAndFmsRoundOnce) {
 
 // And a different pairing would be caught: the sum of the lanes in index order differs from Sum
 // for some of these inputs (else the test above could not fail).
-TEST(Simd16, PairingMattersForTheseInputs) {
+TEST(MGSR_SIMD16_SUITE, PairingMattersForTheseInputs) {
   int differs = 0;
   for (uint32_t seed = 1; seed <= 50; ++seed) {
     std::mt19937 rng(seed);
@@ -172,6 +177,87 @@ TEST(Simd16, PairingMattersForTheseInputs) {
     differs += sequential != Sum(x);
   }
   EXPECT_GT(differs, 0);
+}
+
+// Every lane operation the pixel loops use, lane by lane against the scalar operation, at both
+// widths: where the build has no AVX-512 a 16-lane vector is a pair of 8-lane halves with
+// operators of its own (simd16.h), which must act as the 64-byte vector would.
+template <class V>
+void ExpectLaneOperationsAreScalar(uint32_t seed) {
+  constexpr int L = kLanesOf<V>;
+  using M = MaskOf<V>;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-3.0f, 3.0f);
+  V a, b;
+  for (int l = 0; l < L; ++l) {
+    a[l] = u(rng);
+    b[l] = l % 5 == 0 ? a[l] : u(rng);  // some ties for the comparisons
+  }
+  const float s = 0.75f;
+  const M lt = a<b, le = a <= b, gt = a> s, ge = s >= b, eq = a == b, ne = a != b;
+  const M both = lt & ge, either = lt | gt, odd = lt ^ gt, neither = ~either;
+  const V sum = a + b, diff = a - s, prod = s * b, quot = a / b, neg = -a;
+  V acc = a;
+  acc += b;
+  acc *= b;
+  acc -= a;
+  const V sel = IfElse(lt, a, b), sel2 = Select(gt, a, b), low = Min(a, b), high = Max(a, b);
+  const V mag = Abs(a), kept = Masked(le, a), fl = Floor(a * 4.0f), lanes = Lanes<V>();
+  const V fma = Fma(a, b, Splat<V>(s));
+  for (int l = 0; l < L; ++l) {
+    EXPECT_EQ(lt[l], a[l] < b[l] ? -1 : 0) << l;
+    EXPECT_EQ(le[l], a[l] <= b[l] ? -1 : 0) << l;
+    EXPECT_EQ(gt[l], a[l] > s ? -1 : 0) << l;
+    EXPECT_EQ(ge[l], s >= b[l] ? -1 : 0) << l;
+    EXPECT_EQ(eq[l], a[l] == b[l] ? -1 : 0) << l;
+    EXPECT_EQ(ne[l], a[l] != b[l] ? -1 : 0) << l;
+    EXPECT_EQ(both[l], lt[l] & ge[l]) << l;
+    EXPECT_EQ(either[l], lt[l] | gt[l]) << l;
+    EXPECT_EQ(odd[l], lt[l] ^ gt[l]) << l;
+    EXPECT_EQ(neither[l], ~either[l]) << l;
+    EXPECT_EQ(sum[l], a[l] + b[l]) << l;
+    EXPECT_EQ(diff[l], a[l] - s) << l;
+    EXPECT_EQ(prod[l], s * b[l]) << l;
+    EXPECT_EQ(quot[l], a[l] / b[l]) << l;
+    EXPECT_EQ(neg[l], -a[l]) << l;
+    EXPECT_EQ(acc[l], (a[l] + b[l]) * b[l] - a[l]) << l;
+    EXPECT_EQ(sel[l], a[l] < b[l] ? a[l] : b[l]) << l;
+    EXPECT_EQ(sel2[l], a[l] > s ? a[l] : b[l]) << l;
+    EXPECT_EQ(low[l], std::min(a[l], b[l])) << l;
+    EXPECT_EQ(high[l], std::max(a[l], b[l])) << l;
+    EXPECT_EQ(mag[l], std::abs(a[l])) << l;
+    EXPECT_EQ(kept[l], a[l] <= b[l] ? a[l] : 0.0f) << l;
+    EXPECT_EQ(fl[l], std::floor(a[l] * 4.0f)) << l;
+    EXPECT_EQ(lanes[l], static_cast<float>(l)) << l;
+    EXPECT_NEAR(fma[l], a[l] * b[l] + s, 1e-5f) << l;
+  }
+  // Any sees a single set lane wherever it is.
+  for (int l = 0; l < L; ++l) {
+    M one{};
+    one[l] = -1;
+    EXPECT_TRUE(Any(one)) << l;
+  }
+  EXPECT_FALSE(Any(M{}));
+}
+
+TEST(MGSR_SIMD16_SUITE, LaneOperationsAreScalar16Lanes) {
+  for (uint32_t seed = 1; seed <= 20; ++seed) ExpectLaneOperationsAreScalar<F16>(seed);
+}
+
+TEST(MGSR_SIMD16_SUITE, LaneOperationsAreScalar8Lanes) {
+  for (uint32_t seed = 1; seed <= 20; ++seed) ExpectLaneOperationsAreScalar<F8>(seed);
+}
+
+// Whole numbers below 2^24 to float rows and back (the last-blended indices), every lane.
+TEST(MGSR_SIMD16_SUITE, UintRowsRoundTrip) {
+  U16 u;
+  for (int l = 0; l < 16; ++l) u[l] = (l == 3 ? (1u << 24) - 1 : 0u) + 977u * l * l;
+  const F16 f = ToFloat(u);
+  const U16 back = ToUint(f);
+  for (int l = 0; l < 16; ++l) {
+    EXPECT_EQ(f[l], static_cast<float>(u[l])) << l;
+    EXPECT_EQ(back[l], u[l]) << l;
+  }
 }
 
 }  // namespace
