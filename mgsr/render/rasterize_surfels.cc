@@ -267,8 +267,9 @@ enum ForwardArray {
   kForwardArrays
 };
 
-// Blends surfel j into tile rows [ya, yb], columns [first, first + lanes of V); returns the sum of
-// its blend weights there. kDistortion: also the distortion sums (SurfelRenderOptions::distortion).
+// Blends surfel j into tile rows [ya, yb], columns [first, first + lanes of V); returns its blend
+// weights there per lane, summed over the rows. kDistortion: also the distortion sums
+// (SurfelRenderOptions::distortion).
 template <class V, bool kDistortion>
 V BlendRows(const Surfel& s, int j, float min_power, int ya, int yb, int y0, int first,
             const TileLanes& tl, const PixelArrays& st) {
