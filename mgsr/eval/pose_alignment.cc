@@ -5,6 +5,28 @@
 #include <cmath>
 
 namespace mgsr {
+namespace {
+
+// Whether the points lie on one line (or coincide), which leaves the rotation about that line
+// undetermined: the farthest point from their centroid gives the line's direction, and no point
+// may lie further than 1e-9 of that distance off the line. (A singular value decomposition of the
+// 3 x n points said the same, but compiling Eigen's JacobiSVD of a dynamic-width matrix took over
+// a minute of the sanitizer build.)
+bool Collinear(const Eigen::Matrix3Xd& points) {
+  const Eigen::Matrix3Xd centred = points.colwise() - points.rowwise().mean();
+  Eigen::Index far = 0;
+  const double reach = std::sqrt(centred.colwise().squaredNorm().maxCoeff(&far));
+  if (!(reach > 0)) return true;
+  const Eigen::Vector3d direction = centred.col(far) / reach;
+  double off_line = 0;
+  for (Eigen::Index i = 0; i < centred.cols(); ++i) {
+    const Eigen::Vector3d p = centred.col(i);
+    off_line = std::max(off_line, (p - p.dot(direction) * direction).norm());
+  }
+  return off_line <= 1e-9 * reach;
+}
+
+}  // namespace
 
 Status ComparePoses(const std::vector<Camera>& estimate, const std::vector<Camera>& truth,
                     PoseErrors* errors) {
@@ -22,9 +44,7 @@ Status ComparePoses(const std::vector<Camera>& estimate, const std::vector<Camer
   const Eigen::Vector3d centroid = dst.rowwise().mean();
   double extent = 0;
   for (int i = 0; i < n; ++i) extent = std::max(extent, (dst.col(i) - centroid).norm());
-  // Collinear (or coincident) centres leave the rotation about their line undetermined.
-  Eigen::JacobiSVD<Eigen::Matrix3Xd> svd(src.colwise() - src.rowwise().mean());
-  if (extent <= 0 || svd.singularValues()(1) <= 1e-9 * svd.singularValues()(0))
+  if (extent <= 0 || Collinear(src))
     return Status::Error("ComparePoses: camera centres are collinear; no unique alignment");
 
   const Eigen::Matrix4d sim = Eigen::umeyama(src, dst, /*with_scaling=*/true);
