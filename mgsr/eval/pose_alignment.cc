@@ -9,14 +9,17 @@ namespace {
 
 // Whether the points lie on one line (or coincide), which leaves the rotation about that line
 // undetermined: the farthest point from their centroid gives the line's direction, and no point
-// may lie further than 1e-9 of that distance off the line. (A singular value decomposition of the
-// 3 x n points said the same, but compiling Eigen's JacobiSVD of a dynamic-width matrix took over
-// a minute of the sanitizer build.)
+// may lie further than 1e-9 of that distance off the line. Points within 1e-9 of their distance
+// from the origin of each other coincide (rounding spreads copies of one point by about 1e-16 of
+// it, in any direction). (A singular value decomposition of the 3 x n points said the same for
+// lines, but compiling Eigen's JacobiSVD of a dynamic-width matrix took over a minute of the
+// sanitizer build.)
 bool Collinear(const Eigen::Matrix3Xd& points) {
-  const Eigen::Matrix3Xd centred = points.colwise() - points.rowwise().mean();
+  const Eigen::Vector3d mean = points.rowwise().mean();
+  const Eigen::Matrix3Xd centred = points.colwise() - mean;
   Eigen::Index far = 0;
   const double reach = std::sqrt(centred.colwise().squaredNorm().maxCoeff(&far));
-  if (!(reach > 0)) return true;
+  if (!(reach > 1e-9 * mean.norm())) return true;
   const Eigen::Vector3d direction = centred.col(far) / reach;
   double off_line = 0;
   for (Eigen::Index i = 0; i < centred.cols(); ++i) {
