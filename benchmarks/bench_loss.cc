@@ -44,7 +44,7 @@ struct Inputs {
   }
 };
 
-// The mutual-stage loss sets (reference 1.5): 3DGS render + mutual depth; 2DGS mutual render,
+// The mutual-stage loss sets (method.md 1.5): 3DGS render + mutual depth; 2DGS mutual render,
 // normal consistency, normal TV and depth TV.
 mgsr::Problem MakeProblem() {
   using mgsr::Branch;

@@ -21,9 +21,9 @@ namespace {
 // update loop is ~30% slower with one).
 constexpr int64_t kFlushInterval = 64;
 constexpr float kFlushMoment = 1e-30f;
-// Blocks from this many entries are updated on all threads. (It was 100,000: a model's small
-// blocks, positions, scales, rotations and opacities, 270k entries in all for 25k Gaussians, then
-// ran on one thread while the others waited.)
+// Blocks from this many entries are updated on all threads: a model's small blocks (positions,
+// scales, rotations, opacities; 270k entries in all for 25k Gaussians) must not run on one thread
+// while the others wait.
 constexpr int64_t kParallelFrom = 16384;
 
 void FlushTinyMoments(std::vector<float>* m, std::vector<float>* v) {

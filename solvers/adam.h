@@ -1,4 +1,4 @@
-// Adam per parameter block (reference 1.8: betas 0.9 / 0.999, eps 1e-15), with the optimiser state
+// Adam per parameter block (method.md 1.8: betas 0.9 / 0.999, eps 1e-15), with the optimiser state
 // following the model's rows through density control (new rows start with zero moments).
 #pragma once
 

@@ -1,4 +1,4 @@
-// The paper's auto-stop (reference 1.2): after a minimum iteration, keep the last `window` losses;
+// The paper's auto-stop (method.md 1.2): after a minimum iteration, keep the last `window` losses;
 // stop when their range (max - min) falls below `range`.
 #pragma once
 

@@ -72,6 +72,15 @@ BufferSet BranchTrainer::StageReads(Stage stage, int iteration) const {
   return reads;
 }
 
+bool BranchTrainer::StageReadsNeighbourDepth(Stage stage, int iteration) const {
+  const StageProblem& sp = ProblemFor(stage);
+  const auto& entries = sp.problem.entries();
+  for (size_t i = 0; i < sp.rows.size() && i < entries.size(); ++i)
+    if (RowWeightAt(sp.rows[i], iteration) != 0 && entries[i].term->ReadsNeighbourDepth())
+      return true;
+  return false;
+}
+
 double BranchTrainer::EvaluateLoss(Stage stage, int view, int iteration, const RenderBuffers& in,
                                    const Targets& targets, RenderGradients* gradient) {
   ProfileScope scope("losses");
@@ -242,7 +251,7 @@ std::string BranchTrainer::OptimizeAndControlDensity(const std::vector<float>* s
                                                      int views,
                                                      const std::vector<ParamBlock>& gradients,
                                                      int it) {
-  // The strategy's statistics and regulariser gradient (reference 1.10: view-averaged screen
+  // The strategy's statistics and regulariser gradient (method.md 1.10: view-averaged screen
   // gradients while densifying), the Adam step, then the strategy's row operations.
   const Adam::LearningRates rates = RatesAt(it);
   DensityStep step;

@@ -2,7 +2,7 @@
 // Adam state, the density statistics and schedule, the primitive budget, the background, the
 // warm-up's auto-stop and the branch's loss (one Problem per stage, from the loss table). The
 // solver composes two of them (the 2DGS and the 3DGS branch) and the mutual supervision between
-// them; it never touches a primitive type itself (DESIGN.md section 4).
+// them; it never touches a primitive type itself (docs/design.md).
 //
 // PrimitiveTrainer<P> implements it for a primitive type described by P (see SurfelPrimitive and
 // GaussianPrimitive in solvers/primitive_types.h); a new primitive type is a new P, its model and
@@ -144,6 +144,9 @@ class BranchTrainer {
   // The buffers the stage's rows active at `iteration` read (weight not 0): what a step's render
   // must produce (a primitive type may skip the rest, e.g. the 2DGS distortion).
   BufferSet StageReads(Stage stage, int iteration) const;
+  // Whether a row of the stage active at `iteration` reads the neighbours' rendered depth: the
+  // step then renders each neighbour of its view first (multi-view terms).
+  bool StageReadsNeighbourDepth(Stage stage, int iteration) const;
 
   // --- Training.
   // One step on a batch of `count` views (--batch_views): this process renders its part of the
@@ -500,6 +503,20 @@ class PrimitiveTrainer : public BranchTrainer {
     }
   }
 
+  // Renders the depth of every neighbour of `targets` and points the targets at it.
+  void RenderNeighbourDepth(Targets* targets) {
+    ProfileScope scope("neighbour depth");
+    for (int k = 0; k < targets->num_neighbours; ++k) {
+      const Camera& camera = *targets->neighbours[k].camera;
+      typename P::RenderOptions o = OptionsFor(camera, &neighbour_background_);
+      if constexpr (SkipsUnreadBuffers<P>::value)
+        P::SkipUnread(BufferBit(Buffer::kDepth) | BufferBit(Buffer::kAlpha), &o);
+      renderer_.Forward(model_, o, &neighbour_renders_[k]);
+      targets->neighbours[k].depth = P::Buffers(camera, neighbour_renders_[k]).Get(Buffer::kDepth);
+    }
+    held_current_ = held_is_current_model_ = false;
+  }
+
   typename P::RenderOptions OptionsFor(const Camera& camera, Image* background) {
     typename P::RenderOptions o = render_options_;
     o.camera = camera;
@@ -534,6 +551,11 @@ class PrimitiveTrainer : public BranchTrainer {
                     int iteration, int statistics_width, Slot* slot) {
     if (!step_error_.ok()) return;  // an earlier view found a row the branch cannot feed
     const Camera& camera = *v.camera;
+    // Multi-view rows that read the neighbours' depth: each neighbour rendered with the current
+    // parameters, before this view's forward (whose state the backward needs).
+    Targets step_targets = targets;
+    if (step_targets.num_neighbours > 0 && StageReadsNeighbourDepth(stage, iteration))
+      RenderNeighbourDepth(&step_targets);
     step_options_ = OptionsFor(camera, &step_background_);
     if constexpr (SkipsUnreadBuffers<P>::value)
       P::SkipUnread(StageReads(stage, iteration), &step_options_);
@@ -549,7 +571,7 @@ class PrimitiveTrainer : public BranchTrainer {
     const RenderBuffers buffers = P::Buffers(camera, render);
     KeepFromStep(position, v.view, buffers);
     const double loss =
-        EvaluateLoss(stage, v.view, iteration, buffers, targets, &step_buffer_grad_);
+        EvaluateLoss(stage, v.view, iteration, buffers, step_targets, &step_buffer_grad_);
     if (!step_error_.ok()) return;
     RecordView(position, loss);
     P::TakeGradients(&step_buffer_grad_, &step_render_grad_);
@@ -622,6 +644,8 @@ class PrimitiveTrainer : public BranchTrainer {
   std::vector<std::unique_ptr<Slot>> slots_;  // the batch tree's; slot 0 holds the sum
   // The learnt background of the step's, the held and other renders, and its gradient.
   Image step_background_, held_background_, render_background_, background_grad_;
+  Image neighbour_background_;
+  std::array<typename P::Render, kMaxNeighbours> neighbour_renders_;
   // held_current_: the renderer still holds the forward state of held_ (BackpropHeld may run);
   // held_is_current_model_: and the model has not changed since (a step may reuse held_).
   bool held_current_ = false;

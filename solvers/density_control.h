@@ -1,4 +1,4 @@
-// The reference's density control of both branches (reference 1.10), the "reference" density
+// The reference's density control of both branches (method.md 1.10), the "reference" density
 // strategy: view-averaged screen-gradient statistics, clone (small primitives) and split (large
 // ones, two children scaled by 1/1.6 sampled from the primitive's own Gaussian), pruning by opacity
 // and world size, opacity resets (3DGS: also the reflected opacity, and beta capped at 0.1), and a

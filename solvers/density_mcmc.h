@@ -30,7 +30,7 @@ struct McmcOptions {
   // on, fast preset, NC / aligned PSNR moved by -0.01..+0.06 / -0.10..+0.35 dB on four masked
   // scenes (demo, torus seed 77, suzanne, dented 256) but cost the unmasked harness scene 1.3 NC
   // (no_masks, seeds 0-2: 93.51 / 91.25 / 92.02 against 93.58 / 93.03 / 94.11), where it moves the
-  // transparent primitives of the backdrop. (Until 1c7a1e2 mgsr_solve never applied it anyway.)
+  // transparent primitives of the backdrop.
   float noise_lr = 0.0f;
   // x mean opacity. Off by default (gsplat uses 0.01): on suzanne at 20,000 per branch 0.01 cost
   // the mesh 0.54 NC points and 0.9 CD x1000 for no gain in aligned PSNR (25.88 vs 25.83 dB);

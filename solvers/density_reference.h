@@ -1,4 +1,4 @@
-// The "reference" density strategy (reference 1.10, the authors' schedule): screen-gradient
+// The "reference" density strategy (method.md 1.10, the authors' schedule): screen-gradient
 // statistics while densifying, clone / split / prune every densify_interval iterations, opacity
 // resets, the branch's budget as a cap (solvers/density_control.h has the row operations).
 #pragma once

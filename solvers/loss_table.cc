@@ -146,7 +146,7 @@ std::vector<LossSpec> PaperLossTable(const SolverOptions& o) {
   // Row order is the order the gradients are summed in: keep it when editing (results are
   // reproducible bit for bit only in the same order).
   return {
-      // 2DGS warm-up (reference 1.3): render loss, edge-aware depth TV, normal consistency and
+      // 2DGS warm-up (method.md 1.3): render loss, edge-aware depth TV, normal consistency and
       // normal TV (from normal_from_iteration), depth distortion (from distortion_from_iteration).
       Row(b2, warm, "photo", "render", RenderConfig("image", o.lambda_l1), 1.0, 0, true),
       Row(b2, warm, "depth_tv", "tv", TvConfig("depth", "image", geo, disp_s),
@@ -157,7 +157,11 @@ std::vector<LossSpec> PaperLossTable(const SolverOptions& o) {
           o.normal_from_iteration + 1),
       Row(b2, warm, "distortion", "distortion", nlohmann::json::object(), o.lambda_distortion,
           o.distortion_from_iteration + 1),
-      // 2DGS mutual (reference 1.5): the render loss against the 3DGS transmitted image and against
+      Row(b2, warm, "multiview_ncc", "multiview_ncc", nlohmann::json::object(),
+          o.lambda_multiview_ncc, o.multiview_from_iteration + 1),
+      Row(b2, warm, "multiview_depth", "multiview_depth", nlohmann::json::object(),
+          o.lambda_multiview_depth, o.multiview_from_iteration + 1),
+      // 2DGS mutual (method.md 1.5): the render loss against the 3DGS transmitted image and against
       // the photo, the TVs guided by the transmitted image; everything weighted by w_2d.
       Row(b2, mutual, "render_transmitted", "render", RenderConfig("transmitted", o.lambda_l1),
           w * o.mutual_transmitted_weight),
@@ -171,12 +175,16 @@ std::vector<LossSpec> PaperLossTable(const SolverOptions& o) {
           w * o.depth_tv_mutual_2d),
       Row(b2, mutual, "distortion", "distortion", nlohmann::json::object(),
           w * o.lambda_distortion),
-      // 3DGS warm-up (reference 1.4): render loss, edge-aware TV of the transmitted image and of
+      Row(b2, mutual, "multiview_ncc", "multiview_ncc", nlohmann::json::object(),
+          w * o.lambda_multiview_ncc),
+      Row(b2, mutual, "multiview_depth", "multiview_depth", nlohmann::json::object(),
+          w * o.lambda_multiview_depth),
+      // 3DGS warm-up (method.md 1.4): render loss, edge-aware TV of the transmitted image and of
       // the depth.
       Row(b3, warm, "photo", "render", RenderConfig("image", o.lambda_l1), 1.0, 0, true),
       Row(b3, warm, "transmitted_tv", "tv", TvConfig("transmitted", "image"), o.transmitted_tv_3d),
       Row(b3, warm, "depth_tv", "tv", TvConfig("depth", "image", geo, disp_s), o.depth_tv_3d),
-      // 3DGS mutual (reference 1.5): render loss and the depth loss against the 2DGS depth.
+      // 3DGS mutual (method.md 1.5): render loss and the depth loss against the 2DGS depth.
       Row(b3, mutual, "photo", "render", RenderConfig("image", o.lambda_l1), o.w_3d, 0, true),
       Row(b3, mutual, "mutual_depth", "mutual_depth", {{"masked", false}}, o.w_depth),
   };

@@ -44,7 +44,7 @@ struct LossSpec {
   bool exposure = false;    // behind the view's colour transform when compensation is on
 };
 
-// The paper's table (reference 1.3-1.7) with the options' weights and schedules. In the mutual
+// The paper's table (method.md 1.3-1.7) with the options' weights and schedules. In the mutual
 // stage the 2DGS branch's render loss is two rows (against the 3DGS transmitted image, and against
 // the photo behind the view's colour transform), each weighted by w_2d.
 std::vector<LossSpec> PaperLossTable(const SolverOptions& options);

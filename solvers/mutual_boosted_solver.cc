@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "mgsr/core/timer.h"
+#include "mgsr/io/view_neighbours.h"
 #include "mgsr/loss/loss_registry.h"
 #include "mgsr/model/init_from_points.h"
 #include "solvers/exposure_fit.h"
@@ -18,7 +19,7 @@ double Now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-// Log-linear decay from init to final over max_steps (reference 1.8).
+// Log-linear decay from init to final over max_steps (method.md 1.8).
 double PositionLearningRate(const SolverOptions& o, int step, double extent) {
   const double t = std::clamp(static_cast<double>(step) / o.position_lr_max_steps, 0.0, 1.0);
   return extent *
@@ -60,7 +61,7 @@ void BatchRates(const SolverOptions& o, int step, double extent, const std::stri
   for (float& r : *rates) r *= f;
 }
 
-// What the mutual stage hands a learning branch from the supervising one (reference 1.5): the
+// What the mutual stage hands a learning branch from the supervising one (method.md 1.5): the
 // buffer, the target it fills, and whether pixels outside the mask are forced to the learner's
 // background (the transmitted colour is; the depth is not).
 struct MutualSupervision {
@@ -231,6 +232,7 @@ Status MutualBoostedSolver::BuildProblems() {
     Status status;
     std::unique_ptr<LossTerm> term = LossRegistry::Get().Create(row.term, row.config, &status);
     if (term == nullptr) return status.WithContext("loss row " + LossSpecId(row) + ": ");
+    if (term->ReadsNeighbours() && row.weight != 0) PrepareNeighbours(row.branch);
     trainer(row.branch)
         .AddLossRow(row, std::move(term), row.exposure && options_.exposure != ExposureMode::kOff);
   }
@@ -275,7 +277,7 @@ void MutualBoostedSolver::ReturnBatch() {
 }
 
 int MutualBoostedSolver::NextView() {
-  // A shuffled stack of the training views, refilled when empty (reference 1.3).
+  // A shuffled stack of the training views, refilled when empty (method.md 1.3).
   if (view_stack_.empty()) {
     view_stack_ = train_;
     for (size_t i = view_stack_.size(); i > 1; --i)
@@ -308,11 +310,39 @@ void MutualBoostedSolver::NotifyIterationEnd(Stage stage, int iteration) {
     Request(c->OnIterationEnd(*this, stage, iteration), &callback_request_);
 }
 
+void MutualBoostedSolver::PrepareNeighbours(Branch branch) {
+  const int b = BranchIndex(branch);
+  if (!grays_[b].empty()) return;
+  if (neighbours_.empty()) {
+    NeighbourOptions no;
+    no.count = std::min(options_.multiview_neighbours, kMaxNeighbours);
+    neighbours_ = SelectNeighbours(scene_, no);
+  }
+  grays_[b].resize(scene_.views.size());
+  for (size_t v = 0; v < scene_.views.size(); ++v) {
+    const Image& rgb = photos_[v][b];
+    Image& g = grays_[b][v];
+    g = Image(rgb.width(), rgb.height(), 1);
+    for (size_t i = 0; i < g.size(); ++i)
+      g.data()[i] = 0.299f * rgb.plane(0)[i] + 0.587f * rgb.plane(1)[i] + 0.114f * rgb.plane(2)[i];
+  }
+}
+
 Targets MutualBoostedSolver::LossTargets(Branch branch, int view, const Image* other) const {
   const View& v = scene_.views[view];
   Targets t;
   t.mask = v.mask.empty() ? nullptr : &v.mask;
   t.image = &photos_[view][BranchIndex(branch)];
+  const std::vector<Image>& grays = grays_[BranchIndex(branch)];
+  if (!grays.empty()) {
+    t.gray = &grays[view];
+    for (int u : neighbours_[view]) {
+      if (t.num_neighbours == kMaxNeighbours) break;
+      NeighbourView& n = t.neighbours[t.num_neighbours++];
+      n.camera = &scene_.views[u].camera;
+      n.gray = &grays[u];
+    }
+  }
   if (branch == Branch::kSurfels2D) {
     t.transmitted = other;
   } else {
@@ -323,7 +353,7 @@ Targets MutualBoostedSolver::LossTargets(Branch branch, int view, const Image* o
 
 Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* teacher, int it,
                                        int schedule_it) {
-  // The teacher's render of each view of the batch, a constant target (reference 1.5): the one
+  // The teacher's render of each view of the batch, a constant target (method.md 1.5): the one
   // its own step just made of that view if it kept it, else rendered just before the learner
   // renders that view; copied into storage kept between iterations.
   struct TeacherTargets : BatchTargets {

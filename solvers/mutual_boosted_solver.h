@@ -1,4 +1,4 @@
-// MutualBoostedSolver: MGSR's optimisation (DESIGN.md section 4). Both branches warm up in turn,
+// MutualBoostedSolver: MGSR's optimisation (docs/design.md). Both branches warm up in turn,
 // each stopping on its own when its loss flattens (auto-stop) or at a cap; then the mutual stage:
 // the 2DGS branch learns from the 3DGS branch's transmitted image and the 3DGS branch from the
 // 2DGS depth, each held constant while it supervises (one-way back-propagation). `alternate`
@@ -173,7 +173,10 @@ class MutualBoostedSolver {
   // What a branch's loss terms compare with on a view: the photo on the branch's background, the
   // mask, and `other`, the other branch's render in the mutual stage (the 3DGS transmitted image
   // for the 2DGS branch, the 2DGS depth for the 3DGS branch; null in the warm-up).
+  // With multi-view rows also the view's photo in grey and its neighbours' cameras and photos.
   Targets LossTargets(Branch branch, int view, const Image* other) const;
+  // Chooses every view's neighbours (once) and keeps the photos of `branch` in grey.
+  void PrepareNeighbours(Branch branch);
   // One mutual step of `learner`, supervised by `teacher`'s render of the view (held constant; with
   // bidirectional supervision it then steps with the gradient of the learner's loss).
   Status MutualStep(BranchTrainer* learner, BranchTrainer* teacher, int iteration,
@@ -215,6 +218,10 @@ class MutualBoostedSolver {
   std::vector<int> train_;
   // Per view, the photo composited on each branch's background (indexed by BranchIndex).
   std::vector<std::array<Image, 2>> photos_;
+  // Multi-view terms (PrepareNeighbours): each view's neighbours, and every photo in grey for the
+  // branches whose loss table reads neighbours (empty for the others).
+  std::vector<std::vector<int>> neighbours_;
+  std::array<std::vector<Image>, 2> grays_;
   Rng rng_;
   // Per-view colour transforms, indexed by BranchIndex; without exposure_per_branch the 2DGS
   // branch uses the 3DGS branch's.

@@ -60,7 +60,7 @@ struct GaussianPrimitive : ProjectedPrimitive<GaussianModel, GaussianRenderer> {
     GaussianBackgroundGradient(r, g, d_background);
   }
   // Three scale axes; the reflected opacity follows the primitive's; the opacity reset caps both
-  // opacities at 0.01 and beta at 0.1 (reference 1.10).
+  // opacities at 0.01 and beta at 0.1 (method.md 1.10).
   static PrimitiveLayout Layout();
 
   static RenderBuffers Buffers(const Camera& camera, const Render& r);

@@ -89,6 +89,13 @@ std::string DepthLine(const char* label, const DepthErrorStats& d) {
   return line;
 }
 
+std::string NormalLine(const char* label, const NormalErrorStats& n) {
+  char line[200];
+  std::snprintf(line, sizeof(line), "%s mean %.2f deg, median %.2f deg, %.1f%% beyond 10 deg",
+                label, n.mean_deg, n.median_deg, 100 * n.share_beyond_10deg);
+  return line;
+}
+
 // Signed depth error of the 2DGS branch on the training views when the warm-up ends (at the first
 // mutual 2DGS step), against the ground truth. Written beside the checkpoint so a resumed run still
 // reports it.
@@ -107,11 +114,13 @@ class DepthAfterWarmup : public IterationCallback {
       return CallbackReturnType::kContinue;
     done_ = true;
     const SurfaceDepthReport r = MeasureSurfaceDepth(solver_, options_, scene_, gt_);
-    std::printf("%s\n%s\n",
+    std::printf("%s\n%s\n%s\n",
                 DepthLine("depth after warm-up (train views): expected", r.expected).c_str(),
-                DepthLine("                                    median  ", r.median).c_str());
+                DepthLine("                                    median  ", r.median).c_str(),
+                NormalLine("2DGS normals after warm-up:         angle", r.normal).c_str());
     const nlohmann::json j = {{"expected", DepthErrorToJson(r.expected)},
-                              {"median", DepthErrorToJson(r.median)}};
+                              {"median", DepthErrorToJson(r.median)},
+                              {"normal", NormalErrorToJson(r.normal)}};
     const Status s = WriteStringToFileAtomic(path_, j.dump(2) + "\n");
     if (!s.ok()) std::fprintf(stderr, "warning: %s\n", s.message().c_str());
     return CallbackReturnType::kContinue;
@@ -168,9 +177,12 @@ Status ReportGeometry(MutualBoostedSolver* solver, const SolverOptions& options,
   }
   const SurfaceDepthReport d = MeasureSurfaceDepth(solver, options, scene, gt_depth);
   (*metrics)["depth"]["end"] = {{"expected", DepthErrorToJson(d.expected)},
-                                {"median", DepthErrorToJson(d.median)}};
-  std::printf("%s\n%s\n", DepthLine("depth at the end (train views): expected", d.expected).c_str(),
-              DepthLine("                                median  ", d.median).c_str());
+                                {"median", DepthErrorToJson(d.median)},
+                                {"normal", NormalErrorToJson(d.normal)}};
+  std::printf("%s\n%s\n%s\n",
+              DepthLine("depth at the end (train views): expected", d.expected).c_str(),
+              DepthLine("                                median  ", d.median).c_str(),
+              NormalLine("2DGS normals at the end:         angle", d.normal).c_str());
   std::string text;
   if (ReadFileToString(warmup_depth_path, &text).ok()) {
     try {

@@ -26,6 +26,7 @@ bool SolverOptions::FromPreset(const std::string& name, SolverOptions* o) {
   o->mutual_iterations = Scaled(o->mutual_iterations, f);
   o->normal_from_iteration = Scaled(o->normal_from_iteration, f);
   o->distortion_from_iteration = Scaled(o->distortion_from_iteration, f);
+  o->multiview_from_iteration = Scaled(o->multiview_from_iteration, f);
   o->position_lr_max_steps = Scaled(o->position_lr_max_steps, f);
   o->sh_interval = Scaled(o->sh_interval, f);
   o->auto_stop_window = 50;
@@ -46,9 +47,9 @@ void SolverOptions::ScaleIterationsForBatch(int views) {
   const auto scale = [f](int* v) {
     if (*v != 0) *v = Scaled(*v, f);
   };
-  for (int* v :
-       {&warmup_min_iterations, &warmup_max_iterations, &mutual_iterations, &normal_from_iteration,
-        &distortion_from_iteration, &position_lr_max_steps, &sh_interval})
+  for (int* v : {&warmup_min_iterations, &warmup_max_iterations, &mutual_iterations,
+                 &normal_from_iteration, &distortion_from_iteration, &multiview_from_iteration,
+                 &position_lr_max_steps, &sh_interval})
     scale(v);
   auto_stop_window = std::max(2, Scaled(auto_stop_window, f));
   for (BranchSchedule* b : {&schedule_2d, &schedule_3d}) {
@@ -92,12 +93,16 @@ Status SolverOptions::Validate() const {
     return Status::Error("--mutual_transmitted_weight must be in [0, 1]");
   }
   if (!(auto_stop_range >= 0)) return Status::Error("--auto_stop_range must be >= 0");
+  if (multiview_neighbours < 1 || multiview_neighbours > kMaxNeighbours)
+    return Status::Error("--multiview_neighbours must be in [1, " + std::to_string(kMaxNeighbours) +
+                         "]");
   if (sh_degree < 0 || sh_degree > 3) return Status::Error("--sh_degree must be in [0, 3]");
   if (sh_interval < 1) return Status::Error("--sh_interval must be >= 1");
   if (!(surfel_filter_sigma >= 0.01f && surfel_filter_sigma <= 2.0f))
     return Status::Error("--surfel_filter_sigma must be in [0.01, 2] pixels");
   for (double w : {w_2d, w_3d, w_depth, lambda_normal, lambda_distortion, depth_tv_warmup_2d,
-                   depth_tv_mutual_2d, transmitted_tv_3d, depth_tv_3d}) {
+                   depth_tv_mutual_2d, transmitted_tv_3d, depth_tv_3d, lambda_multiview_ncc,
+                   lambda_multiview_depth}) {
     if (!(w >= 0) || !std::isfinite(w))
       return Status::Error("loss weights must be finite and >= 0");
   }
@@ -162,6 +167,10 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"normal_from_iteration", Text(normal_from_iteration)},
           {"lambda_distortion", Text(lambda_distortion)},
           {"distortion_from_iteration", Text(distortion_from_iteration)},
+          {"lambda_multiview_ncc", Text(lambda_multiview_ncc)},
+          {"lambda_multiview_depth", Text(lambda_multiview_depth)},
+          {"multiview_from_iteration", Text(multiview_from_iteration)},
+          {"multiview_neighbours", Text(multiview_neighbours)},
           {"depth_tv_warmup_2d", Text(depth_tv_warmup_2d)},
           {"depth_tv_mutual_2d", Text(depth_tv_mutual_2d)},
           {"transmitted_tv_3d", Text(transmitted_tv_3d)},

@@ -1,5 +1,5 @@
 // SolverOptions: every schedule, weight and rate of MGSR's optimisation, with the reference
-// defaults (MGSR_REFERENCE.md 1.1-1.13), and presets that scale them. A plain struct with a
+// defaults (docs/method.md 1.1-1.13), and presets that scale them. A plain struct with a
 // validating check, like ceres::Solver::Options.
 #pragma once
 
@@ -22,7 +22,7 @@ struct BranchSchedule {
 };
 
 // The 2DGS normal-consistency weight: the reference's, and this project's default for objects
-// whose pixels are known (masks or alpha; README, surface accuracy, state D).
+// whose pixels are known (masks or alpha; docs/geometry.md, state D).
 constexpr double kReferenceNormalWeight = 0.05;
 constexpr double kNormalWeightWithForeground = 2.0;
 
@@ -44,18 +44,26 @@ struct SolverOptions {
   // reflection the 3DGS branch is plain 3DGS (reflected opacity ~0 and frozen, so C = C_tran).
   bool train_2d = true, train_3d = true;
   bool reflection = true;
-  // Loss weights (reference 1.3-1.7).
+  // Loss weights (method.md 1.3-1.7).
   double lambda_l1 = 0.8;  // render loss: lambda L1 + (1 - lambda) D-SSIM
   // Normal consistency and normal TV. The reference uses 0.05; at that weight the trained disks
   // stay tilted (4-20 degrees off the true normal, larger disks more), each tilted disk's near rim
   // stands out of the surface unless its centre sits deeper, and the surface ends 0.4-1.0 px
-  // inside the truth. 2.0 aligns them: 0.1-0.25 px on five scenes, CD 2-4x lower, NC up (README,
-  // surface accuracy). 4.0 over-smooths concavities.
+  // inside the truth. 2.0 aligns them: 0.1-0.25 px on five scenes, CD 2-4x lower, NC up (docs/
+  // geometry.md). 4.0 over-smooths concavities.
   double lambda_normal = kNormalWeightWithForeground;
   int normal_from_iteration = 7000;  // warm-up: normal terms off before this
-  // 2DGS depth distortion (reference 3.4). MGSR leaves it at 0; 2DGS uses 1000 from 3000 on.
+  // 2DGS depth distortion (method.md 3.4). MGSR leaves it at 0; 2DGS uses 1000 from 3000 on.
   double lambda_distortion = 0.0;
   int distortion_from_iteration = 3000;
+  // Multi-view consistency of the 2DGS branch (docs/geometry.md): the patch NCC through the
+  // rendered plane and the forward-backward depth reprojection, against `multiview_neighbours`
+  // neighbouring views each (chosen once from the points' co-visibility). Warm-up: from
+  // multiview_from_iteration; mutual stage: throughout, times w_2d.
+  double lambda_multiview_ncc = 0.0;
+  double lambda_multiview_depth = 0.0;
+  int multiview_from_iteration = 7000;
+  int multiview_neighbours = 2;
   double depth_tv_warmup_2d = 1.0;
   double depth_tv_mutual_2d = 0.05;
   double transmitted_tv_3d = 0.1;
@@ -88,14 +96,14 @@ struct SolverOptions {
   // over every pixel of every training view, stay below this is dropped (0: off), so the saved
   // models hold only what renders.
   double prune_contribution = 0;
-  // Learning rates (reference 1.8); positions scale with the scene extent and decay log-linearly.
+  // Learning rates (method.md 1.8); positions scale with the scene extent and decay log-linearly.
   double position_lr_init = 1.6e-4, position_lr_final = 1.6e-6;
   int position_lr_max_steps = 30000;
   double feature_lr = 2.5e-3, opacity_lr = 0.05, scaling_lr = 5e-3, rotation_lr = 1e-3;
   // SH degree grows by one every `sh_interval` warm-up iterations up to `sh_degree`.
   int sh_degree = 3, sh_interval = 1000;
   // Grey level each branch renders on and composites its masked photos on: 2DGS white, 3DGS black
-  // (reference 1.12, OmniObject3D setting). Photos without masks keep their own backdrop, so for
+  // (method.md 1.12, OmniObject3D setting). Photos without masks keep their own backdrop, so for
   // them both are set to the backdrop's level (solvers/backdrop.h) and empty space needs no
   // primitives.
   float background_2d = 1.0f, background_3d = 0.0f;
@@ -107,20 +115,21 @@ struct SolverOptions {
   // full-opacity one, or area-preserving (edge-on and sub-pixel surfels do not dilate silhouettes),
   // and its sigma in pixels: the reference's sqrt(2)/2, or by default 0.29, the spread of the
   // pixel's own box. A wide full-opacity floor draws every silhouette about a sigma too far out,
-  // and the fit pulls the surface in by as much (README, surface accuracy).
+  // and the fit pulls the surface in by as much (docs/geometry.md).
   bool surfel_area_preserving_low_pass = true;
   float surfel_filter_sigma = 0.29f;
   // Initial 2DGS disk orientation: in the plane of each initial point's nearest neighbours
   // (mgsr/model/init_from_points.h), or the reference's random rotation. Small disks get almost no
   // orientation gradient from the photos (the screen low-pass makes them look alike at any tilt),
   // so a random start leaves many tilted, and a tilted disk must sit deeper for its near edge not
-  // to stand out of the surface: README, surface accuracy.
+  // to stand out of the surface: docs/geometry.md.
   bool surfel_orientation_from_points = true;
   // Per-view exposure compensation (mgsr/loss/exposure_compensation.h): an affine colour model per
   // training view in front of every comparison with a photo, learned at its own rate with a weak
   // prior towards identity, re-fitted (Huber, solvers/exposure_fit.h) against the warmed-up render
   // when the mutual stage starts. Shared by both branches unless exposure_per_branch.
-  // Default affine: measured best on the changing-light scenes (README, exposure compensation).
+  // Default affine: measured best on the changing-light scenes (docs/user_guide.md, exposure
+  // compensation).
   ExposureMode exposure = ExposureMode::kAffine;
   double exposure_lr = 5e-3;
   double exposure_prior = 1e-3;        // on A - I

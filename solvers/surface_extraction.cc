@@ -195,6 +195,7 @@ SurfaceDepthReport MeasureSurfaceDepth(MutualBoostedSolver* solver,
                                        const SolverOptions& solver_options, const Scene& scene,
                                        ExactDepthViews* training_depth) {
   DepthErrorAccumulator expected, median;
+  NormalErrorAccumulator normal;
   const std::vector<int> train = scene.TrainIndices();
   for (size_t k = 0; k < train.size(); ++k) {
     const View& v = scene.views[train[k]];
@@ -203,8 +204,12 @@ SurfaceDepthReport MeasureSurfaceDepth(MutualBoostedSolver* solver,
     const Image* mask = v.mask.empty() ? nullptr : &v.mask;
     expected.Add(r.geometry.depth, truth, mask, v.camera);
     median.Add(r.geometry.median_depth, truth, mask, v.camera);
+    if (!r.geometry.normal_world.empty()) {
+      const Image true_normal = RenderExactNormal(training_depth->caster(), v.camera);
+      normal.Add(r.geometry.normal_world, true_normal, mask, v.camera);
+    }
   }
-  return {expected.Finish(), median.Finish()};
+  return {expected.Finish(), median.Finish(), normal.Finish()};
 }
 
 }  // namespace mgsr

@@ -1,4 +1,4 @@
-// The mesh of a trained solver (reference 5; DESIGN.md section 6): the geometry branch's depth for
+// The mesh of a trained solver (method.md 5; docs/design.md): the geometry branch's depth for
 // every training view, rendered at `resolution_scale` times the training resolution (the models
 // are continuous, so a finer depth map is a better sample of the same surface) and fused into a
 // TSDF whose voxel matches the finer pixel footprint. Also the exact-depth ceiling of the same
@@ -12,6 +12,7 @@
 #include "mgsr/core/status.h"
 #include "mgsr/core/triangle_mesh.h"
 #include "mgsr/eval/depth_error.h"
+#include "mgsr/eval/normal_error.h"
 #include "mgsr/io/scene.h"
 #include "mgsr/mesh/exact_depth_ceiling.h"
 #include "mgsr/mesh/tsdf_fusion.h"
@@ -73,8 +74,10 @@ Status ExactDepthCeiling(ExactDepthViews* training_depth, const Scene& scene,
 
 // Signed depth error of the geometry branch's expected and median depth on the training views
 // (inside the masks), against the ground truth's exact depth for TrainingCameras(scene).
+// Also the angle between the rendered 2DGS normals and the true surface normals.
 struct SurfaceDepthReport {
   DepthErrorStats expected, median;
+  NormalErrorStats normal;
 };
 SurfaceDepthReport MeasureSurfaceDepth(MutualBoostedSolver* solver,
                                        const SolverOptions& solver_options, const Scene& scene,

@@ -131,6 +131,13 @@ DEFINE_bool(list_losses, false,
             "Print the registered loss terms and the loss table these options give, then exit.");
 DEFINE_double(lambda_distortion, -1,
               "Weight of the 2DGS depth-distortion term (-1: the default of SolverOptions).");
+DEFINE_double(lambda_multiview_ncc, -1,
+              "Weight of the 2DGS multi-view patch NCC through the rendered plane (-1: the "
+              "default of SolverOptions).");
+DEFINE_double(lambda_multiview_depth, -1,
+              "Weight of the 2DGS multi-view forward-backward depth reprojection (-1: the "
+              "default).");
+DEFINE_int32(multiview_neighbours, 2, "Neighbouring views per view for the multi-view terms.");
 DEFINE_double(
     mutual_transmitted_weight, 0.2,
     "2DGS mutual loss: weight of the render loss against the 3DGS transmitted image (lambda_6).");
@@ -257,6 +264,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
        {"Batches and MPI", {"batch_views", "batch_sqrt_lr", "batch_keep_iterations"}},
        {"Losses",
         {"loss_config", "list_losses", "lambda_l1", "lambda_normal", "lambda_distortion",
+         "lambda_multiview_ncc", "lambda_multiview_depth", "multiview_neighbours",
          "depth_tv_warmup_2d", "depth_tv_mutual_2d", "tv_on_geometry", "depth_tv_disparity", "w_2d",
          "w_3d", "w_depth", "mutual_transmitted_weight"}},
        {"Exposure compensation",
@@ -342,6 +350,18 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   } else if (FLAGS_lambda_distortion != -1) {
     return Fail("--lambda_distortion must be >= 0 (or -1 for the default)");
   }
+  for (auto [flag, value, name] :
+       {std::tuple{FLAGS_lambda_multiview_ncc, &options.lambda_multiview_ncc,
+                   "--lambda_multiview_ncc"},
+        std::tuple{FLAGS_lambda_multiview_depth, &options.lambda_multiview_depth,
+                   "--lambda_multiview_depth"}}) {
+    if (flag >= 0) {
+      *value = flag;
+    } else if (flag != -1) {
+      return Fail(std::string(name) + " must be >= 0 (or -1 for the default)");
+    }
+  }
+  options.multiview_neighbours = FLAGS_multiview_neighbours;
   options.mutual_transmitted_weight = FLAGS_mutual_transmitted_weight;
   options.mutual_image_weight = 1.0 - FLAGS_mutual_transmitted_weight;
   if (FLAGS_auto_stop_window >= 0) options.auto_stop_window = FLAGS_auto_stop_window;

@@ -19,6 +19,11 @@ DEFINE_double(region_half, 2.0,
 DEFINE_string(shape, "sphere",
               "sphere | torus | rounded_box | dented (concavities and a thin rod)");
 DEFINE_int32(detail, 1, "Mesh detail 0..2.");
+DEFINE_string(mesh, "",
+              "A mesh file (OBJ, PLY or glb) to render instead of --shape; centred and scaled to "
+              "radius 1.");
+DEFINE_string(texture, "noise",
+              "noise (low-contrast solid noise) or print (a high-contrast printed pattern).");
 DEFINE_int32(num_views, 48, "Number of views (cameras on a sphere around the object).");
 DEFINE_int32(width, 128, "Image width in pixels.");
 DEFINE_int32(height, 128, "Image height in pixels.");
@@ -46,7 +51,8 @@ int main(int argc, char** argv) {
       "mgsr_synth --output DIR [--shape sphere] [--num_views 48] ...",
       {{"Output", {"output", "text", "masks", "constant_light_copy"}},
        {"Scene", {"scene_type", "region_half"}},
-       {"Object", {"shape", "detail", "specular", "shininess", "mirror", "num_points"}},
+       {"Object",
+        {"shape", "mesh", "detail", "texture", "specular", "shininess", "mirror", "num_points"}},
        {"Cameras and photos",
         {"num_views", "width", "height", "distance", "test_every", "supersampling",
          "pose_noise_deg", "pose_noise_rel"}},
@@ -61,6 +67,8 @@ int main(int argc, char** argv) {
   o.scene_type = FLAGS_scene_type;
   o.region_half = FLAGS_region_half;
   o.shape = FLAGS_shape;
+  o.mesh_path = FLAGS_mesh;
+  o.texture = FLAGS_texture;
   o.detail = FLAGS_detail;
   o.num_views = FLAGS_num_views;
   o.width = FLAGS_width;
@@ -86,7 +94,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "error: %s\n", s.message().c_str());
     return 1;
   }
-  std::printf("wrote %s %s scene (%d views, %dx%d) to %s in %.1f s\n", o.shape.c_str(),
+  const std::string what = o.mesh_path.empty() ? o.shape : o.mesh_path;
+  std::printf("wrote %s %s scene (%d views, %dx%d) to %s in %.1f s\n", what.c_str(),
               o.scene_type.c_str(), o.num_views, o.width, o.height, FLAGS_output.c_str(),
               timer.ElapsedSeconds());
   return 0;

@@ -1,4 +1,4 @@
-// Exact closest point on a triangle mesh (DESIGN.md section 6): the query behind the exact
+// Exact closest point on a triangle mesh (docs/design.md): the query behind the exact
 // geometry metric. Candidates come from a kd-tree over dense samples that remember their triangle;
 // the search radius is widened by the samples' covering radius, so the answer is the true closest
 // point on the mesh's triangles, not an approximation by its samples.

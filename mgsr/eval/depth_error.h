@@ -1,4 +1,4 @@
-// Signed per-pixel depth error against exact depth (DESIGN.md section 6): where a rendered depth
+// Signed per-pixel depth error against exact depth (docs/design.md): where a rendered depth
 // lies relative to the true surface, pooled over views. The sign follows the mesh's signed offset:
 // error = true depth - rendered depth, so a negative error means the render lies behind the true
 // surface (inside the object). A mean absolute error is dominated by a few silhouette pixels; the
@@ -34,8 +34,8 @@ class DepthErrorAccumulator {
 // The same signed error as a picture (3 channels): white where the render lies on the true surface,
 // red where it lies in front of it (outside the object), blue behind it (inside), saturating at
 // `range_footprints` pixel footprints; black where a pixel does not count (as in Add). This is the
-// map that shows where a surface is filled in (concavities) or sunk (convex parts): README,
-// surface accuracy.
+// map that shows where a surface is filled in (concavities) or sunk (convex parts): docs/
+// geometry.md.
 Image SignedDepthErrorImage(const Image& rendered, const Image& truth, const Image* mask,
                             const Camera& camera, double range_footprints = 2.0);
 

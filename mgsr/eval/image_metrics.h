@@ -1,4 +1,4 @@
-// Image quality: PSNR and SSIM as the reference evaluates them (reference 6.1, 1.14):
+// Image quality: PSNR and SSIM as the reference evaluates them (method.md 6.1, 1.14):
 //   PSNR = 10 log10(1 / MSE) over all pixels and channels (images in [0, 1]);
 //   SSIM = mean over pixels and channels of the SSIM map with an 11x11 Gaussian window (sigma 1.5),
 //          zero padding, C1 = 0.01^2, C2 = 0.03^2, each channel on its own.

@@ -1,4 +1,4 @@
-// Mesh quality against ground truth (DESIGN.md sections 5 and 6, reference 6.2), measured exactly:
+// Mesh quality against ground truth (docs/design.md, method.md 6.2), measured exactly:
 // area-uniform samples on each surface, and for each sample the exact closest point on the *other*
 // surface's triangles (TriangleClosestPoint), so a mesh against itself scores ~0 and errors far
 // below the sample spacing still show.

@@ -51,4 +51,11 @@ nlohmann::json DepthErrorToJson(const DepthErrorStats& s) {
           {"share_beyond_1px", s.share_beyond_footprint}};
 }
 
+nlohmann::json NormalErrorToJson(const NormalErrorStats& s) {
+  return {{"pixels", s.pixels},
+          {"mean_deg", s.mean_deg},
+          {"median_deg", s.median_deg},
+          {"share_beyond_10deg", s.share_beyond_10deg}};
+}
+
 }  // namespace mgsr

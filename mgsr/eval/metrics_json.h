@@ -5,6 +5,7 @@
 
 #include "mgsr/eval/depth_error.h"
 #include "mgsr/eval/mesh_metrics.h"
+#include "mgsr/eval/normal_error.h"
 
 namespace mgsr {
 
@@ -12,5 +13,6 @@ namespace mgsr {
 // headline F-score and every F-score threshold.
 nlohmann::json MeshMetricsToJson(const MeshMetrics& m);
 nlohmann::json DepthErrorToJson(const DepthErrorStats& s);
+nlohmann::json NormalErrorToJson(const NormalErrorStats& s);
 
 }  // namespace mgsr

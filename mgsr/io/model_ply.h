@@ -17,7 +17,7 @@ Status WriteGaussianPly(const std::string& path, const GaussianModel& model);
 // Reads a file written by WriteGaussianPly or by the original 3DGS code (the reflection attributes
 // then default to: reflected SH = transmitted DC, reflected opacity 0.1, beta 0.1).
 Status ReadGaussianPly(const std::string& path, GaussianModel* model);
-// The reflection block of a model read from a plain 3DGS file, as reference 1.9 initialises it:
+// The reflection block of a model read from a plain 3DGS file, as method.md 1.9 initialises it:
 // reflected SH = transmitted DC, reflected opacity 0.1, beta 0.1. Needs the model's size and SH
 // set.
 void SetPlainReflection(GaussianModel* model);

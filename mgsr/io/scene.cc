@@ -175,7 +175,7 @@ Status LoadViewImages(const std::string& image_path, const std::string& mask_pat
                            std::to_string(m.height()) + " but its image is " +
                            std::to_string(raw.width()) + "x" + std::to_string(raw.height()));
     }
-    // A mask may be grey, RGB or RGBA; take the first channel (reference 1.13: mask[0]).
+    // A mask may be grey, RGB or RGBA; take the first channel (method.md 1.13: mask[0]).
     mask = ExtractChannels(m, 0, 1);
   }
   int width = raw.width(), height = raw.height();

@@ -4,6 +4,8 @@
 #include "mgsr/loss/exposure_compensation.h"
 #include "mgsr/loss/l1_loss.h"
 #include "mgsr/loss/loss_registry.h"
+#include "mgsr/loss/multiview_depth_loss.h"
+#include "mgsr/loss/multiview_ncc_loss.h"
 #include "mgsr/loss/mutual_depth_loss.h"
 #include "mgsr/loss/normal_consistency_loss.h"
 #include "mgsr/loss/render_loss.h"
@@ -112,6 +114,41 @@ void RegisterBuiltinLosses(LossRegistry* r) {
   r->Register("distortion", [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {
     return std::make_unique<DistortionLoss>();
   });
+  r->Register("multiview_ncc", [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
+    MultiviewNccConfig m;
+    m.patch_radius = static_cast<int>(Number(c, "patch_radius", m.patch_radius));
+    m.stride = static_cast<int>(Number(c, "stride", m.stride));
+    m.min_variance = Number(c, "min_variance", m.min_variance);
+    m.min_alpha = Number(c, "min_alpha", m.min_alpha);
+    m.max_reprojection_px = Number(c, "max_reprojection_px", m.max_reprojection_px);
+    if (c.contains("check_occlusion")) {
+      if (!c["check_occlusion"].is_boolean()) {
+        *s = Status::Error("'check_occlusion' must be true or false");
+        return nullptr;
+      }
+      m.check_occlusion = c["check_occlusion"].get<bool>();
+    }
+    if (m.patch_radius < 1 || m.patch_radius > 10 || m.stride < 1 || m.stride > 64 ||
+        !(m.min_variance >= 0) || !(m.max_reprojection_px > 0)) {
+      *s = Status::Error(
+          "multiview_ncc: patch_radius in [1, 10], stride in [1, 64], min_variance >= 0, "
+          "max_reprojection_px > 0");
+      return nullptr;
+    }
+    return std::make_unique<MultiviewNccLoss>(m);
+  });
+  r->Register("multiview_depth",
+              [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
+                MultiviewDepthConfig m;
+                m.stride = static_cast<int>(Number(c, "stride", m.stride));
+                m.max_error_px = Number(c, "max_error_px", m.max_error_px);
+                m.min_alpha = Number(c, "min_alpha", m.min_alpha);
+                if (m.stride < 1 || m.stride > 64 || !(m.max_error_px > 0)) {
+                  *s = Status::Error("multiview_depth: stride in [1, 64], max_error_px > 0");
+                  return nullptr;
+                }
+                return std::make_unique<MultiviewDepthLoss>(m);
+              });
 }
 
 }  // namespace mgsr

@@ -1,4 +1,4 @@
-// D-SSIM: 1 - SSIM, with SSIM as the reference computes it (reference 1.14): an 11x11 Gaussian
+// D-SSIM: 1 - SSIM, with SSIM as the reference computes it (method.md 1.14): an 11x11 Gaussian
 // window (sigma 1.5) per channel, zero padding, C1 = 0.01^2, C2 = 0.03^2, mean of the map. The
 // per-plane map and its gradient are SsimPlaneSum's (mgsr/loss/dssim_plane.h).
 #pragma once

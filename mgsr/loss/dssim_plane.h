@@ -1,5 +1,5 @@
 // The SSIM of one image plane against another and its gradient, the kernel behind DssimLoss: an
-// 11x11 Gaussian window (sigma 1.5), zero padding, C1 = 0.01^2, C2 = 0.03^2 (reference 1.14).
+// 11x11 Gaussian window (sigma 1.5), zero padding, C1 = 0.01^2, C2 = 0.03^2 (method.md 1.14).
 //
 // One fused pass per plane instead of eight separate blurs: the horizontal blurs of the five
 // moments are taken from one read of each row, the vertical blur, the SSIM map and the

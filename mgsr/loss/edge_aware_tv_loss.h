@@ -1,4 +1,4 @@
-// Edge-aware total variation (reference 1.14, after GS-IR): for a buffer P (C x H x W) and a guide
+// Edge-aware total variation (method.md 1.14, after GS-IR): for a buffer P (C x H x W) and a guide
 // image I (3 channels),
 //   TV = mean_{c,y<H-1,x} e^{-mean_ch |I(y+1,x) - I(y,x)|} (P(y+1,x) - P(y,x))^2
 //      + mean_{c,y,x<W-1} e^{-mean_ch |I(y,x+1) - I(y,x)|} (P(y,x+1) - P(y,x))^2

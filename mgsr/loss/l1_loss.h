@@ -1,4 +1,4 @@
-// L1: mean |x - target| over all pixels and channels (reference 1.14).
+// L1: mean |x - target| over all pixels and channels (method.md 1.14).
 #pragma once
 
 #include <cmath>

@@ -23,6 +23,13 @@ class LossTerm {
   virtual std::vector<Buffer> Inputs() const = 0;
   // Buffers it reads as constants (stop-gradient), e.g. alpha in the normal consistency.
   virtual std::vector<Buffer> ConstantInputs() const { return {}; }
+  // Multi-view terms: whether the term reads the neighbours' rendered depth (the trainer then
+  // renders it for each neighbour of the view before the step). Neighbours' cameras and photos are
+  // always in the targets when the scene has them.
+  virtual bool ReadsNeighbourDepth() const { return false; }
+  // Whether the term reads neighbouring views at all (their cameras and photos): the solver then
+  // chooses each view's neighbours once and keeps every photo in grey.
+  virtual bool ReadsNeighbours() const { return ReadsNeighbourDepth(); }
   // Checks that the inputs and targets the term needs are present and shaped alike.
   virtual Status Check(const RenderBuffers& in, const Targets& targets) const = 0;
   // Value; with grad != nullptr also adds scale * d value / d input buffer to grad.

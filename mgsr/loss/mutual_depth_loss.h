@@ -1,4 +1,4 @@
-// Mutual depth loss of the 3DGS branch (reference 1.5, 2.4; paper eq. 9): squared difference of the
+// Mutual depth loss of the 3DGS branch (method.md 1.5, 2.4; paper eq. 9): squared difference of the
 // max-normalised depths of the two branches,
 //   L_Z = mean gamma (D / max D - Z / max Z)^2,   Z = the 2DGS branch's depth (a constant target).
 // The maxima are held constant (the reference's PyTorch code also sends a gradient to the argmax
@@ -78,7 +78,7 @@ class MutualDepthLoss : public LossTermImpl<MutualDepthLoss> {
   bool masked_;
 };
 
-// Mean of the 2DGS depth-distortion buffer (reference 3.4; unused by MGSR's defaults, weight 0).
+// Mean of the 2DGS depth-distortion buffer (method.md 3.4; unused by MGSR's defaults, weight 0).
 class DistortionLoss : public LossTermImpl<DistortionLoss> {
  public:
   std::string Name() const override { return "distortion"; }

@@ -1,4 +1,4 @@
-// Depth-normal consistency of the 2DGS branch (reference 1.3, 3.6; paper eq. 10):
+// Depth-normal consistency of the 2DGS branch (method.md 1.3, 3.6; paper eq. 10):
 //   L_n = mean_pixels gamma (1 - <N_rend, stopgrad(A) N_surf>)
 // N_rend is the alpha-weighted world normal; N_surf the unit normal of the surface the expected
 // depth describes: back-project pixel centres P = C + D r (r the world ray with camera z = 1),

@@ -43,6 +43,18 @@ struct RenderBuffersT {
   void Set(Buffer b, const ImageT<T>* image) { images[static_cast<int>(b)] = image; }
 };
 
+// A neighbouring view, for terms that compare several views (multi-view consistency): its camera,
+// its photo in grey, and, when a row asks for it, its depth rendered by the same branch with the
+// current parameters. All constants.
+template <typename T>
+struct NeighbourViewT {
+  const Camera* camera = nullptr;
+  const ImageT<T>* gray = nullptr;   // 1 channel, the photo on the branch's background
+  const ImageT<T>* depth = nullptr;  // 1 channel; null unless a row reads neighbour depth
+};
+// At most this many neighbours per view (a fixed array: targets are copied every step).
+constexpr int kMaxNeighbours = 4;
+
 // Constant inputs: nothing here receives a gradient (that is one-way supervision).
 template <typename T>
 struct TargetsT {
@@ -52,6 +64,11 @@ struct TargetsT {
       nullptr;  // the 3DGS branch's C_tran, as a target for the 2DGS branch
   const ImageT<T>* other_depth =
       nullptr;  // the 2DGS branch's depth, as a target for the 3DGS branch
+  // Multi-view terms: this view's photo in grey and its neighbours (chosen once per scene,
+  // SelectNeighbours in mgsr/io/view_neighbours.h).
+  const ImageT<T>* gray = nullptr;
+  std::array<NeighbourViewT<T>, kMaxNeighbours> neighbours{};
+  int num_neighbours = 0;
 };
 
 template <typename T>
@@ -96,6 +113,7 @@ struct TargetGradientsT {
 
 using RenderBuffers = RenderBuffersT<float>;
 using RenderBuffersD = RenderBuffersT<double>;
+using NeighbourView = NeighbourViewT<float>;
 using Targets = TargetsT<float>;
 using TargetsD = TargetsT<double>;
 using RenderGradients = RenderGradientsT<float>;

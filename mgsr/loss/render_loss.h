@@ -1,4 +1,4 @@
-// The render loss of the paper: lambda L1 + (1 - lambda) D-SSIM, lambda = 0.8 (reference 1.7,
+// The render loss of the paper: lambda L1 + (1 - lambda) D-SSIM, lambda = 0.8 (method.md 1.7,
 // lambda_1).
 #pragma once
 
@@ -33,7 +33,7 @@ class RenderLoss : public PhotometricTerm<RenderLoss> {
   double lambda_;
 };
 
-// The 2DGS branch's loss in the mutual stage (reference 1.5, paper lambda_6): a render loss against
+// The 2DGS branch's loss in the mutual stage (method.md 1.5, paper lambda_6): a render loss against
 // the 3DGS branch's transmitted image (weight 0.2) plus one against the ground truth (weight 0.8).
 class MutualRenderLoss : public LossTermImpl<MutualRenderLoss> {
  public:

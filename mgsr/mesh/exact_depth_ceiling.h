@@ -1,4 +1,4 @@
-// The achievable ceiling of a reconstruction's mesh (DESIGN.md section 6): the ground-truth mesh's
+// The achievable ceiling of a reconstruction's mesh (docs/design.md): the ground-truth mesh's
 // exact depth, rendered for the same cameras at the same resolution and fused with the same TSDF
 // settings. Whatever the fusion itself loses (voxel steps, truncation, unseen regions) this mesh
 // loses too, so a reconstruction's score reads as "x of the achievable".

@@ -1,4 +1,4 @@
-// The region a mesh is fused in (DESIGN.md section 6): scene-level captures see ground, walls and
+// The region a mesh is fused in (docs/design.md): scene-level captures see ground, walls and
 // sky far beyond what they were taken of, and fusing all of it makes a mesh of the background.
 // The region is a box: given by the user, read from a file (gt/region.json of mgsr_synth), or
 // found from the cameras as the volume most of their view frusta share.

@@ -112,7 +112,7 @@ Status TsdfIntegrator::Integrate(const DepthFrame& f) {
   const open3d::camera::PinholeCameraIntrinsic intrinsic(w, h, f.camera.fx, f.camera.fy,
                                                          f.camera.cx - 0.5, f.camera.cy - 0.5);
   // Open3D 0.16's integrate is far slower with two OpenMP threads than with one on this machine
-  // (DESIGN.md section 2): run it single-threaded.
+  // (docs/design.md): run it single-threaded.
   const int threads = omp_get_max_threads();
   omp_set_num_threads(1);
   volume_->tsdf.Integrate(*rgbd, intrinsic, f.camera.WorldToCameraMatrix());

@@ -1,4 +1,4 @@
-// TSDF fusion of per-view depth maps into a triangle mesh (reference 5; DESIGN.md section 2), on
+// TSDF fusion of per-view depth maps into a triangle mesh (method.md 5; docs/design.md), on
 // Open3D's ScalableTSDFVolume from Debian's libopen3d-dev.
 #pragma once
 
@@ -24,7 +24,7 @@ struct DepthFrame {
 
 struct TsdfOptions {
   double voxel_size = 0;         // 0: the pixel footprint at the object (AutoVoxelSize)
-  double truncation_voxels = 4;  // sdf truncation in voxels (DESIGN.md: 4 gives the best NC)
+  double truncation_voxels = 4;  // sdf truncation in voxels (4: best NC, docs/user_guide.md)
   double depth_max = 0;          // 0: beyond every depth in the frames
   float weight_threshold = 0.5f;
   bool keep_largest_component = false;  // drop floating fragments

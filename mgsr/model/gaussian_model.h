@@ -1,7 +1,7 @@
 // GaussianModel: the 3DGS branch's parameter blocks, structure-of-arrays, raw (pre-activation)
 // values as the optimiser sees them. Activations: scale = exp(log_scale), rotation =
 // normalise(quat), opacity = sigmoid(logit); reflection parameters of MGSR: reflected SH, reflected
-// opacity and the reflected confidence beta (all sigmoid logits), see reference section 2.
+// opacity and the reflected confidence beta (all sigmoid logits), see method.md 2.
 #pragma once
 
 #include <cstddef>

@@ -1,4 +1,4 @@
-// Initialising both branches from points (reference 1.9): one primitive per point, colour from
+// Initialising both branches from points (method.md 1.9): one primitive per point, colour from
 // the point (SH DC, higher bands 0), opacity 0.1, isotropic scale sqrt(mean squared distance to the
 // 3 nearest neighbours). 3DGS: identity rotation, reflected SH DC = transmitted DC, reflected
 // opacity 0.1 and beta 0.1 (the reference stores beta = 1 with an infinite logit, frozen until

@@ -1,4 +1,4 @@
-// Projection stage of the 3DGS branch (reference 4.1): per Gaussian, the view-space mean, the EWA
+// Projection stage of the 3DGS branch (method.md 4.1): per Gaussian, the view-space mean, the EWA
 // screen covariance with the 0.3 px^2 dilation and the 1.3 x fov clamp of the Jacobian, its conic,
 // a 3-sigma radius, the screen box that can receive alpha >= 1/255 and its tile rectangle,
 // activated opacities and the SH colours (transmitted and, for MGSR, reflected). Pixel coordinates
@@ -70,7 +70,7 @@ struct GaussianGradients {
 };
 
 // |d loss / d screen mean| per Gaussian in NDC units (the pixel gradient times W/2 and H/2), the
-// statistic density control compares with its threshold (reference 1.10: 2e-4).
+// statistic density control compares with its threshold (method.md 1.10: 2e-4).
 // (For the 2DGS branch pass its reference-3.8(5) statistic, SurfelGradients::mean2d.)
 void ScreenGradientNorms(const std::vector<float>& mean2d_grads, int width, int height,
                          std::vector<float>* norms);

@@ -189,7 +189,7 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
       L.ok[l] = (L.g.pv[2][l] > kSurfelNear) & (cos != 0.0f) & std::isfinite(cos);
     }
 #pragma omp simd
-    for (int l = 0; l < kLanes; ++l) {  // screen AABB of the projected 3-sigma disk (reference 3.2)
+    for (int l = 0; l < kLanes; ++l) {  // screen AABB of the projected 3-sigma disk (method.md 3.2)
       const float tu0 = L.g.M[0][l], tu1 = L.g.M[1][l], tu2 = L.g.M[2][l];
       const float tv0 = L.g.M[3][l], tv1 = L.g.M[4][l], tv2 = L.g.M[5][l];
       const float tw0 = L.g.M[6][l], tw1 = L.g.M[7][l], tw2 = L.g.M[8][l];
@@ -444,7 +444,7 @@ void ProjectSurfelsBackward(const SurfelModel& m, const Camera& cam, int sh_degr
           dM[6 + k] = moved ? r2 : dM[6 + k];
         }
       }
-      // Densification statistic (reference 3.8(5)): the centre's x_num / y_num gradients scaled
+      // Densification statistic (method.md 3.8): the centre's x_num / y_num gradients scaled
       // by the depth, in pixels.
       L.mean2d[0][l] = dM[2] * g.M[8][l];
       L.mean2d[1][l] = dM[5] * g.M[8][l];

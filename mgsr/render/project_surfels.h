@@ -1,4 +1,4 @@
-// Projection stage of the 2DGS branch (reference 3.1-3.2), in COLMAP pixel coordinates (pixel
+// Projection stage of the 2DGS branch (method.md 3.1-3.2), in COLMAP pixel coordinates (pixel
 // (x, y) spans [x, x+1) x [y, y+1)). A surfel is the disk X(u, v) = p + s_u u t_u + s_v v t_v;
 // through the camera it becomes the 3x3 matrix M = K [R_c [s_u t_u, s_v t_v, p] + t_c e3^T] whose
 // rows T_u, T_v, T_w give x_num, y_num and depth of the local point (u, v, 1). Per surfel: M, the
@@ -55,7 +55,7 @@ struct ProjectedSurfelsGrad {
 
 struct SurfelGradients {
   SurfelModel params;         // d loss / d raw parameter, model layout
-  std::vector<float> mean2d;  // N x 2: the densification statistic of reference 3.8(5), pixels
+  std::vector<float> mean2d;  // N x 2: the densification statistic of method.md 3.8, pixels
   void ResizeAndZero(const SurfelModel& model);
   // Only sized: ProjectSurfelsBackward writes every entry.
   void ResizeForBackward(const SurfelModel& model);

@@ -1,4 +1,4 @@
-// Rasterization stage of the 3DGS branch with MGSR's reflection decomposition (reference 2.2):
+// Rasterization stage of the 3DGS branch with MGSR's reflection decomposition (method.md 2.2):
 // per 16x16 tile, front-to-back alpha blending of the depth-sorted Gaussians, two transmittance
 // chains per pixel:
 //   C_tran = sum_i c_t,i a_i T_i + T_N bg        (a_i = min(0.99, o_i G_i),
@@ -10,8 +10,8 @@
 //   C      = C_tran + W * C_ref
 // A Gaussian affects a pixel only inside its 3-sigma square (|dx|, |dy| <= radius), where the
 // exponent is <= 0, and in a chain only if that chain's alpha >= 1/255 (each chain decides for
-// itself: a departure from the reference kernels, which skip both when either alpha is small,
-// reference 8 item 20). A chain stops when its transmittance would fall below 1e-4 (that Gaussian
+// itself: a departure from the authors' kernels, which skip both when either alpha is small,
+// method.md 2.2). A chain stops when its transmittance would fall below 1e-4 (that Gaussian
 // is not blended in it); the pixel stops when every chain has. Tiles and pixel loops visit only
 // the box where some alpha can reach 1/255 (ProjectedGaussians::extent), which changes nothing.
 #pragma once

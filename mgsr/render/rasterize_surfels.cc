@@ -171,7 +171,7 @@ struct Surfel {
   }
 };
 
-// The ray-splat intersection of one tile row (reference 3.3), shared by both passes so their
+// The ray-splat intersection of one tile row (method.md 3.3), shared by both passes so their
 // decisions agree bit for bit.
 template <class V>
 struct RowHit {
@@ -226,7 +226,7 @@ inline void IntersectRow(const Surfel& s, float py, float min_power, simd::MaskO
   const V rho = simd::Min(h->rho3d, h->rho2d);
   // Depth: where the ray meets the disk's plane in the splat branch; the centre's depth where the
   // screen low-pass draws the surfel (as 2DGS's own rasterizer; MGSR's copy takes the plane there
-  // too, reference 3.3). Off the disk that intersection is unbounded: for a nearly edge-on surfel
+  // too, method.md 3.3). Off the disk that intersection is unbounded: for a nearly edge-on surfel
   // it lies thousands of units away, and those depths made the 2DGS branch's single-iteration loss
   // spikes (up to 4.6e6) through the depth TV and distortion terms; with disks started tangent to
   // the surface (every silhouette disk edge-on) they cost the 2DGS-only method 10 dB.

@@ -1,4 +1,4 @@
-// Rasterization stage of the 2DGS branch (reference 3.3-3.4): per tile, front-to-back blending of
+// Rasterization stage of the 2DGS branch (method.md 3.3-3.4): per tile, front-to-back blending of
 // depth-sorted surfels with the exact ray-splat intersection in each splat's (u, v) frame:
 //   k = x T_w - T_u, l = y T_w - T_v, p = k x l, (u, v) = (p_x, p_y) / p_z   at the pixel centre
 //   (x, y) rho = min(u^2 + v^2, 2 |m - (x, y)|^2 + c)   (the screen low-pass floor), G = exp(-rho /
@@ -17,7 +17,7 @@
 //   e^{-c/2} = min(1, 2 |det J|),  det J = det M / T_w2^3  (the screen Jacobian at the centre),
 // so a surfel adds coverage in proportion to the area it projects to, as in Mip-Splatting. It
 // renders a given surface's silhouette exactly, but trained on the synthetic scenes its surfaces
-// sat deeper inside the truth than the reference's (README, surface accuracy), so it is an option.
+// sat deeper inside the truth than the reference's (docs/geometry.md), so it is an option.
 #pragma once
 
 #include <cstdint>
@@ -48,7 +48,7 @@ struct SurfelRenderOptions {
   // The screen low-pass Gaussian's sigma in pixels (rho2d = |m - pixel|^2 / sigma^2). Smaller
   // dilates silhouettes less: every footprint is at least this wide, so an edge-on disk at a
   // silhouette draws the object's outline about a sigma too far out, and the fit pulls the surface
-  // in to compensate (README, surface accuracy).
+  // in to compensate (docs/geometry.md).
   float filter_sigma = kReferenceSurfelFilterSigma;
   // Also sum each surfel's blend weights over the image (SurfelRender::contribution): what pruning
   // by contribution reads. Off in training steps (it costs a reduction per row).

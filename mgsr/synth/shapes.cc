@@ -182,7 +182,9 @@ TriangleMesh MakeDentedSphereWithRod(int subdivisions) {
   return body;
 }
 
-std::vector<std::string> ShapeNames() { return {"sphere", "torus", "rounded_box", "dented"}; }
+std::vector<std::string> ShapeNames() {
+  return {"sphere", "torus", "rounded_box", "dented", "gear", "slot", "knot", "wall"};
+}
 
 bool MakeShape(const std::string& name, int detail, TriangleMesh* mesh) {
   detail = std::max(0, std::min(2, detail));
@@ -194,6 +196,14 @@ bool MakeShape(const std::string& name, int detail, TriangleMesh* mesh) {
     *mesh = MakeRoundedBox(0.55, 0.15, 12 << detail);
   else if (name == "dented")
     *mesh = MakeDentedSphereWithRod(3 + detail);
+  else if (name == "gear")
+    *mesh = MakeGear(14, 16 << detail);
+  else if (name == "slot")
+    *mesh = MakeSlottedBlock(4 << detail);
+  else if (name == "knot")
+    *mesh = MakeTrefoilKnot(192 << detail, 16 << detail);
+  else if (name == "wall")
+    *mesh = MakePrintedWall();
   else
     return false;
   return true;

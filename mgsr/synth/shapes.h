@@ -17,7 +17,20 @@ TriangleMesh MakeRoundedBox(double half_extent, double rounding, int segments_pe
 // A sphere with three smooth dents (concavities) and a thin rod (thin structure) sticking out.
 TriangleMesh MakeDentedSphereWithRod(int subdivisions);
 
-// Names accepted by MakeShape: sphere, torus, rounded_box, dented (all listed by ShapeNames()).
+// Detailed shapes (detailed_shapes.cc). Sharp-edged ones have no vertex normals (face normals
+// are exact).
+// A gear: deep trapezoidal teeth around a hole through its middle, tilted.
+TriangleMesh MakeGear(int teeth, int samples_per_tooth);
+// A U-shaped block with a narrow, deep slot (0.1 wide, 0.9 deep), tilted.
+TriangleMesh MakeSlottedBlock(int segments);
+// A trefoil knot as a thin tube (radius 0.12) whose strands pass close to each other.
+TriangleMesh MakeTrefoilKnot(int segments, int sides);
+// A flat slab 1.4 x 1.4 x 0.06 standing upright: with the "print" texture, a printed wall whose
+// true normals are constant over each face.
+TriangleMesh MakePrintedWall();
+
+// Names accepted by MakeShape: sphere, torus, rounded_box, dented, gear, slot, knot, wall (all
+// listed by ShapeNames()).
 std::vector<std::string> ShapeNames();
 // Builds a shape by name at a detail level (0 = coarse .. 2 = fine); false if the name is unknown.
 bool MakeShape(const std::string& name, int detail, TriangleMesh* mesh);

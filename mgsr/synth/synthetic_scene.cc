@@ -9,6 +9,7 @@
 #include "mgsr/io/colmap_model.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
+#include "mgsr/io/mesh_obj.h"
 #include "mgsr/io/ply.h"
 #include "mgsr/synth/ray_caster.h"
 #include "mgsr/synth/scene_layout.h"
@@ -33,6 +34,20 @@ Eigen::Vector3d Albedo(const Eigen::Vector3d& p) {
   const double speck = ValueNoise(p * 28.0);
   c *= 0.45 + 0.55 * Smoothstep(0.25, 0.45, speck);
   return c;
+}
+
+// A printed pattern (linear albedo): dark ornaments and thin lines on cream, in two inks, with
+// edges a pixel sharp at the usual scales: what a wallpaper or a poster shows.
+Eigen::Vector3d PrintAlbedo(const Eigen::Vector3d& p) {
+  const double u = std::sin(9.0 * p.x() + 2.1 * std::sin(7.0 * p.z())) *
+                   std::sin(9.0 * p.z() + 2.1 * std::sin(7.0 * p.y())) *
+                   std::cos(5.0 * p.y() - 1.3 * p.x());
+  const double stripes = std::sin(31.0 * (p.x() + 0.7 * p.y() - 0.4 * p.z()));
+  const double ink = Smoothstep(0.18, 0.24, u) + Smoothstep(0.93, 0.97, stripes);
+  const Eigen::Vector3d paper(0.82, 0.78, 0.66), ink_a(0.09, 0.11, 0.28), ink_b(0.42, 0.06, 0.05);
+  const double which = Smoothstep(0.45, 0.55, ValueNoise(p * 2.5 + Eigen::Vector3d(1.7, 4.2, 0.3)));
+  const Eigen::Vector3d ink_color = ink_a + (ink_b - ink_a) * which;
+  return paper + (ink_color - paper) * std::min(1.0, ink);
 }
 
 // A simple environment: blue sky brightening to the horizon, a dark checkered ground, and the key
@@ -91,8 +106,9 @@ Eigen::Vector3d ShadeObject(const RayCaster& shadow_caster, const Eigen::Vector3
                             const ViewLight& light, const SynthOptions& o, Reflect reflect) {
   Eigen::Vector3d n = n_in;
   if (n.dot(view_dir) > 0) n = -n;  // inside faces of open parts
+  const Eigen::Vector3d albedo = o.texture == "print" ? PrintAlbedo(p) : Albedo(p);
   Eigen::Vector3d c =
-      DirectLight(shadow_caster, Albedo(p), p, n, view_dir, light, o.specular, o.shininess);
+      DirectLight(shadow_caster, albedo, p, n, view_dir, light, o.specular, o.shininess);
   if (o.mirror > 0) {
     const Eigen::Vector3d r = view_dir - 2 * view_dir.dot(n) * n;
     const double cos_theta = std::max(0.0, -view_dir.dot(n));
@@ -137,8 +153,10 @@ Status SynthOptions::Validate() const {
     if (type == SceneType::kIndoor && !(distance <= 4.5))
       return Status::Error("--distance must be <= 4.5 indoors (the room is 10 units wide)");
   }
+  if (texture != "noise" && texture != "print")
+    return Status::Error("unknown --texture '" + texture + "' (noise or print)");
   TriangleMesh unused;
-  if (!MakeShape(shape, 0, &unused)) {
+  if (mesh_path.empty() && !MakeShape(shape, 0, &unused)) {
     std::string names;
     for (const auto& n : ShapeNames()) names += (names.empty() ? "" : ", ") + n;
     return Status::Error("unknown shape '" + shape + "' (choose one of: " + names + ")");
@@ -161,12 +179,43 @@ Status SynthOptions::Validate() const {
   return Status::Ok();
 }
 
+void NormaliseMesh(TriangleMesh* mesh, double radius) {
+  if (mesh->vertices.empty()) return;
+  Eigen::Vector3d lo = mesh->vertices[0], hi = lo;
+  for (const auto& p : mesh->vertices) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  const Eigen::Vector3d centre = 0.5 * (lo + hi);
+  double far = 0;
+  for (const auto& p : mesh->vertices) far = std::max(far, (p - centre).norm());
+  const double s = far > 0 ? radius / far : 1.0;
+  for (auto& p : mesh->vertices) p = (p - centre) * s;
+}
+
+Status MakeObjectMesh(const SynthOptions& o, TriangleMesh* mesh) {
+  if (o.mesh_path.empty()) {
+    if (!MakeShape(o.shape, o.detail, mesh))
+      return Status::Error("unknown shape '" + o.shape + "'");
+    return Status::Ok();
+  }
+  TriangleMesh m;
+  MGSR_RETURN_IF_ERROR(ReadMeshFile(o.mesh_path, &m));
+  if (m.triangles.empty()) return Status::Error(o.mesh_path + ": the mesh has no faces");
+  NormaliseMesh(&m, 1.0);
+  if (!(m.SurfaceArea() > 0)) return Status::Error(o.mesh_path + ": the mesh has no area");
+  m.vertex_colors.clear();
+  m.ComputeVertexNormals();
+  *mesh = std::move(m);
+  return Status::Ok();
+}
+
 Status MakeSyntheticScene(const SynthOptions& o, SyntheticScene* s) {
   MGSR_RETURN_IF_ERROR(o.Validate());
   *s = SyntheticScene();
   ParseSceneType(o.scene_type, &s->type);
   TriangleMesh object;
-  MakeShape(o.shape, o.detail, &object);
+  MGSR_RETURN_IF_ERROR(MakeObjectMesh(o, &object));
   s->layout = MakeSceneLayout(object, s->type, o.region_half);
   Rng rng(o.seed);
   const double fx = 0.5 * o.width / std::tan(0.5 * o.fov_x);
@@ -515,7 +564,8 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
       WriteStringToFileAtomic(JoinPath(out, "transforms_train.json"), train.dump(2)));
   MGSR_RETURN_IF_ERROR(
       WriteStringToFileAtomic(JoinPath(out, "transforms_test.json"), test.dump(2)));
-  nlohmann::json info = {{"shape", o.shape},
+  nlohmann::json info = {{"shape", o.mesh_path.empty() ? o.shape : o.mesh_path},
+                         {"texture", o.texture},
                          {"seed", o.seed},
                          {"num_views", o.num_views},
                          {"width", o.width},

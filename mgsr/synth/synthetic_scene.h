@@ -27,7 +27,13 @@ struct RayHit;
 struct SynthOptions {
   std::string scene_type = "object";  // object | outdoor | indoor (ParseSceneType)
   std::string shape = "sphere";       // see ShapeNames()
-  int detail = 1;                     // mesh detail 0..2
+  // A mesh file (OBJ, PLY or glb) to render instead of `shape`: centred on its bounding box and
+  // scaled so that its farthest vertex lies at radius 1, as the built-in shapes (NormaliseMesh).
+  std::string mesh_path;
+  // The object's diffuse texture: "noise" (two colours and speckles, low contrast) or "print"
+  // (a high-contrast printed pattern: geometry that copies texture shows in its normals).
+  std::string texture = "noise";
+  int detail = 1;  // mesh detail 0..2
   int num_views = 48;
   int width = 128, height = 128;
   double fov_x = 0.6911112;  // radians (as the shared suzanne scene)
@@ -76,6 +82,13 @@ struct SyntheticScene {
   std::vector<bool> is_test;
   std::vector<ViewLight> lights;
 };
+
+// Centres a mesh on its bounding box and scales it so that its farthest vertex lies at `radius`.
+void NormaliseMesh(TriangleMesh* mesh, double radius);
+
+// The object mesh of `options`: the file at mesh_path (normalised, with vertex normals when it has
+// none) or the built-in shape.
+Status MakeObjectMesh(const SynthOptions& options, TriangleMesh* mesh);
 
 // Builds the mesh, cameras and lights (no rendering).
 Status MakeSyntheticScene(const SynthOptions& options, SyntheticScene* scene);

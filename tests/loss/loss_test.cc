@@ -29,11 +29,16 @@ namespace mgsr {
 namespace {
 
 // Random double-precision inputs for any term: every buffer and every target, plausible ranges
-// (positive depths around 3, alpha in (0.5, 1)).
+// (positive depths around 3, alpha in (0.5, 1)), and for the multi-view terms a grey photo and two
+// neighbours a little to the side with their own photos and depths.
 struct Fixture {
   Camera camera = LookAtCamera({0.2, -3, 0.5}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 14, 11, 16, 16);
+  std::array<Camera, 2> neighbour_cameras = {
+      LookAtCamera({0.45, -2.95, 0.55}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 14, 11, 16, 16),
+      LookAtCamera({0.05, -3.02, 0.3}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 14, 11, 16, 16)};
   std::array<ImageD, kNumBuffers> buffers;
-  ImageD image, transmitted, mask, other_depth;
+  ImageD image, transmitted, mask, other_depth, gray;
+  std::array<ImageD, 2> neighbour_gray, neighbour_depth;
   RenderBuffersD in;
   TargetsD targets;
 
@@ -64,6 +69,14 @@ struct Fixture {
     targets.transmitted = &transmitted;
     targets.mask = &mask;
     targets.other_depth = &other_depth;
+    gray = random(1, 0, 1);
+    targets.gray = &gray;
+    for (int k = 0; k < 2; ++k) {
+      neighbour_gray[k] = random(1, 0, 1);
+      neighbour_depth[k] = random(1, 2.9, 3.1);
+      targets.neighbours[k] = {&neighbour_cameras[k], &neighbour_gray[k], &neighbour_depth[k]};
+    }
+    targets.num_neighbours = 2;
   }
 };
 

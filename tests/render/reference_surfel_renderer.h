@@ -1,5 +1,5 @@
 // A slow, independent reference of the 2DGS-branch render for tests: double precision, one pixel
-// at a time over every surfel sorted by depth, no tiles, written from reference section 3 and the
+// at a time over every surfel sorted by depth, no tiles, written from method.md 3 and the
 // rules of rasterize_surfels.h; it shares no code with the renderer.
 #pragma once
 

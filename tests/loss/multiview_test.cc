@@ -1,0 +1,195 @@
+// The multi-view terms: the plane-induced warp against a numerically intersected plane, the terms
+// on exactly rendered views of a textured plane, the forward-backward reprojection's derivative,
+// and neighbour selection on a known camera layout. (Their gradients on random inputs are checked
+// by loss_test's harness with every registered term.)
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <set>
+
+#include "mgsr/io/view_neighbours.h"
+#include "mgsr/loss/multiview_depth_loss.h"
+#include "mgsr/loss/multiview_geometry.h"
+#include "mgsr/loss/multiview_ncc_loss.h"
+#include "test_util.h"
+
+namespace mgsr {
+namespace {
+
+// A textured plane through `origin` with unit normal `n`, seen exactly by a camera: z-depth,
+// the normal (turned to the camera) and a smooth grey texture of the world position.
+struct PlaneView {
+  ImageD depth, normal, alpha, gray;
+};
+
+double Texture(const Eigen::Vector3d& X) {
+  return 0.5 + 0.2 * std::sin(21.0 * X.x() + 4.0 * X.y()) * std::cos(15.0 * X.z() - 1.2 * X.x()) +
+         0.15 * std::sin(33.0 * X.y() + 9.0 * X.z());
+}
+
+PlaneView RenderPlane(const Camera& cam, const Eigen::Vector3d& origin, const Eigen::Vector3d& n,
+                      double depth_scale = 1.0) {
+  PlaneView v{ImageD(cam.width, cam.height, 1), ImageD(cam.width, cam.height, 3),
+              ImageD(cam.width, cam.height, 1), ImageD(cam.width, cam.height, 1)};
+  const Eigen::Vector3d C = cam.Center();
+  for (int y = 0; y < cam.height; ++y) {
+    for (int x = 0; x < cam.width; ++x) {
+      const Eigen::Vector3d w = cam.R.transpose() * cam.PixelToRay(x + 0.5, y + 0.5);
+      const double t = n.dot(origin - C) / n.dot(w);  // z-depth (w has camera z = 1)
+      const Eigen::Vector3d X = C + t * w;
+      v.depth.at(0, y, x) = t * depth_scale;
+      const Eigen::Vector3d nn = n.dot(w) < 0 ? n : Eigen::Vector3d(-n);
+      for (int c = 0; c < 3; ++c) v.normal.at(c, y, x) = nn[c];
+      v.alpha.at(0, y, x) = 1.0;
+      v.gray.at(0, y, x) = Texture(X);
+    }
+  }
+  return v;
+}
+
+TEST(MultiviewGeometryTest, PlaneWarpMatchesTheIntersectedPlane) {
+  const Camera ref =
+      LookAtCamera({0.3, -3, 0.6}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 64, 48, 60, 62);
+  const Camera nb =
+      LookAtCamera({1.1, -2.8, 0.9}, {0.1, 0, 0}, Eigen::Vector3d::UnitZ(), 64, 48, 58, 58);
+  const Eigen::Vector3d origin(0.05, 0.1, -0.02), n = Eigen::Vector3d(0.2, -1.0, 0.35).normalized();
+  const Eigen::Vector3d C = ref.Center();
+  auto point_of = [&](const Eigen::Vector2d& q) {
+    const Eigen::Vector3d w = ref.R.transpose() * ref.PixelToRay(q.x(), q.y());
+    return Eigen::Vector3d(C + (n.dot(origin - C) / n.dot(w)) * w);
+  };
+  const Eigen::Vector2d p(30.5, 20.5);
+  const double D = ref.WorldToCamera(point_of(p)).z();
+  double worst = 0;
+  for (double dy = -5; dy <= 5; dy += 2.5) {
+    for (double dx = -5; dx <= 5; dx += 2.5) {
+      const Eigen::Vector2d q = p + Eigen::Vector2d(dx, dy);
+      Eigen::Vector2d warped;
+      ASSERT_TRUE(multiview::WarpThroughPlane(ref, nb, p, D, n, q, &warped));
+      worst = std::max(worst, (warped - nb.WorldToPixel(point_of(q))).norm());
+      // The other side of the normal is the same plane.
+      Eigen::Vector2d flipped;
+      ASSERT_TRUE(multiview::WarpThroughPlane(ref, nb, p, D, -n, q, &flipped));
+      EXPECT_NEAR((flipped - warped).norm(), 0.0, 1e-9);
+    }
+  }
+  EXPECT_LT(worst, 1e-9);
+  // A wrong depth moves every warped pixel off the plane's.
+  Eigen::Vector2d off;
+  ASSERT_TRUE(multiview::WarpThroughPlane(ref, nb, p, 1.05 * D, n, p, &off));
+  EXPECT_GT((off - nb.WorldToPixel(point_of(p))).norm(), 0.5);
+}
+
+struct TwoViewScene {
+  Camera ref = LookAtCamera({0.3, -3, 0.6}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 64, 48, 60, 60);
+  std::array<Camera, 2> nb = {
+      LookAtCamera({1.0, -2.85, 0.8}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 64, 48, 60, 60),
+      LookAtCamera({-0.5, -2.9, 0.2}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 64, 48, 60, 60)};
+  Eigen::Vector3d origin{0, 0, 0}, n = Eigen::Vector3d(0.15, -1.0, 0.3).normalized();
+  PlaneView view = RenderPlane(ref, origin, n);
+  std::array<PlaneView, 2> nb_view = {RenderPlane(nb[0], origin, n), RenderPlane(nb[1], origin, n)};
+  RenderBuffersD in;
+  TargetsD targets;
+
+  TwoViewScene() {
+    in.camera = &ref;
+    in.Set(Buffer::kDepth, &view.depth);
+    in.Set(Buffer::kNormal, &view.normal);
+    in.Set(Buffer::kAlpha, &view.alpha);
+    targets.gray = &view.gray;
+    for (int k = 0; k < 2; ++k)
+      targets.neighbours[k] = {&nb[k], &nb_view[k].gray, &nb_view[k].depth};
+    targets.num_neighbours = 2;
+  }
+};
+
+TEST(MultiviewNccTest, ExactPlaneAgreesAndAWrongDepthDoesNot) {
+  TwoViewScene s;
+  const MultiviewNccLoss ncc;
+  ASSERT_TRUE(ncc.Check(RenderBuffers(), Targets()).ok() == false);  // needs its inputs
+  const double exact = ncc.Evaluate(s.in, s.targets, 1.0, nullptr);
+  // Only bilinear interpolation separates the warped patch from the truth.
+  EXPECT_LT(exact, 0.01);
+  // The depth 10% too far: the patches no longer match (the occlusion test off, which would
+  // otherwise drop every pair that disagrees).
+  MultiviewNccConfig c;
+  c.check_occlusion = false;
+  const MultiviewNccLoss no_occlusion(c);
+  const PlaneView far = RenderPlane(s.ref, s.origin, s.n, 1.1);
+  s.in.Set(Buffer::kDepth, &far.depth);
+  const double wrong = no_occlusion.Evaluate(s.in, s.targets, 1.0, nullptr);
+  EXPECT_GT(wrong, 10 * exact + 0.02);
+  // Its gradient pushes the depth back: a step against it lowers the loss.
+  RenderGradientsD g;
+  no_occlusion.Evaluate(s.in, s.targets, 1.0, &g);
+  ImageD stepped = far.depth;
+  const ImageD& gd = g.Get(Buffer::kDepth);
+  double norm2 = 0;
+  for (size_t i = 0; i < gd.size(); ++i) norm2 += gd.data()[i] * gd.data()[i];
+  ASSERT_GT(norm2, 0);
+  for (size_t i = 0; i < stepped.size(); ++i)
+    stepped.data()[i] -= 0.01 * gd.data()[i] / std::sqrt(norm2);
+  s.in.Set(Buffer::kDepth, &stepped);
+  EXPECT_LT(no_occlusion.Evaluate(s.in, s.targets, 1.0, nullptr), wrong);
+}
+
+TEST(MultiviewDepthTest, ExactPlaneReprojectsOntoItselfAndTheDerivativeIsExact) {
+  TwoViewScene s;
+  const MultiviewDepthLoss depth;
+  // Bilinear depth is not exactly the plane's (depth is not linear in pixels): a thousandth.
+  EXPECT_LT(depth.Evaluate(s.in, s.targets, 1.0, nullptr), 1e-3);
+  const PlaneView far = RenderPlane(s.ref, s.origin, s.n, 1.01);
+  s.in.Set(Buffer::kDepth, &far.depth);
+  EXPECT_GT(depth.Evaluate(s.in, s.targets, 1.0, nullptr), 0.05);
+  // ForwardBackward's derivative against central differences, off the exact depth.
+  const Eigen::Vector2d p(25.5, 19.5);
+  const double D = far.depth.at(0, 19, 25);
+  double e, de;
+  ASSERT_TRUE(multiview::ForwardBackward(s.ref, s.nb[0], s.nb_view[0].depth, p, D, &e, &de));
+  double ep, em;
+  const double h = 1e-6;
+  ASSERT_TRUE(
+      multiview::ForwardBackward(s.ref, s.nb[0], s.nb_view[0].depth, p, D + h, &ep, nullptr));
+  ASSERT_TRUE(
+      multiview::ForwardBackward(s.ref, s.nb[0], s.nb_view[0].depth, p, D - h, &em, nullptr));
+  EXPECT_GT(e, 0.1);
+  EXPECT_NEAR(de, (ep - em) / (2 * h), 1e-5 * std::max(1.0, std::abs(de)));
+}
+
+TEST(ViewNeighboursTest, RingOfCamerasPicksTheAdjacentOnes) {
+  // 24 cameras on a circle 15 degrees apart, all looking at a ball of points: each view's two
+  // neighbours are the cameras beside it, never one across the circle.
+  Scene scene;
+  const int n = 24;
+  for (int i = 0; i < n; ++i) {
+    const double a = 2 * M_PI * i / n;
+    View v;
+    v.name = "v" + std::to_string(i);
+    v.camera = LookAtCamera({3 * std::cos(a), 3 * std::sin(a), 0.4}, {0, 0, 0},
+                            Eigen::Vector3d::UnitZ(), 64, 64, 60, 60);
+    scene.views.push_back(v);
+  }
+  for (int i = 0; i < 500; ++i) {
+    const double u = 2 * M_PI * ((i * 0.618034) - std::floor(i * 0.618034)), z = -1 + 2.0 * i / 500;
+    const double r = std::sqrt(1 - z * z);
+    scene.points.emplace_back(0.6 * r * std::cos(u), 0.6 * r * std::sin(u), 0.6 * z);
+  }
+  NeighbourOptions o;
+  o.count = 2;
+  const auto nbs = SelectNeighbours(scene, o);
+  ASSERT_EQ(nbs.size(), static_cast<size_t>(n));
+  for (int i = 0; i < n; ++i) {
+    ASSERT_EQ(nbs[i].size(), 2u) << i;
+    const std::set<int> got(nbs[i].begin(), nbs[i].end());
+    EXPECT_EQ(got, (std::set<int>{(i + 1) % n, (i + n - 1) % n})) << "view " << i;
+  }
+  // Test views get neighbours too, but are never anyone's neighbour.
+  scene.views[5].is_test = true;
+  const auto with_test = SelectNeighbours(scene, o);
+  EXPECT_EQ(with_test[5].size(), 2u);
+  for (int i = 0; i < n; ++i)
+    for (int u : with_test[i]) EXPECT_NE(u, 5);
+}
+
+}  // namespace
+}  // namespace mgsr
