@@ -127,6 +127,13 @@ Status ApplyRow(const nlohmann::json& row, std::vector<LossSpec>* table) {
   return Status::Ok();
 }
 
+// The normal consistency's config: empty at the defaults, so the table reads as before.
+nlohmann::json NormalConfig(const SolverOptions& o) {
+  nlohmann::json c = nlohmann::json::object();
+  if (!o.normal_depth_gradient) c["depth_gradient"] = false;
+  return c;
+}
+
 }  // namespace
 
 const char* StageName(Stage stage) { return stage == Stage::kWarmup ? "warmup" : "mutual"; }
@@ -151,8 +158,8 @@ std::vector<LossSpec> PaperLossTable(const SolverOptions& o) {
       Row(b2, warm, "photo", "render", RenderConfig("image", o.lambda_l1), 1.0, 0, true),
       Row(b2, warm, "depth_tv", "tv", TvConfig("depth", "image", geo, disp_s),
           o.depth_tv_warmup_2d),
-      Row(b2, warm, "normal_consistency", "normal_consistency", nlohmann::json::object(),
-          o.lambda_normal, o.normal_from_iteration + 1),
+      Row(b2, warm, "normal_consistency", "normal_consistency", NormalConfig(o), o.lambda_normal,
+          o.normal_from_iteration + 1),
       Row(b2, warm, "normal_tv", "tv", TvConfig("normal", "image", geo), o.lambda_normal,
           o.normal_from_iteration + 1),
       Row(b2, warm, "distortion", "distortion", nlohmann::json::object(), o.lambda_distortion,
@@ -167,7 +174,7 @@ std::vector<LossSpec> PaperLossTable(const SolverOptions& o) {
           w * o.mutual_transmitted_weight),
       Row(b2, mutual, "photo", "render", RenderConfig("image", o.lambda_l1),
           w * o.mutual_image_weight, 0, true),
-      Row(b2, mutual, "normal_consistency", "normal_consistency", nlohmann::json::object(),
+      Row(b2, mutual, "normal_consistency", "normal_consistency", NormalConfig(o),
           w * o.lambda_normal),
       Row(b2, mutual, "normal_tv", "tv", TvConfig("normal", "transmitted", geo),
           w * o.lambda_normal),

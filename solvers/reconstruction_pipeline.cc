@@ -422,6 +422,12 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
     }
     MGSR_RETURN_IF_ERROR(CheckBatchSplit(options.batch_views, o.group->size()));
   }
+  // Opening the output locks it, creating it when missing: first make sure the input is there
+  // (an output inside a mistyped workspace path must not create that path).
+  if (o.images.empty() && !DirectoryExists(workspace))
+    return Status::Error(workspace + ": scene folder does not exist");
+  if (!o.images.empty() && !DirectoryExists(o.images))
+    return Status::Error(o.images + ": folder of photos does not exist");
   OutputFolder out;
   if (!o.check_only && writer) {
     const Status opened = OutputFolder::Open(o.output,
@@ -876,6 +882,7 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   metrics["files"] = out.Manifest();
   s = out.Write("metrics.json", metrics.dump(2) + "\n");
   if (!s.ok()) return fail(s.message());
+  out.Commit();
   std::printf("test views: PSNR %.2f dB, SSIM %.4f (exposure-aligned %.2f dB, %.4f)", psnr, ssim,
               psnr_aligned, ssim_aligned);
   if (depth_views > 0)

@@ -165,6 +165,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"lambda_l1", Text(lambda_l1)},
           {"lambda_normal", Text(lambda_normal)},
           {"normal_from_iteration", Text(normal_from_iteration)},
+          {"normal_depth_gradient", Text(normal_depth_gradient)},
           {"lambda_distortion", Text(lambda_distortion)},
           {"distortion_from_iteration", Text(distortion_from_iteration)},
           {"lambda_multiview_ncc", Text(lambda_multiview_ncc)},

@@ -86,6 +86,16 @@ inline void ParseToolFlags(const std::string& usage, const std::vector<FlagTopic
     std::exit(0);
   }
   gflags::HandleCommandLineHelpFlags();  // --helpfull, --version, ...
+  // gflags takes a bare boolean flag as true and leaves a following word ("--overwrite false") as
+  // a positional argument; no tool takes one, so a stray word is a mistake that would otherwise
+  // silently turn a flag on.
+  if (*argc > 1) {
+    std::fprintf(stderr,
+                 "error: unexpected argument '%s' (no tool takes positional arguments; give a "
+                 "flag its value with '=', e.g. --overwrite=false)\n",
+                 (*argv)[1]);
+    std::exit(2);
+  }
 }
 
 }  // namespace mgsr_tools

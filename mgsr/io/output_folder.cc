@@ -1,5 +1,11 @@
 #include "mgsr/io/output_folder.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <system_error>
 
@@ -48,17 +54,54 @@ Status OutputFolder::Open(const std::string& dir, OutputMode mode, OutputFolder*
                          "run, or --resume to continue it)");
   }
   folder->mode_ = mode;
+  MGSR_RETURN_IF_ERROR(MakeDirectories(dir));
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0)
+    return Status::Error(dir + ": cannot open the output folder: " + std::strerror(errno));
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    const int err = errno;
+    ::close(fd);
+    if (err == EWOULDBLOCK)
+      return Status::Error(dir +
+                           ": another run is writing into this output folder; wait for it to end "
+                           "or choose another --output");
+    return Status::Error(dir + ": cannot lock the output folder: " + std::strerror(err));
+  }
+  folder->lock_ = std::shared_ptr<int>(new int(fd), [](int* p) {
+    ::close(*p);
+    delete p;
+  });
   return Status::Ok();
 }
 
 Status OutputFolder::Prepare() {
   if (prepared_) return Status::Ok();
   prepared_ = true;
-  MGSR_RETURN_IF_ERROR(ClearResults());
-  if (mode_ == OutputMode::kOverwrite) {
-    for (const std::string& name : StateNames()) MGSR_RETURN_IF_ERROR(RemovePath(Path(name)));
+  MGSR_RETURN_IF_ERROR(MakeDirectories(dir_));
+  // A run set aside by an overwrite that never ended (killed) is not this run's to restore.
+  MGSR_RETURN_IF_ERROR(RemovePath(Path(kPreviousRun)));
+  if (mode_ != OutputMode::kOverwrite) return ClearResults();
+  // Overwrite: the previous run's results and state move aside, metrics.json first (so no
+  // manifest is ever left without its files).
+  const std::string aside = Path(kPreviousRun);
+  std::error_code ec;
+  for (const std::vector<std::string>* names : {&ResultNames(), &StateNames()}) {
+    for (const std::string& name : *names) {
+      fs::remove(Path(name) + ".tmp", ec);
+      if (!fs::exists(fs::symlink_status(Path(name), ec))) continue;
+      MGSR_RETURN_IF_ERROR(MakeDirectories(aside));
+      fs::rename(Path(name), JoinPath(aside, name), ec);
+      if (ec)
+        return Status::Error(Path(name) +
+                             ": cannot set the previous run's output aside: " + ec.message());
+    }
   }
-  return MakeDirectories(dir_);
+  return Status::Ok();
+}
+
+void OutputFolder::Commit() {
+  if (dir_.empty()) return;
+  (void)RemovePath(Path(kPreviousRun));
 }
 
 Status OutputFolder::ClearResults() const {
@@ -104,6 +147,24 @@ void OutputFolder::Discard() {
   // a run records lies under ResultNames(), so clearing those takes back what it wrote.
   written_.clear();
   (void)ClearResults();
+  // Put back what an overwrite set aside, where this run left nothing of the same name (a run
+  // stopped while writing keeps its own checkpoint for --resume).
+  const std::string aside = Path(kPreviousRun);
+  std::error_code ec;
+  if (!fs::is_directory(aside, ec)) return;
+  // State first, results in reverse (metrics.json last: never a manifest without its files).
+  std::vector<std::string> names = StateNames();
+  names.insert(names.end(), ResultNames().rbegin(), ResultNames().rend());
+  {
+    for (const std::string& name : names) {
+      const std::string from = JoinPath(aside, name);
+      if (!fs::exists(fs::symlink_status(from, ec)) ||
+          fs::exists(fs::symlink_status(Path(name), ec)))
+        continue;
+      fs::rename(from, Path(name), ec);
+    }
+  }
+  fs::remove_all(aside, ec);
 }
 
 Status VerifyOutputManifest(const std::string& dir, const nlohmann::json& metrics) {

@@ -79,8 +79,12 @@ void RegisterBuiltinLosses(LossRegistry* r) {
     return std::make_unique<EdgeAwareTvLoss>(b, g, c.value("on_geometry", false), disparity_scale);
   });
   r->Register("normal_consistency",
-              [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {
-                return std::make_unique<NormalConsistencyLoss>();
+              [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
+                if (c.contains("depth_gradient") && !c["depth_gradient"].is_boolean()) {
+                  *s = Status::Error("'depth_gradient' must be true or false");
+                  return nullptr;
+                }
+                return std::make_unique<NormalConsistencyLoss>(c.value("depth_gradient", true));
               });
   r->Register("mutual_depth", [](const nlohmann::json& c, Status*) -> std::unique_ptr<LossTerm> {
     return std::make_unique<MutualDepthLoss>(c.contains("masked") && c["masked"].is_boolean() &&

@@ -24,9 +24,19 @@ ImageT<T> DepthToNormal(const ImageT<T>& depth, const Camera& camera);
 
 class NormalConsistencyLoss : public LossTermImpl<NormalConsistencyLoss> {
  public:
+  // `depth_gradient` false: the depth's normal N_surf is a constant target too, so the term turns
+  // the rendered normals towards the surface without pulling the depth (whose finite differences
+  // round off creases and fill concavities).
+  explicit NormalConsistencyLoss(bool depth_gradient = true) : depth_gradient_(depth_gradient) {}
   std::string Name() const override { return "normal_consistency"; }
-  std::vector<Buffer> Inputs() const override { return {Buffer::kNormal, Buffer::kDepth}; }
-  std::vector<Buffer> ConstantInputs() const override { return {Buffer::kAlpha}; }
+  std::vector<Buffer> Inputs() const override {
+    if (!depth_gradient_) return {Buffer::kNormal};
+    return {Buffer::kNormal, Buffer::kDepth};
+  }
+  std::vector<Buffer> ConstantInputs() const override {
+    if (!depth_gradient_) return {Buffer::kAlpha, Buffer::kDepth};
+    return {Buffer::kAlpha};
+  }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
     MGSR_RETURN_IF_ERROR(RequireImage(Name(), "depth", in.Get(Buffer::kDepth),
                                       static_cast<const Image*>(nullptr), 1));
@@ -43,6 +53,9 @@ class NormalConsistencyLoss : public LossTermImpl<NormalConsistencyLoss> {
   template <typename T>
   double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
                  RenderGradientsT<T>* grad) const;
+
+ private:
+  bool depth_gradient_ = true;
 };
 
 // --- implementation ---------------------------------------------------------------------------
@@ -116,7 +129,14 @@ double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const Targets
   if (grad != nullptr) {
     ImageT<T>& gN = grad->Get(Buffer::kNormal, N);
     for (int k = 0; k < 3; ++k) p.d_normal[k] = gN.plane(k);
-    p.d_depth = grad->Get(Buffer::kDepth, D).data();
+    if (depth_gradient_) {
+      p.d_depth = grad->Get(Buffer::kDepth, D).data();
+    } else {
+      // The kernel writes a depth gradient; here it goes into scratch and is dropped.
+      static thread_local std::vector<T> dropped;
+      dropped.assign(n, T(0));
+      p.d_depth = dropped.data();
+    }
     p.gain = static_cast<T>(-scale * inv_n);
   }
   return NormalConsistencySum(p) * inv_n;

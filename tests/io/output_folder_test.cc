@@ -33,10 +33,10 @@ TEST(OutputFolderTest, ANonEmptyFolderIsRefusedUnlessResumingOrOverwriting) {
                              ": output folder is not empty (use --overwrite to replace a "
                              "previous run, or --resume to continue it)");
   EXPECT_TRUE(FileExists(dir + "/mesh.ply"));  // nothing touched
-  // A missing or empty folder is fine (created when the run first writes); a file where the
-  // folder should be is not.
+  // A missing or empty folder is fine (created, empty, to be locked); a file where the folder
+  // should be is not.
   ASSERT_TRUE(OutputFolder::Open(dir + "/new/deeper", OutputMode::kFresh, &out).ok());
-  EXPECT_FALSE(fs::exists(dir + "/new"));
+  EXPECT_TRUE(fs::is_empty(dir + "/new/deeper"));
   ASSERT_TRUE(out.Prepare().ok());
   EXPECT_TRUE(DirectoryExists(dir + "/new/deeper"));
   ASSERT_TRUE(OutputFolder::Open(dir + "/new/deeper", OutputMode::kFresh, &out).ok());
@@ -49,11 +49,32 @@ TEST(OutputFolderTest, OverwriteClearsTheRunAndResumeKeepsItsState) {
   ASSERT_TRUE(OutputFolder::Open(dir, OutputMode::kOverwrite, &out).ok());
   EXPECT_TRUE(FileExists(dir + "/mesh.ply"));  // nothing goes before the run's first write
   ASSERT_TRUE(out.Prepare().ok());
-  for (const char* f :
-       {"metrics.json", "mesh.ply", "point_cloud_2d.ply", "renders", "checkpoints", "log.csv"}) {
-    EXPECT_FALSE(fs::exists(dir + "/" + f)) << f;
-  }
+  const char* const run_files[] = {"metrics.json", "mesh.ply",    "point_cloud_2d.ply",
+                                   "renders",      "checkpoints", "log.csv"};
+  for (const char* f : run_files) EXPECT_FALSE(fs::exists(dir + "/" + f)) << f;
   EXPECT_TRUE(FileExists(dir + "/notes.txt"));  // not ours: left alone
+  // The overwriting run fails: the previous run comes back as it was, except what the failing
+  // run left of its own (its checkpoint, for --resume).
+  ASSERT_TRUE(WriteStringToFileAtomic(out.Path("mesh.ply"), "new").ok());
+  ASSERT_TRUE(out.Record("mesh.ply").ok());
+  ASSERT_TRUE(WriteStringToFileAtomic(out.Path("log.csv"), "new").ok());
+  out.Discard();
+  std::string text;
+  for (const char* f : {"metrics.json", "mesh.ply", "point_cloud_2d.ply", "renders/v_gt.png",
+                        "checkpoints/latest.ckpt"}) {
+    ASSERT_TRUE(ReadFileToString(dir + "/" + f, &text).ok()) << f;
+    EXPECT_EQ(text, "old") << f;
+  }
+  ASSERT_TRUE(ReadFileToString(dir + "/log.csv", &text).ok());
+  EXPECT_EQ(text, "new");
+  EXPECT_FALSE(fs::exists(dir + "/" + OutputFolder::kPreviousRun));
+  // It finishes: the previous run is gone for good.
+  ASSERT_TRUE(OutputFolder::Open(dir, OutputMode::kOverwrite, &out).ok());
+  ASSERT_TRUE(out.Prepare().ok());
+  EXPECT_TRUE(fs::exists(dir + "/" + OutputFolder::kPreviousRun));
+  out.Commit();
+  EXPECT_FALSE(fs::exists(dir + "/" + OutputFolder::kPreviousRun));
+  for (const char* f : run_files) EXPECT_FALSE(fs::exists(dir + "/" + f)) << f;
 
   dir = PreviousRun();
   ASSERT_TRUE(OutputFolder::Open(dir, OutputMode::kResume, &out).ok());
@@ -63,6 +84,19 @@ TEST(OutputFolderTest, OverwriteClearsTheRunAndResumeKeepsItsState) {
     EXPECT_FALSE(fs::exists(dir + "/" + f)) << f;
   for (const char* f : {"checkpoints/latest.ckpt", "log.csv", "notes.txt"})
     EXPECT_TRUE(FileExists(dir + "/" + f)) << f;
+}
+
+TEST(OutputFolderTest, OneRunAtATime) {
+  const std::string dir = testing::ScratchDir() + "/run";
+  OutputFolder first, second;
+  ASSERT_TRUE(OutputFolder::Open(dir, OutputMode::kFresh, &first).ok());
+  const Status s = OutputFolder::Open(dir, OutputMode::kOverwrite, &second);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.message(), dir +
+                             ": another run is writing into this output folder; wait for it to "
+                             "end or choose another --output");
+  first = OutputFolder();  // the first run ends: its lock goes with it
+  EXPECT_TRUE(OutputFolder::Open(dir, OutputMode::kOverwrite, &second).ok());
 }
 
 TEST(OutputFolderTest, TheManifestVouchesForEachFileAndDiscardTakesThemBack) {

@@ -24,7 +24,7 @@ TEST(LossTableTest, ThePaperTableFollowsTheOptions) {
   o.normal_from_iteration = 300;
   const std::vector<LossSpec> t = PaperLossTable(o);
   ASSERT_TRUE(CheckLossTable(t).ok());
-  EXPECT_EQ(t.size(), 16u);
+  EXPECT_EQ(t.size(), 20u);
   const LossSpec* nc = Find(t, Branch::kSurfels2D, Stage::kWarmup, "normal_consistency");
   ASSERT_NE(nc, nullptr);
   EXPECT_EQ(nc->weight, 0.7);

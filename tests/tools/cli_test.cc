@@ -803,7 +803,7 @@ TEST_F(CliTest, LossConfigChangesTheTableAndTheLogShowsEachRow) {
   ASSERT_TRUE(ReadFileToString(dir + "/out/metrics.json", &metrics).ok());
   const nlohmann::json m = nlohmann::json::parse(metrics);
   ASSERT_TRUE(m["losses"].is_array());
-  EXPECT_EQ(m["losses"].size(), 17u);  // the paper's 16 rows and the new one
+  EXPECT_EQ(m["losses"].size(), 21u);  // the default 20 rows and the new one
 }
 
 }  // namespace
@@ -830,6 +830,31 @@ TEST(CliHelpTest, HelpShowsTheToolsOwnFlagsByTopic) {
       << r.output;
   EXPECT_NE(r.output.find("  --preset (string, default \"fast\")\n"), std::string::npos)
       << r.output;
+}
+
+}  // namespace
+}  // namespace mgsr
+
+namespace mgsr {
+namespace {
+
+// "--overwrite false" is gflags' bare --overwrite (true) and a stray word: every tool refuses the
+// word with one line, before doing anything (a finished run must not be replaced).
+TEST(CliArgumentsTest, StrayPositionalWordsAreRefusedByEveryTool) {
+  const std::string dir = testing::ScratchDir();
+  for (const char* tool :
+       {"mgsr_solve", "mgsr_eval", "mgsr_synth", "mgsr_colmap", "mgsr_bench", "mgsr_render"}) {
+    const auto r = testing::RunCommand(kTools + "/" + tool + " false");
+    EXPECT_EQ(r.exit_code, 2) << tool << r.output;
+    EXPECT_EQ(r.output.rfind("error: unexpected argument 'false'", 0), 0u) << tool << r.output;
+    EXPECT_NE(r.output.find("--overwrite=false"), std::string::npos) << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << tool << r.output;
+  }
+  // The audit's case: "--masks false" must not write a scene with masks.
+  const auto r =
+      testing::RunCommand(kTools + "/mgsr_synth --output " + dir + "/scene --masks false");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/scene")) << "nothing may be written";
 }
 
 }  // namespace
