@@ -131,6 +131,7 @@ Status ApplyRow(const nlohmann::json& row, std::vector<LossSpec>* table) {
 nlohmann::json NormalConfig(const SolverOptions& o) {
   nlohmann::json c = nlohmann::json::object();
   if (!o.normal_depth_gradient) c["depth_gradient"] = false;
+  if (o.normal_edge_weight > 0) c["edge_weight"] = o.normal_edge_weight;
   return c;
 }
 

@@ -166,6 +166,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"lambda_normal", Text(lambda_normal)},
           {"normal_from_iteration", Text(normal_from_iteration)},
           {"normal_depth_gradient", Text(normal_depth_gradient)},
+          {"normal_edge_weight", Text(normal_edge_weight)},
           {"lambda_distortion", Text(lambda_distortion)},
           {"distortion_from_iteration", Text(distortion_from_iteration)},
           {"lambda_multiview_ncc", Text(lambda_multiview_ncc)},

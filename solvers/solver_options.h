@@ -55,6 +55,8 @@ struct SolverOptions {
   int normal_from_iteration = 7000;  // warm-up: normal terms off before this
   // false: the normal consistency does not pull the depth (only the rendered normals turn).
   bool normal_depth_gradient = true;
+  // > 0: the normal consistency relaxes where the photo has edges (NormalConsistencyLoss).
+  double normal_edge_weight = 0;
   // 2DGS depth distortion (method.md 3.4). MGSR leaves it at 0; 2DGS uses 1000 from 3000 on.
   double lambda_distortion = 0.0;
   int distortion_from_iteration = 3000;

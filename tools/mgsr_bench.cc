@@ -47,6 +47,9 @@ DEFINE_string(budgets, "",
 DEFINE_string(workspace, "",
               "Run on this existing workspace (COLMAP or NeRF layout, e.g. ../shared/data/suzanne) "
               "instead of the generated scenes; the scene is named after its folder.");
+DEFINE_string(shared_data, MGSR_SOURCE_DIR "/../shared/data",
+              "The shared data folder (meshes for the detailed scenes); a scene whose file is "
+              "missing there is skipped.");
 DEFINE_bool(profile, false,
             "Instead of the suite: where an iteration's time goes. Generates a 256 px, 48-view "
             "specular object (or --size/--views), runs mgsr_solve --profile on it and writes "
@@ -308,19 +311,32 @@ int main(int argc, char** argv) {
     const bool external = !FLAGS_workspace.empty();  // then it is the only scene
     const std::string scene_dir = external ? fs::absolute(FLAGS_workspace).string()
                                            : mgsr::JoinPath(work, "scenes/" + sc.name);
+    // A scene's own size (detailed shapes) unless --size says otherwise.
+    const int scene_size = FLAGS_size == 0 && sc.size > 0 ? sc.size : size;
+    std::vector<std::string> scene_args = sc.synth_args;
+    bool missing = false;
+    for (std::string& a : scene_args) {
+      if (a.rfind(b::kSharedDataPrefix, 0) != 0) continue;
+      a = mgsr::JoinPath(FLAGS_shared_data, a.substr(std::string(b::kSharedDataPrefix).size()));
+      if (!mgsr::FileExists(a)) {
+        std::printf("mgsr_bench: skipping scene %s: %s not found\n", sc.name.c_str(), a.c_str());
+        missing = true;
+      }
+    }
+    if (missing && !external) continue;
     if (!external) fs::remove_all(scene_dir, ec);
     std::vector<std::string> args = {synth,
                                      "--output",
                                      scene_dir,
                                      "--width",
-                                     std::to_string(size),
+                                     std::to_string(scene_size),
                                      "--height",
-                                     std::to_string(size),
+                                     std::to_string(scene_size),
                                      "--num_views",
                                      std::to_string(sc.num_views > 0 ? sc.num_views : views),
                                      "--seed",
                                      "7"};
-    args.insert(args.end(), sc.synth_args.begin(), sc.synth_args.end());
+    args.insert(args.end(), scene_args.begin(), scene_args.end());
     s = mgsr::MakeDirectories(mgsr::JoinPath(work, "runs/" + sc.name));
     if (!s.ok()) return Fail(s.message());
     const std::string synth_log = mgsr::JoinPath(work, "runs/" + sc.name + "/synth.log");

@@ -140,6 +140,9 @@ DEFINE_double(lambda_multiview_depth, -1,
 DEFINE_bool(normal_depth_gradient, true,
             "The normal consistency also pulls the depth (false: only the rendered normals turn "
             "towards the depth's).");
+DEFINE_double(normal_edge_weight, -1,
+              "The normal consistency relaxes where the photo has edges: weight exp(-beta x "
+              "gradient) per pixel (0: off; -1: the default of SolverOptions).");
 DEFINE_int32(multiview_neighbours, 2, "Neighbouring views per view for the multi-view terms.");
 DEFINE_double(
     mutual_transmitted_weight, 0.2,
@@ -268,8 +271,9 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
        {"Losses",
         {"loss_config", "list_losses", "lambda_l1", "lambda_normal", "lambda_distortion",
          "lambda_multiview_ncc", "lambda_multiview_depth", "multiview_neighbours",
-         "normal_depth_gradient", "depth_tv_warmup_2d", "depth_tv_mutual_2d", "tv_on_geometry",
-         "depth_tv_disparity", "w_2d", "w_3d", "w_depth", "mutual_transmitted_weight"}},
+         "normal_depth_gradient", "normal_edge_weight", "depth_tv_warmup_2d", "depth_tv_mutual_2d",
+         "tv_on_geometry", "depth_tv_disparity", "w_2d", "w_3d", "w_depth",
+         "mutual_transmitted_weight"}},
        {"Exposure compensation",
         {"exposure", "exposure_lr", "exposure_prior", "exposure_offset_prior",
          "exposure_mean_prior", "exposure_per_branch", "exposure_fit"}},
@@ -366,6 +370,11 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   }
   options.multiview_neighbours = FLAGS_multiview_neighbours;
   options.normal_depth_gradient = FLAGS_normal_depth_gradient;
+  if (FLAGS_normal_edge_weight >= 0) {
+    options.normal_edge_weight = FLAGS_normal_edge_weight;
+  } else if (FLAGS_normal_edge_weight != -1) {
+    return Fail("--normal_edge_weight must be >= 0 (or -1 for the default)");
+  }
   options.mutual_transmitted_weight = FLAGS_mutual_transmitted_weight;
   options.mutual_image_weight = 1.0 - FLAGS_mutual_transmitted_weight;
   if (FLAGS_auto_stop_window >= 0) options.auto_stop_window = FLAGS_auto_stop_window;

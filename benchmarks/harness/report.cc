@@ -67,18 +67,19 @@ std::string TableRow(const std::string& label, const RunRecord& r) {
     << Fixed(r.psnr, 2) << " | " << Fixed(r.ssim, 4) << " | " << Fixed(r.psnr_aligned, 2) << " | "
     << Fixed(r.ssim_aligned, 4) << " | " << Fixed(r.offset_px, 2) << " | " << Fixed(r.fscore_1px, 3)
     << " | " << Fixed(100 * r.ceiling_nc, 2) << " | " << Fixed(1000 * r.ceiling_cd, 2) << " | "
-    << Fixed(r.t_warmup, 0) << " | " << Fixed(r.t_mutual, 0) << " | " << Fixed(r.t_mesh, 1) << " | "
-    << Fixed(r.t_total, 0) << " | " << Fixed(r.peak_mb, 0) << " | " << Fixed(r.gaussians, 0)
-    << " | " << Fixed(r.surfels, 0) << " | " << (r.ok ? "ok" : "**failed**: " + r.failure) << " |";
+    << Fixed(r.normal_deg, 1) << " | " << Fixed(r.t_warmup, 0) << " | " << Fixed(r.t_mutual, 0)
+    << " | " << Fixed(r.t_mesh, 1) << " | " << Fixed(r.t_total, 0) << " | " << Fixed(r.peak_mb, 0)
+    << " | " << Fixed(r.gaussians, 0) << " | " << Fixed(r.surfels, 0) << " | "
+    << (r.ok ? "ok" : "**failed**: " + r.failure) << " |";
   return s.str();
 }
 
 const char* kTableHeader =
     "| method | NC x100 | CD x1000 | PSNR | SSIM | PSNR aligned | SSIM aligned | offset px | "
-    "F 1px | ceiling NC | ceiling CD | warm-up s | mutual s | mesh s | total s | peak MB | "
-    "Gaussians | surfels | status |\n"
+    "F 1px | ceiling NC | ceiling CD | normal deg | warm-up s | mutual s | mesh s | total s | "
+    "peak MB | Gaussians | surfels | status |\n"
     "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | "
-    "---: | ---: | ---: | ---: | ---: | --- |\n";
+    "---: | ---: | ---: | ---: | ---: | ---: | --- |\n";
 
 // Charts with gnuplot: one point per run, a colour per method, the Pareto front as a dashed step
 // line (y higher is better, or lower with `lower_is_better`). Returns false when gnuplot is not
@@ -383,10 +384,14 @@ std::vector<std::string> SplitCsvLine(const std::string& line) {
 constexpr char kCsvHeaderV1[] =
     "scene,method,status,failure,nc,cd,psnr,ssim,psnr_aligned,ssim_aligned,warmup_s,mutual_s,"
     "mesh_s,total_s,wall_s,peak_mb,gaussians,surfels,offset_px,fscore_1px,ceiling_nc,ceiling_cd";
-constexpr char kCsvHeader[] =
+constexpr char kCsvHeaderV2[] =
     "scene,method,status,failure,nc,cd,psnr,ssim,psnr_aligned,ssim_aligned,warmup_s,mutual_s,"
     "mesh_s,total_s,wall_s,peak_mb,gaussians,surfels,offset_px,fscore_1px,ceiling_nc,ceiling_cd,"
     "iterations";
+constexpr char kCsvHeader[] =
+    "scene,method,status,failure,nc,cd,psnr,ssim,psnr_aligned,ssim_aligned,warmup_s,mutual_s,"
+    "mesh_s,total_s,wall_s,peak_mb,gaussians,surfels,offset_px,fscore_1px,ceiling_nc,ceiling_cd,"
+    "iterations,normal_deg";
 
 }  // namespace
 
@@ -401,6 +406,7 @@ RunRecord::RunRecord()
       fscore_1px(kNaN),
       ceiling_nc(kNaN),
       ceiling_cd(kNaN),
+      normal_deg(kNaN),
       t_warmup(kNaN),
       t_mutual(kNaN),
       t_mesh(kNaN),
@@ -450,6 +456,7 @@ void ReadRunResult(int exit_code, int signal, bool timed_out, double timeout_sec
   r->offset_px = Get(m, {"mesh", "signed_offset_median_px"});
   r->ceiling_nc = Get(m, {"mesh", "ceiling", "nc"});
   r->ceiling_cd = Get(m, {"mesh", "ceiling", "cd"});
+  r->normal_deg = Get(m, {"depth", "end", "normal", "mean_deg"});
   if (const nlohmann::json* f = Find(m, {"mesh", "fscores"}); f != nullptr && f->is_array()) {
     for (const nlohmann::json& e : *f) {
       if (e.is_object() && e.value("footprints", 0.0) == 1.0)
@@ -488,9 +495,10 @@ Status ReadResultsCsv(const std::string& path, const std::string& work,
   MGSR_RETURN_IF_ERROR(ReadFileToString(path, &text));
   std::istringstream in(text);
   std::string line;
-  if (!std::getline(in, line) || (line != kCsvHeader && line != kCsvHeaderV1))
+  if (!std::getline(in, line) ||
+      (line != kCsvHeader && line != kCsvHeaderV2 && line != kCsvHeaderV1))
     return Status::Error(path + ": not a results.csv of this harness (header differs)");
-  const size_t columns = line == kCsvHeader ? 23 : 22;
+  const size_t columns = line == kCsvHeader ? 24 : line == kCsvHeaderV2 ? 23 : 22;
   runs->clear();
   int line_number = 1;
   while (std::getline(in, line)) {
@@ -511,7 +519,7 @@ Status ReadResultsCsv(const std::string& path, const std::string& work,
                         &r.psnr_aligned, &r.ssim_aligned, &r.t_warmup,     &r.t_mutual,
                         &r.t_mesh,       &r.t_total,      &r.wall_seconds, &r.peak_mb,
                         &r.gaussians,    &r.surfels,      &r.offset_px,    &r.fscore_1px,
-                        &r.ceiling_nc,   &r.ceiling_cd,   &r.iterations};
+                        &r.ceiling_nc,   &r.ceiling_cd,   &r.iterations,   &r.normal_deg};
     for (size_t k = 0; k + 4 < columns; ++k) {
       const std::string& v = f[4 + k];
       if (v.empty()) continue;
@@ -581,10 +589,10 @@ Status WriteReport(const std::string& dir, const ReportContext& c,
   for (const RunRecord& r : runs) {
     csv << r.scene << "," << r.method << "," << (r.ok ? "ok" : "failed") << ","
         << CsvEscape(r.failure);
-    for (double v :
-         {r.nc, r.cd, r.psnr, r.ssim, r.psnr_aligned, r.ssim_aligned, r.t_warmup, r.t_mutual,
-          r.t_mesh, r.t_total, r.wall_seconds, r.peak_mb, r.gaussians, r.surfels, r.offset_px,
-          r.fscore_1px, r.ceiling_nc, r.ceiling_cd, r.iterations}) {
+    for (double v : {r.nc,           r.cd,         r.psnr,       r.ssim,       r.psnr_aligned,
+                     r.ssim_aligned, r.t_warmup,   r.t_mutual,   r.t_mesh,     r.t_total,
+                     r.wall_seconds, r.peak_mb,    r.gaussians,  r.surfels,    r.offset_px,
+                     r.fscore_1px,   r.ceiling_nc, r.ceiling_cd, r.iterations, r.normal_deg}) {
       csv << "," << (std::isfinite(v) ? Precise(v) : "");
     }
     csv << "\n";

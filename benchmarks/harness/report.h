@@ -23,6 +23,9 @@ struct RunRecord {
   // Exact geometry (point to triangle): the median signed offset in training pixel footprints
   // (negative: inside), the F-score at one footprint, and the exact-depth ceiling's NC and CD.
   double offset_px, fscore_1px, ceiling_nc, ceiling_cd;
+  // The mean angle between the rendered 2DGS normals and the true ones on the training views
+  // (degrees): relief smoothed away or texture copied into the geometry shows here.
+  double normal_deg;
   double t_warmup, t_mutual, t_mesh, t_total, peak_mb;
   double gaussians, surfels;
   // Training iterations: the longer branch's warm-up plus the mutual stage (an iteration steps

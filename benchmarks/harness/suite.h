@@ -16,7 +16,14 @@ struct SceneSpec {
   std::vector<std::string> synth_args;  // mgsr_synth flags (size and views added by the runner)
   int num_views = 0;                    // 0: the suite's default
   bool varying_light = true;
+  // Image size (width and height); 0: the suite's default. Detailed shapes need more pixels than
+  // the suite's small default to show their detail at all.
+  int size = 0;
 };
+
+// In synth_args, this prefix stands for the shared data folder (mgsr_bench --shared_data); a scene
+// whose file there is missing is skipped with a note.
+constexpr const char* kSharedDataPrefix = "{shared}/";
 
 // Which scenes a method runs on.
 enum class Coverage { kAll, kMainScene, kVaryingLight };

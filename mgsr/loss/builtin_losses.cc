@@ -1,4 +1,6 @@
 // The registration lines of the built-in loss terms: one per term.
+#include <cmath>
+
 #include "mgsr/loss/dssim_loss.h"
 #include "mgsr/loss/edge_aware_tv_loss.h"
 #include "mgsr/loss/exposure_compensation.h"
@@ -78,14 +80,19 @@ void RegisterBuiltinLosses(LossRegistry* r) {
     }
     return std::make_unique<EdgeAwareTvLoss>(b, g, c.value("on_geometry", false), disparity_scale);
   });
-  r->Register("normal_consistency",
-              [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
-                if (c.contains("depth_gradient") && !c["depth_gradient"].is_boolean()) {
-                  *s = Status::Error("'depth_gradient' must be true or false");
-                  return nullptr;
-                }
-                return std::make_unique<NormalConsistencyLoss>(c.value("depth_gradient", true));
-              });
+  r->Register(
+      "normal_consistency", [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
+        if (c.contains("depth_gradient") && !c["depth_gradient"].is_boolean()) {
+          *s = Status::Error("'depth_gradient' must be true or false");
+          return nullptr;
+        }
+        const double edge = Number(c, "edge_weight", 0);
+        if (!(edge >= 0) || !std::isfinite(edge)) {
+          *s = Status::Error("'edge_weight' must be finite and >= 0");
+          return nullptr;
+        }
+        return std::make_unique<NormalConsistencyLoss>(c.value("depth_gradient", true), edge);
+      });
   r->Register("mutual_depth", [](const nlohmann::json& c, Status*) -> std::unique_ptr<LossTerm> {
     return std::make_unique<MutualDepthLoss>(c.contains("masked") && c["masked"].is_boolean() &&
                                              c["masked"].get<bool>());

@@ -27,7 +27,11 @@ class NormalConsistencyLoss : public LossTermImpl<NormalConsistencyLoss> {
   // `depth_gradient` false: the depth's normal N_surf is a constant target too, so the term turns
   // the rendered normals towards the surface without pulling the depth (whose finite differences
   // round off creases and fill concavities).
-  explicit NormalConsistencyLoss(bool depth_gradient = true) : depth_gradient_(depth_gradient) {}
+  // `edge_weight` beta > 0: each pixel's term is weighted by exp(-beta g), g the photo's mean
+  // absolute central difference there (both axes, all channels): the prior relaxes where the photo
+  // shows an edge (a crease, a groove's rim) and holds where the photo is flat.
+  explicit NormalConsistencyLoss(bool depth_gradient = true, double edge_weight = 0)
+      : depth_gradient_(depth_gradient), edge_weight_(edge_weight) {}
   std::string Name() const override { return "normal_consistency"; }
   std::vector<Buffer> Inputs() const override {
     if (!depth_gradient_) return {Buffer::kNormal};
@@ -56,6 +60,7 @@ class NormalConsistencyLoss : public LossTermImpl<NormalConsistencyLoss> {
 
  private:
   bool depth_gradient_ = true;
+  double edge_weight_ = 0;
 };
 
 // --- implementation ---------------------------------------------------------------------------
@@ -120,6 +125,31 @@ double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const Targets
   p.depth = D.data();
   p.alpha = A.data();
   p.mask = t.mask != nullptr ? t.mask->data() : nullptr;
+  if (edge_weight_ > 0 && t.image != nullptr && t.image->width() == w && t.image->height() == h) {
+    // gamma x exp(-beta g): a constant of the photo (and the mask), like the mask itself.
+    static thread_local std::vector<T> weight;
+    weight.resize(n);
+    const ImageT<T>& I = *t.image;
+    const int channels = I.channels();
+#pragma omp parallel for schedule(static) if (static_cast <int64_t>(n) >= kParallelPixels)
+    for (int y = 0; y < h; ++y) {
+      const int y0 = y > 0 ? y - 1 : y, y1 = y + 1 < h ? y + 1 : y;
+      for (int x = 0; x < w; ++x) {
+        const int x0 = x > 0 ? x - 1 : x, x1 = x + 1 < w ? x + 1 : x;
+        double g = 0;
+        for (int c = 0; c < channels; ++c) {
+          const T* plane = I.plane(c);
+          g += std::abs(static_cast<double>(plane[y * w + x1] - plane[y * w + x0])) +
+               std::abs(static_cast<double>(plane[y1 * w + x] - plane[y0 * w + x]));
+        }
+        g /= 2.0 * channels;
+        const size_t i = static_cast<size_t>(y) * w + x;
+        const double gamma = p.mask != nullptr ? static_cast<double>(p.mask[i]) : 1.0;
+        weight[i] = static_cast<T>(gamma * std::exp(-edge_weight_ * g));
+      }
+    }
+    p.mask = weight.data();
+  }
   const internal::Vec3<T> C = cam.Center().template cast<T>();
   for (int k = 0; k < 3; ++k) {
     p.normal[k] = N.plane(k);

@@ -230,14 +230,23 @@ TEST(HarnessTest, BudgetStudyFindsTheSmallestRunReachingTheReference) {
   ASSERT_TRUE(ReadReportContext(JoinPath(dir, "context.json"), &saved).ok());
   EXPECT_TRUE(saved.budget_study);
 
-  // A results.csv of the older layout (no iterations column) still reads back.
+  // results.csv of the older layouts (no normal_deg column; no iterations either) still read back.
   std::string csv;
   ASSERT_TRUE(ReadFileToString(JoinPath(dir, "results.csv"), &csv).ok());
-  std::string old;
+  std::string older, oldest;
   std::istringstream lines(csv);
-  for (std::string line; std::getline(lines, line);) old += line.substr(0, line.rfind(',')) + "\n";
-  ASSERT_TRUE(WriteStringToFileAtomic(JoinPath(dir, "old.csv"), old).ok());
+  for (std::string line; std::getline(lines, line);) {
+    line = line.substr(0, line.rfind(','));
+    older += line + "\n";
+    oldest += line.substr(0, line.rfind(',')) + "\n";
+  }
+  ASSERT_TRUE(WriteStringToFileAtomic(JoinPath(dir, "older.csv"), older).ok());
+  ASSERT_TRUE(WriteStringToFileAtomic(JoinPath(dir, "old.csv"), oldest).ok());
   std::vector<RunRecord> back;
+  ASSERT_TRUE(ReadResultsCsv(JoinPath(dir, "older.csv"), dir, &back).ok());
+  ASSERT_EQ(back.size(), runs.size());
+  EXPECT_DOUBLE_EQ(back[0].iterations, 1000);
+  EXPECT_TRUE(std::isnan(back[0].normal_deg));
   ASSERT_TRUE(ReadResultsCsv(JoinPath(dir, "old.csv"), dir, &back).ok());
   ASSERT_EQ(back.size(), runs.size());
   EXPECT_TRUE(std::isnan(back[0].iterations));
@@ -295,14 +304,14 @@ TEST(HarnessTest, QuickRunWritesAReportThatParses) {
   int rows = 0;
   while (std::getline(lines, line)) {
     const size_t commas = std::count(line.begin(), line.end(), ',');
-    EXPECT_EQ(commas, 22u) << line;
+    EXPECT_EQ(commas, 23u) << line;
     if (rows > 0) {
       // Every run has a mesh here: its signed offset and the exact-depth ceiling are filled in.
       std::vector<std::string> fields;
       std::istringstream f(line);
       for (std::string v; std::getline(f, v, ',');) fields.push_back(v);
-      ASSERT_EQ(fields.size(), 23u) << line;
-      for (int k : {18, 20, 21, 22}) EXPECT_FALSE(fields[k].empty()) << k << ": " << line;
+      ASSERT_EQ(fields.size(), 24u) << line;
+      for (int k : {18, 20, 21, 22, 23}) EXPECT_FALSE(fields[k].empty()) << k << ": " << line;
       EXPECT_TRUE(line.rfind("control,", 0) == 0 || line.rfind("main,", 0) == 0) << line;
       EXPECT_TRUE(line.find(",ok,") != std::string::npos ||
                   line.find(",failed,") != std::string::npos)

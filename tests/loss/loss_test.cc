@@ -18,6 +18,7 @@
 #include "mgsr/loss/exposure_compensation.h"
 #include "mgsr/loss/l1_loss.h"
 #include "mgsr/loss/loss_registry.h"
+#include "mgsr/loss/multiview_ncc_loss.h"
 #include "mgsr/loss/mutual_depth_loss.h"
 #include "mgsr/loss/normal_consistency_loss.h"
 #include "mgsr/loss/normal_consistency_plane.h"
@@ -121,6 +122,16 @@ TEST(LossGradientTest, EveryTermMatchesNumericDifferentiation) {
   ExpectGradientMatchesNumeric(DssimLoss(Buffer::kColor, TargetKind::kImage));
   ExpectGradientMatchesNumeric(RenderLoss(Buffer::kColor, TargetKind::kImage, 0.8));
   ExpectGradientMatchesNumeric(MutualRenderLoss());
+  // The normal consistency relaxed at the photo's edges, and without its pull on the depth.
+  ExpectGradientMatchesNumeric(NormalConsistencyLoss(true, 5.0));
+  ExpectGradientMatchesNumeric(NormalConsistencyLoss(false, 0.0));
+  ExpectGradientMatchesNumeric(MultiviewNccLoss([] {
+    MultiviewNccConfig c;
+    c.check_occlusion = false;
+    c.patch_radius = 2;
+    c.stride = 2;
+    return c;
+  }()));
   ExpectGradientMatchesNumeric(EdgeAwareTvLoss(Buffer::kTransmitted, TargetKind::kImage));
   ExpectGradientMatchesNumeric(EdgeAwareTvLoss(Buffer::kDepth, TargetKind::kTransmitted));
   ExpectGradientMatchesNumeric(EdgeAwareTvLoss(Buffer::kNormal, TargetKind::kImage));
