@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -544,6 +545,10 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   s = ResolveMeshRegion(o.mesh_region, scene, &surface, &region_note);
   if (!s.ok()) return fail(s.message());
   std::printf("mesh region: %s\n", region_note.c_str());
+  if (options.batch_views > static_cast<int>(scene.TrainIndices().size())) {
+    return fail("--batch_views " + std::to_string(options.batch_views) + " is more than the " +
+                std::to_string(scene.TrainIndices().size()) + " training views of " + workspace);
+  }
   if (options.batch_views > 1) {
     if (o.batch_scale_iterations) {
       if (options.losses.empty()) options.losses = PaperLossTable(options);
@@ -800,7 +805,7 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   const double mesh_seconds = mesh_timer.ElapsedSeconds();
 
   nlohmann::json metrics = {
-      {"scene", workspace},
+      {"scene", std::filesystem::absolute(workspace).lexically_normal().string()},
       {"preset", o.preset},
       {"method", o.method},
       {"mutual_mode", options.mutual_mode},
@@ -879,12 +884,21 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   }
   if (stop_requested_) return stop_writing();
   // Last: the manifest of every file this run wrote, so metrics.json vouches for the folder.
+  if (test.empty()) {
+    // No held-out view: no image score at all, rather than a 0 that reads like a measurement.
+    metrics["test"] = {{"views", 0},
+                       {"note", "no test views (--test_every 0 and no split file): no PSNR/SSIM"}};
+  }
   metrics["files"] = out.Manifest();
   s = out.Write("metrics.json", metrics.dump(2) + "\n");
   if (!s.ok()) return fail(s.message());
   out.Commit();
-  std::printf("test views: PSNR %.2f dB, SSIM %.4f (exposure-aligned %.2f dB, %.4f)", psnr, ssim,
-              psnr_aligned, ssim_aligned);
+  if (test.empty()) {
+    std::printf("test views: none (--test_every 0 and no split file), so no PSNR/SSIM");
+  } else {
+    std::printf("test views: PSNR %.2f dB, SSIM %.4f (exposure-aligned %.2f dB, %.4f)", psnr, ssim,
+                psnr_aligned, ssim_aligned);
+  }
   if (depth_views > 0)
     std::printf(", 2DGS depth error %.4f (%.3f%% of the extent)", depth_err / depth_views,
                 100 * depth_err / depth_views / scene.extent);

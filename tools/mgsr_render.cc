@@ -126,6 +126,9 @@ int main(int argc, char** argv) {
        {"Cameras", {"orbit", "views", "elevation", "distance_scale", "width", "fps", "sheet"}}},
       &argc, &argv);
   if (FLAGS_run.empty() || FLAGS_output.empty()) return Fail("--run and --output are required");
+  // As mgsr_synth: a frame is a few hundred bytes a pixel of buffers.
+  if (FLAGS_width < 0 || FLAGS_width > 8192)
+    return Fail("--width must be in [1, 8192] (0: the training width)");
   if (FLAGS_orbit < 0) return Fail("--orbit must be >= 0");
   if (FLAGS_orbit == 0 && FLAGS_views != "test" && FLAGS_views != "train" && FLAGS_views != "all")
     return Fail("--views must be test, train or all");

@@ -312,6 +312,15 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   if (FLAGS_surfel_init != "neighbours" && FLAGS_surfel_init != "random")
     return Fail("--surfel_init must be neighbours or random");
   options.surfel_orientation_from_points = FLAGS_surfel_init == "neighbours";
+  // -1 means "the preset's"; any other negative count is a typo, not a request.
+  for (const auto& [value, name] :
+       {std::pair{FLAGS_warmup_max_iterations, "--warmup_max_iterations"},
+        std::pair{FLAGS_warmup_min_iterations, "--warmup_min_iterations"},
+        std::pair{FLAGS_mutual_iterations, "--mutual_iterations"}}) {
+    if (value < -1) return Fail(std::string(name) + " must be >= 0 (or -1 for the preset's)");
+  }
+  if (!(FLAGS_far_radius > 1 && FLAGS_far_radius <= 1e4))
+    return Fail("--far_radius must be in (1, 10000] scene extents");
   if (FLAGS_warmup_max_iterations >= 0) options.warmup_max_iterations = FLAGS_warmup_max_iterations;
   if (FLAGS_warmup_min_iterations >= 0) options.warmup_min_iterations = FLAGS_warmup_min_iterations;
   if (FLAGS_mutual_iterations >= 0) options.mutual_iterations = FLAGS_mutual_iterations;

@@ -3,6 +3,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <nlohmann/json.hpp>
 
 #include "mgsr/core/rng.h"
@@ -374,9 +375,46 @@ Camera RecordedCamera(const Camera& truth, const SynthOptions& o, Rng* rng) {
   return c;
 }
 
+namespace {
+
+// What a scene written here consists of: replaced whole when a scene is written over an older one,
+// so no photo, mask or map of the old scene stays beside the new ones.
+const char* const kSceneEntries[] = {"images",
+                                     "masks",
+                                     "images_constant",
+                                     "sparse",
+                                     "gt",
+                                     "split.txt",
+                                     "points3d.ply",
+                                     "lights.json",
+                                     "transforms_train.json",
+                                     "transforms_test.json"};
+
+// An empty or missing folder takes a scene; so does an older scene of ours (it has lights.json),
+// whose entries are removed first; anything else is refused, never mixed with.
+Status PrepareSceneFolder(const std::string& out) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::exists(out, ec)) return Status::Ok();
+  if (!fs::is_directory(out, ec)) return Status::Error(out + ": exists and is not a folder");
+  if (fs::is_empty(out, ec)) return Status::Ok();
+  if (!fs::exists(JoinPath(out, "lights.json"), ec))
+    return Status::Error(out +
+                         ": folder is not empty and holds no scene of mgsr_synth; choose an "
+                         "empty or new folder");
+  for (const char* e : kSceneEntries) {
+    fs::remove_all(JoinPath(out, e), ec);
+    if (ec) return Status::Error(JoinPath(out, e) + ": cannot remove the older scene's file");
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
 Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
   SyntheticScene s;
   MGSR_RETURN_IF_ERROR(MakeSyntheticScene(o, &s));
+  MGSR_RETURN_IF_ERROR(PrepareSceneFolder(out));
   for (const char* d : {"images", "sparse/0", "gt/depth", "gt/normal"}) {
     MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, d)));
   }

@@ -116,5 +116,28 @@ TEST(MeshObjTest, AMeshFileBecomesASceneScaledToTheUnitSphere) {
   EXPECT_NE(missing.message().find("missing.obj"), std::string::npos);
 }
 
+// A scene written over an older one replaces it whole (no old photo stays); a folder holding
+// anything else is refused.
+TEST(SceneFolderTest, ASceneReplacesAnOlderSceneAndNothingElse) {
+  const std::string dir = testing::ScratchDir() + "/scene";
+  SynthOptions o = testing::SmallSynthOptions();
+  ASSERT_TRUE(WriteSyntheticScene(o, dir).ok());
+  o.num_views = 6;
+  o.masks = false;
+  ASSERT_TRUE(WriteSyntheticScene(o, dir).ok());
+  size_t images = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir + "/images"))
+    images += !e.path().empty();
+  EXPECT_EQ(images, 6u);
+  EXPECT_FALSE(std::filesystem::exists(dir + "/masks"));
+  const std::string other = testing::ScratchDir() + "/other";
+  std::filesystem::create_directories(other);
+  std::ofstream(other + "/notes.txt") << "mine";
+  const Status s = WriteSyntheticScene(o, other);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("holds no scene of mgsr_synth"), std::string::npos) << s.message();
+  EXPECT_TRUE(std::filesystem::exists(other + "/notes.txt"));
+}
+
 }  // namespace
 }  // namespace mgsr

@@ -505,6 +505,49 @@ TEST_F(CliTest, SolveRejectsBadOptions) {
         std::string::npos)
         << r.output;
   }
+  // Out of range: only -1 means "the preset's"; a batch larger than the training views; an
+  // infinite far sphere; a render wider than any buffer should be.
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --mutual_iterations -5");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.output, "error: --mutual_iterations must be >= 0 (or -1 for the preset's)\n");
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ +
+                          " --output /tmp/x --far_radius inf");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.output, "error: --far_radius must be in (1, 10000] scene extents\n");
+  const std::string out = testing::ScratchDir() + "/out";
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + out +
+                          " --batch_views 9");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("error: --batch_views 9 is more than the 8 training views of "),
+            std::string::npos)
+      << r.output;
+  r = testing::RunCommand(kTools + "/mgsr_render --run " + base_ + " --output " + out +
+                          "/render --orbit 2 --width 200000");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_EQ(r.output, "error: --width must be in [1, 8192] (0: the training width)\n");
+}
+
+// Without test views there is no image score: metrics.json says why instead of a PSNR of 0, and
+// names the workspace by its absolute path (mgsr_render --run works from any folder).
+TEST_F(CliTest, NoTestViewsMeansNoPsnr) {
+  const std::string dir = Copy();
+  fs::remove(dir + "/split.txt");
+  const std::string out = dir + "/out";
+  const std::string rel = fs::relative(dir, fs::current_path()).string();
+  const auto r =
+      testing::RunCommand(kTools + "/mgsr_solve --workspace " + rel + " --output " + out +
+                          " --test_every 0 --warmup_max_iterations 30 --warmup_min_iterations 20 "
+                          "--mutual_iterations 10 --checkpoint_every 0");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("test views: none (--test_every 0 and no split file)"), std::string::npos)
+      << r.output;
+  std::string text;
+  ASSERT_TRUE(ReadFileToString(out + "/metrics.json", &text).ok());
+  const nlohmann::json m = nlohmann::json::parse(text);
+  EXPECT_EQ(m["test"]["views"], 0);
+  EXPECT_FALSE(m["test"].contains("psnr"));
+  EXPECT_EQ(m["scene"], fs::absolute(dir).lexically_normal().string());
 }
 
 // Photos without masks on a uniform grey: --background auto renders both branches on that grey;
