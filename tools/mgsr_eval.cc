@@ -21,6 +21,7 @@
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
 #include "mgsr/io/mesh_glb.h"
+#include "mgsr/io/mesh_obj.h"
 #include "mgsr/io/output_folder.h"
 #include "mgsr/io/ply.h"
 #include "tools/tool_flags.h"
@@ -88,10 +89,9 @@ mgsr::MeshMetricsOptions MeshOptionsFromFlags() {
   return o;
 }
 
-// A mesh file by its extension: .glb (binary glTF), otherwise PLY.
+// A mesh file by its extension: .glb (binary glTF), .obj, otherwise PLY.
 mgsr::Status ReadMesh(const std::string& path, mgsr::TriangleMesh* mesh) {
-  const bool glb = path.size() >= 4 && path.compare(path.size() - 4, 4, ".glb") == 0;
-  return glb ? mgsr::ReadMeshGlb(path, mesh) : mgsr::ReadTriangleMesh(path, mesh);
+  return mgsr::ReadMeshFile(path, mesh);
 }
 
 int EvaluateMeshes(nlohmann::json* report) {

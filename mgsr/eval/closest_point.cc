@@ -106,10 +106,17 @@ class ClosestTriangleSet {
 
 }  // namespace
 
+// A triangle whose longest edge exceeds this many median longest edges is tested directly.
+constexpr double kOversized = 64;
+
 struct TriangleClosestPoint::Index {
   SampleCloud cloud;
   std::unique_ptr<SampleTree> tree;
   double covering_radius = 0;
+  // Triangles far larger than the mesh's typical one (a stray vertex far away makes a few): not
+  // sampled, but tested one by one in every query. Sampled, their covering radius would widen
+  // every query's search ball to the whole mesh (a query then visits every sample).
+  std::vector<int> oversized;
 };
 
 TriangleClosestPoint::TriangleClosestPoint(const TriangleMesh& mesh)
@@ -146,9 +153,13 @@ TriangleClosestPoint::TriangleClosestPoint(const TriangleMesh& mesh)
     const auto& f = mesh.triangles[i];
     const Eigen::Vector3d &a = mesh.vertices[f[0]], &b = mesh.vertices[f[1]],
                           &c = mesh.vertices[f[2]];
+    if (longest[i] > kOversized * spacing) {
+      index_->oversized.push_back(static_cast<int>(i));
+      continue;
+    }
     // n x n similar sub-triangles, one sample at each centroid: every point of the triangle is
     // within (the largest centroid-to-vertex distance) / k of a sample.
-    const int k = static_cast<int>(std::clamp(std::ceil(longest[i] / spacing), 1.0, 256.0));
+    const int k = static_cast<int>(std::clamp(std::ceil(longest[i] / spacing), 1.0, kOversized));
     const Eigen::Vector3d centroid = (a + b + c) / 3.0;
     const double reach =
         std::max({(a - centroid).norm(), (b - centroid).norm(), (c - centroid).norm()}) / k;
@@ -172,21 +183,31 @@ TriangleClosestPoint::TriangleClosestPoint(const TriangleMesh& mesh)
 
 TriangleClosestPoint::~TriangleClosestPoint() = default;
 
-bool TriangleClosestPoint::empty() const { return index_->cloud.points.empty(); }
+bool TriangleClosestPoint::empty() const {
+  return index_->cloud.points.empty() && index_->oversized.empty();
+}
 
 ClosestPoint TriangleClosestPoint::Query(const Eigen::Vector3d& p) const {
   ClosestPoint best;
   if (empty()) return best;
+  best.distance = std::numeric_limits<double>::infinity();
+  for (int t : index_->oversized) {
+    const auto& f = mesh_.triangles[t];
+    const Eigen::Vector3d q =
+        ClosestPointOnTriangle(p, mesh_.vertices[f[0]], mesh_.vertices[f[1]], mesh_.vertices[f[2]]);
+    const double d = (q - p).norm();
+    if (d < best.distance) best = {q, d, t};
+  }
+  if (index_->cloud.points.empty()) return best;
   // Seed the bound with the nearest sample's triangle, then search the ball around it.
   size_t nearest = 0;
   double d2 = 0;
   index_->tree->knnSearch(p.data(), 1, &nearest, &d2);
   const int t = index_->cloud.triangle[nearest];
   const auto& f = mesh_.triangles[t];
-  best.point =
+  const Eigen::Vector3d q =
       ClosestPointOnTriangle(p, mesh_.vertices[f[0]], mesh_.vertices[f[1]], mesh_.vertices[f[2]]);
-  best.distance = (best.point - p).norm();
-  best.triangle = t;
+  if ((q - p).norm() < best.distance) best = {q, (q - p).norm(), t};
   ClosestTriangleSet set(mesh_, index_->cloud, p, index_->covering_radius, &best);
   index_->tree->findNeighbors(set, p.data(), nanoflann::SearchParams());
   return best;

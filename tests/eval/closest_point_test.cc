@@ -70,6 +70,30 @@ TEST(ClosestPointTest, IndexAgreesWithBruteForce) {
   EXPECT_NEAR(index.Query(mesh.vertices[17]).distance, 0.0, 1e-12);
 }
 
+// One stray vertex far away (a mesh an audit fed mgsr_eval): its few huge triangles are tested
+// directly instead of being sampled, so the search ball stays small, and the answer stays exact.
+TEST(ClosestPointTest, AFarAwayVertexKeepsTheAnswerExact) {
+  TriangleMesh mesh = MakeDentedSphereWithRod(2);
+  const int far = static_cast<int>(mesh.vertices.size());
+  mesh.vertices.emplace_back(1e6, 2e5, -3e5);
+  mesh.triangles.emplace_back(0, 1, far);
+  mesh.triangles.emplace_back(5, far, 9);
+  const TriangleClosestPoint index(mesh);
+  Rng rng(4);
+  for (int trial = 0; trial < 200; ++trial) {
+    const Eigen::Vector3d p = RandomPoint(&rng, trial % 5 == 0 ? 5e5 : 1.5);
+    double best = 1e300;
+    for (const auto& f : mesh.triangles) {
+      best = std::min(best, (ClosestPointOnTriangle(p, mesh.vertices[f[0]], mesh.vertices[f[1]],
+                                                    mesh.vertices[f[2]]) -
+                             p)
+                                .norm());
+    }
+    const ClosestPoint c = index.Query(p);
+    EXPECT_NEAR(c.distance, best, 1e-9 * std::max(1.0, best)) << "trial " << trial;
+  }
+}
+
 TEST(ClosestPointTest, FaceNormalsPointOutOfAClosedShape) {
   const TriangleMesh sphere = MakeIcoSphere(1.0, 3);
   const TriangleClosestPoint index(sphere);
