@@ -17,7 +17,43 @@ struct Frame {
   std::string image_path, mask_path, name;
   Eigen::Matrix4d c2w_gl;
   bool is_test;
+  json own;  // the frame's own intrinsics (nerfstudio: per-frame values win over the file's)
 };
+
+// The intrinsic keys a frame or the file may give. Lens distortion is refused rather than ignored:
+// these loaders hand the solver pinhole cameras only.
+const char* const kIntrinsicKeys[] = {"fl_x",           "fl_y",          "cx", "cy", "w", "h",
+                                      "camera_angle_x", "camera_angle_y"};
+const char* const kDistortionKeys[] = {"k1", "k2", "k3", "k4", "p1", "p2"};
+
+// Checks the camera keys of `obj` (the file's top level or one frame): numbers where given, sizes
+// whole and in range, no lens distortion, a pinhole camera model.
+Status CheckCameraKeys(const json& obj, const std::string& where) {
+  for (const char* key : kIntrinsicKeys) {
+    if (!obj.contains(key)) continue;
+    const json& v = obj[key];
+    if (!v.is_number() || !std::isfinite(v.get<double>()))
+      return Status::Error(where + ": '" + key + "' must be a finite number");
+    const std::string k = key;
+    if ((k == "w" || k == "h") && (v.get<double>() < 1 || v.get<double>() > 65536 ||
+                                   v.get<double>() != std::floor(v.get<double>())))
+      return Status::Error(where + ": '" + k + "' must be a whole number of pixels in [1, 65536]");
+  }
+  for (const char* key : kDistortionKeys) {
+    if (obj.contains(key) && !(obj[key].is_number() && obj[key].get<double>() == 0.0))
+      return Status::Error(where + ": lens distortion ('" + std::string(key) +
+                           "') is not supported here; undistort the photos first (colmap "
+                           "image_undistorter, or mgsr_colmap)");
+  }
+  if (obj.contains("camera_model")) {
+    const std::string model =
+        obj["camera_model"].is_string() ? obj["camera_model"].get<std::string>() : "?";
+    if (model != "PINHOLE" && model != "SIMPLE_PINHOLE")
+      return Status::Error(where + ": camera_model " + model +
+                           " is not supported here (PINHOLE only); undistort the photos first");
+  }
+  return Status::Ok();
+}
 
 bool HasExtension(const std::string& p) {
   const size_t slash = p.find_last_of('/');
@@ -33,9 +69,10 @@ Status ReadTransforms(const std::string& root, const std::string& file, bool is_
   MGSR_RETURN_IF_ERROR(ReadFileToString(path, &text));
   try {
     *meta = json::parse(text);
-    if (!meta->contains("frames") || !(*meta)["frames"].is_array()) {
+    if (!meta->is_object() || !meta->contains("frames") || !(*meta)["frames"].is_array()) {
       return Status::Error(path + ": no 'frames' array");
     }
+    MGSR_RETURN_IF_ERROR(CheckCameraKeys(*meta, path));
     for (const json& f : (*meta)["frames"]) {
       Frame fr;
       fr.is_test = is_test;
@@ -58,6 +95,14 @@ Status ReadTransforms(const std::string& root, const std::string& file, bool is_
       }
       if (!fr.c2w_gl.allFinite())
         return Status::Error(path + ": transform_matrix of " + fp + " has NaN/inf");
+      MGSR_RETURN_IF_ERROR(CheckCameraKeys(f, path + ": frame " + fp));
+      fr.own = json::object();
+      for (const char* key : kIntrinsicKeys)
+        if (f.contains(key)) fr.own[key] = f[key];
+      for (const Frame& other : *frames) {
+        if (other.image_path == fr.image_path)
+          return Status::Error(path + ": frame " + fp + " is listed twice");
+      }
       frames->push_back(fr);
     }
   } catch (const json::exception& e) {
@@ -86,7 +131,11 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
   if (FileExists(JoinPath(root, "transforms_test.json"))) {
     MGSR_RETURN_IF_ERROR(ReadTransforms(root, "transforms_test.json", true, &frames, &test_meta));
   }
-  if (!train_meta.contains("camera_angle_x") && !train_meta.contains("fl_x")) {
+  bool every_frame_has_focal = true;
+  for (const Frame& f : frames)
+    every_frame_has_focal &= f.own.contains("fl_x") || f.own.contains("camera_angle_x");
+  if (!train_meta.contains("camera_angle_x") && !train_meta.contains("fl_x") &&
+      !every_frame_has_focal) {
     return Status::Error(JoinPath(root, "transforms_train.json") +
                          ": needs camera_angle_x or fl_x");
   }
@@ -100,9 +149,12 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
     View& v = scene->views[i];
     v.name = f.name;
     v.is_test = f.is_test;
-    // Size: from the json (nerfstudio-style w/h) or from the image itself.
-    int w = static_cast<int>(JsonNumber(meta, "w", 0)),
-        h = static_cast<int>(JsonNumber(meta, "h", 0));
+    // A frame's own intrinsics win over the file's (nerfstudio's per-frame cameras).
+    const auto number = [&](const char* key, double fallback) {
+      return JsonNumber(f.own, key, JsonNumber(meta, key, fallback));
+    };
+    // Size: from the json (nerfstudio-style w/h, checked whole and in range) or the image itself.
+    int w = static_cast<int>(number("w", 0)), h = static_cast<int>(number("h", 0));
     Image probe;
     if (w <= 0 || h <= 0) {
       statuses[i] = ReadImage(f.image_path, &probe);
@@ -113,11 +165,11 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
     Camera& c = v.camera;
     c.width = w;
     c.height = h;
-    const double angle = JsonNumber(meta, "camera_angle_x", 0);
-    c.fx = JsonNumber(meta, "fl_x", angle > 0 ? 0.5 * w / std::tan(0.5 * angle) : 0);
-    c.fy = JsonNumber(meta, "fl_y", c.fx);
-    c.cx = JsonNumber(meta, "cx", w / 2.0);
-    c.cy = JsonNumber(meta, "cy", h / 2.0);
+    const double angle = number("camera_angle_x", 0);
+    c.fx = number("fl_x", angle > 0 ? 0.5 * w / std::tan(0.5 * angle) : 0);
+    c.fy = number("fl_y", c.fx);
+    c.cx = number("cx", w / 2.0);
+    c.cy = number("cy", h / 2.0);
     // OpenGL camera-to-world (y up, looking down -z) -> COLMAP world-to-camera.
     Eigen::Matrix4d c2w = f.c2w_gl;
     c2w.col(1) *= -1;

@@ -267,6 +267,15 @@ Status ReadPly(const std::string& path, PlyData* ply) {
               return Status::Error(path + ": truncated or malformed ASCII data in element '" +
                                    e.name + "' item " + std::to_string(i));
             }
+            // As the binary reader: a value its declared type cannot hold is refused, not
+            // rounded to infinity later (a float32 file read back would hold inf there).
+            const double x = e.columns[p][i];
+            const bool single = prop.type == "float" || prop.type == "float32";
+            if (!std::isfinite(x) || (single && std::fabs(x) > 3.4028234663852886e38)) {
+              return Status::Error(path + ": element '" + e.name + "' item " + std::to_string(i) +
+                                   " property '" + prop.name + "' is out of range for " +
+                                   prop.type);
+            }
             continue;
           }
           long long n = 0;
@@ -402,8 +411,14 @@ Status ReadTriangleMesh(const std::string& path, TriangleMesh* mesh) {
     if (il < 0) il = f->FindProperty("vertex_index");
     if (il < 0 || !f->properties[il].is_list)
       return Status::Error(path + ": faces lack vertex_indices");
+    if (!IsIntegerType(f->properties[il].type))
+      return Status::Error(path + ": face indices are declared " + f->properties[il].type +
+                           "; they must be an integer type");
     for (size_t i = 0; i < f->count; ++i) {
       const auto& idx = f->lists[il][i];
+      if (idx.size() < 3)
+        return Status::Error(path + ": face " + std::to_string(i) + " has " +
+                             std::to_string(idx.size()) + " vertices (at least 3)");
       for (int64_t k : idx) {
         if (k < 0 || k >= static_cast<int64_t>(v->count)) {
           return Status::Error(path + ": face " + std::to_string(i) + " refers to vertex " +

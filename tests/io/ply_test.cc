@@ -89,6 +89,26 @@ TEST(PlyTest, BadFilesGiveClearErrors) {
   s = ReadTriangleMesh(dir + "/idx.ply", &m);
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("refers to vertex 1 of 1"), std::string::npos) << s.message();
+  // What a float32 file cannot hold, face indices that are not integers, faces of fewer than
+  // three vertices: each refused by name.
+  const std::string head =
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty "
+      "float z\nelement face 1\n";
+  const std::pair<std::string, std::string> cases[] = {
+      {head + "property list uchar int vertex_indices\nend_header\n0 0 0\n1e39 0 0\n0 1 0\n3 0 "
+              "1 2\n",
+       "property 'x' is out of range for float"},
+      {head + "property list uchar float vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 "
+              "1 2\n",
+       "face indices are declared float; they must be an integer type"},
+      {head + "property list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n",
+       "face 0 has 2 vertices (at least 3)"}};
+  for (const auto& [text, expected] : cases) {
+    ASSERT_TRUE(WriteStringToFileAtomic(dir + "/case.ply", text).ok());
+    s = ReadTriangleMesh(dir + "/case.ply", &m);
+    ASSERT_FALSE(s.ok()) << expected;
+    EXPECT_NE(s.message().find(expected), std::string::npos) << s.message();
+  }
 }
 
 // Found by fuzzing (#18): a list where a scalar belongs crashed the readers, and a small header

@@ -429,3 +429,77 @@ TEST(SceneTextModelTest, TextAndBinaryWorkspacesLoadTheSame) {
 
 }  // namespace
 }  // namespace mgsr
+
+namespace mgsr {
+namespace {
+
+// The Blender/nerfstudio json: what it cannot honour is refused naming the field, what it can is
+// honoured (a frame's own focal length wins over the file's).
+class BlenderFieldsTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = testing::ScratchDir();
+    ASSERT_TRUE(WriteSyntheticScene(testing::SmallSynthOptions(), dir_).ok());
+    std::filesystem::remove_all(dir_ + "/sparse");
+    std::string text;
+    ASSERT_TRUE(ReadFileToString(dir_ + "/transforms_train.json", &text).ok());
+    json_ = nlohmann::json::parse(text);
+  }
+  Status Load(Scene* scene) {
+    EXPECT_TRUE(WriteStringToFileAtomic(dir_ + "/transforms_train.json", json_.dump()).ok());
+    return LoadScene(dir_, SceneOptions(), scene);
+  }
+  void ExpectRefused(const std::string& expected) {
+    Scene scene;
+    const Status s = Load(&scene);
+    ASSERT_FALSE(s.ok()) << expected;
+    EXPECT_NE(s.message().find(expected), std::string::npos) << s.message();
+    EXPECT_NE(s.message().find("transforms_train.json"), std::string::npos) << s.message();
+  }
+  std::string dir_;
+  nlohmann::json json_;
+};
+
+TEST_F(BlenderFieldsTest, PerFrameFocalLengthWins) {
+  Scene scene;
+  ASSERT_TRUE(Load(&scene).ok());
+  const double fx = scene.views[0].camera.fx;
+  json_["frames"][1]["fl_x"] = 2 * fx;
+  json_["frames"][1]["fl_y"] = 2 * fx;
+  ASSERT_TRUE(Load(&scene).ok());
+  const std::string name = json_["frames"][1]["file_path"].get<std::string>();
+  for (const View& v : scene.views) {
+    if (v.name == name) {
+      EXPECT_DOUBLE_EQ(v.camera.fx, 2 * fx);
+      EXPECT_DOUBLE_EQ(v.camera.fy, 2 * fx);
+    } else {
+      EXPECT_DOUBLE_EQ(v.camera.fx, fx) << v.name;
+    }
+  }
+}
+
+TEST_F(BlenderFieldsTest, FieldsItCannotHonourAreRefused) {
+  const nlohmann::json original = json_;
+  json_["w"] = 1e12;
+  ExpectRefused("'w' must be a whole number of pixels in [1, 65536]");
+  json_ = original;
+  json_["k1"] = 0.1;
+  ExpectRefused("lens distortion ('k1') is not supported here");
+  json_ = original;
+  json_["frames"][2]["p2"] = -0.01;
+  ExpectRefused("lens distortion ('p2') is not supported here");
+  json_ = original;
+  json_["camera_model"] = "OPENCV_FISHEYE";
+  ExpectRefused("camera_model OPENCV_FISHEYE is not supported here");
+  json_ = original;
+  json_["frames"].push_back(json_["frames"][0]);
+  ExpectRefused("is listed twice");
+  json_ = original;
+  json_["k1"] = 0.0;  // zero distortion is a pinhole camera
+  json_["camera_model"] = "PINHOLE";
+  Scene scene;
+  EXPECT_TRUE(Load(&scene).ok());
+}
+
+}  // namespace
+}  // namespace mgsr
