@@ -474,6 +474,7 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   const SceneOptions& so = o.scene;
   Scene scene;
   Status s = LoadScene(workspace, so, &scene);
+  if (s.ok()) s = CheckTrainable(scene);
   if (!s.ok()) return fail(s.message());
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   const double load_seconds = load_timer.ElapsedSeconds();

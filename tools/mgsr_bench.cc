@@ -209,7 +209,7 @@ int main(int argc, char** argv) {
       "mgsr_bench --output DIR [--quick] [--scenes a,b] [--methods x,y]",
       {{"What to run",
         {"scenes", "methods", "quick", "size", "views", "solve_flags", "timeout", "budgets",
-         "workspace", "resume"}},
+         "workspace", "resume", "shared_data"}},
        {"Profile", {"profile", "profile_iterations"}},
        {"Output", {"output", "work", "title", "report_only", "nc_threshold"}}},
       &argc, &argv);

@@ -272,4 +272,38 @@ void AddFarPoints(int count, double radius_scale, uint64_t seed, Scene* scene) {
   }
 }
 
+Status CheckTrainable(const Scene& scene) {
+  const std::vector<int> train = scene.TrainIndices();
+  if (train.size() < 2)
+    return Status::Error(scene.root + ": " + std::to_string(train.size()) +
+                         " training view(s); at least 2 are needed (fewer test views: "
+                         "--test_every, or the split file)");
+  for (int v : train) {
+    const Camera& c = scene.views[v].camera;
+    if (c.width < 16 || c.height < 16)
+      return Status::Error(scene.root + ": view " + scene.views[v].name + " is " +
+                           std::to_string(c.width) + "x" + std::to_string(c.height) +
+                           " pixels after downscaling; at least 16x16 are needed (a smaller "
+                           "--downscale)");
+  }
+  if (scene.random_points) return Status::Ok();
+  size_t seen_twice = 0;
+  for (const Eigen::Vector3f& p : scene.points) {
+    int seen = 0;
+    for (int v : train) {
+      const Camera& c = scene.views[v].camera;
+      const Eigen::Vector3d x = c.WorldToCamera(p.cast<double>());
+      if (!(x.z() > 0)) continue;
+      const Eigen::Vector2d q = c.CameraToPixel(x);
+      if (q.x() >= 0 && q.y() >= 0 && q.x() <= c.width && q.y() <= c.height && ++seen >= 2) break;
+    }
+    if (seen >= 2 && ++seen_twice >= 4) return Status::Ok();
+  }
+  return Status::Error(scene.root + ": only " + std::to_string(seen_twice) + " of the " +
+                       std::to_string(scene.points.size()) +
+                       " scene points lie in front of two training cameras (at least 4 are "
+                       "needed): the cameras look away from the points, or the model has too "
+                       "few points");
+}
+
 }  // namespace mgsr

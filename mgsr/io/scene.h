@@ -62,6 +62,13 @@ struct Scene {
 // has no alpha): the ground truth a branch rendering on that background is compared with.
 Image CompositeOnBackground(const View& view, float background);
 
+// What makes a loaded scene trainable, checked before any training (a scene that fails one of
+// these trained and then failed at fusion, with a message about voxels or empty depth): at least
+// two training views, images of at least 16 x 16 pixels, and (for points that were read, not
+// drawn) at least four points in front of and inside the frames of two training cameras. The
+// error names the scene and what is wrong with it.
+Status CheckTrainable(const Scene& scene);
+
 // Detects the layout and loads. Every error names the file and the problem.
 Status LoadScene(const std::string& path, const SceneOptions& options, Scene* scene);
 

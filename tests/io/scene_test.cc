@@ -503,3 +503,38 @@ TEST_F(BlenderFieldsTest, FieldsItCannotHonourAreRefused) {
 
 }  // namespace
 }  // namespace mgsr
+
+namespace mgsr {
+namespace {
+
+// Scenes that load but cannot train are refused before training, saying what is wrong.
+TEST(TrainableTest, DegenerateScenesAreRefusedBeforeTraining) {
+  const std::string dir = testing::ScratchDir();
+  ASSERT_TRUE(WriteSyntheticScene(testing::SmallSynthOptions(), dir).ok());
+  Scene scene;
+  ASSERT_TRUE(LoadScene(dir, SceneOptions(), &scene).ok());
+  EXPECT_TRUE(CheckTrainable(scene).ok());
+  Scene one = scene;
+  for (size_t v = 0; v < one.views.size(); ++v) one.views[v].is_test = v != 1;
+  Status s = CheckTrainable(one);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("1 training view(s); at least 2 are needed"), std::string::npos)
+      << s.message();
+  Scene away = scene;
+  for (auto& p : away.points) p = Eigen::Vector3f(0, 0, 1000);  // above every camera's view
+  s = CheckTrainable(away);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("only 0 of the 200 scene points lie in front of two training"),
+            std::string::npos)
+      << s.message();
+  SceneOptions tiny;
+  tiny.downscale = 1000;
+  Scene small;
+  s = LoadScene(dir, tiny, &small);
+  if (s.ok()) s = CheckTrainable(small);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find(dir), std::string::npos) << s.message();
+}
+
+}  // namespace
+}  // namespace mgsr
