@@ -126,9 +126,20 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
                            " (written by another version); start again with --overwrite");
     }
     if (it->second != value) {
+      // Options the pipeline derives from the scene rather than from a flag of their own: say
+      // which flags move them, since the user changed one of those.
+      std::string hint;
+      if (name == "max_gaussians" || name == "max_surfels")
+        hint =
+            " (derived from the scene's size in pixels and --budget: did --downscale, "
+            "--max_width, --budget or the photos change?)";
+      else if (name == "lambda_normal")
+        hint = " (derived from whether the views have masks, unless --lambda_normal is given)";
+      else if (name == "background_2d" || name == "background_3d" || name == "environment")
+        hint = " (derived from --background and the photos' borders)";
       return Status::Error(
           path + ": the checkpoint was written with " + name + " = " + it->second +
-          ", this run has " + name + " = " + value +
+          ", this run has " + name + " = " + value + hint +
           "; resume with the options of that run, or start again with --overwrite");
     }
   }
@@ -201,6 +212,15 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
                          ", next iteration " + std::to_string(next) + ", SH degree " +
                          std::to_string(sh) + " out of range)");
   }
+  // Values no run writes (a hand edit whose checksum was recomputed): a finished flag other than
+  // 0/1 or set before the mutual stage's end, and the generator's state 0 (splitmix64 from any
+  // seed meets it with probability 2^-64 per draw).
+  if (finished > 1 || (finished == 1 && !(stage == 1 && next == options_.mutual_iterations + 1))) {
+    return Status::Error(path + ": corrupt checkpoint (marked finished at stage " +
+                         std::to_string(stage) + ", next iteration " + std::to_string(next) + ")");
+  }
+  if (rng_state == 0)
+    return Status::Error(path + ": corrupt checkpoint (random generator state 0)");
   // Everything read: commit.
   stage_ = stage == 0 ? Stage::kWarmup : Stage::kMutual;
   next_iteration_ = next;

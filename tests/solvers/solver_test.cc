@@ -573,6 +573,16 @@ TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
     ExpectRefused(&s, bad, data, "the checkpoint was written with " + edit.first);
   }
 
+  // A budget the pipeline derives from the scene: the message names the flags that move it.
+  {
+    SolverOptions other = o;
+    other.max_gaussians = o.max_gaussians + 1;
+    MutualBoostedSolver s(other, scene);
+    ExpectRefused(&s, bad, data,
+                  "(derived from the scene's size in pixels and --budget: did "
+                  "--downscale, --max_width, --budget or the photos change?)");
+  }
+
   // Another scene: a moved camera, or another scene altogether.
   Scene moved = scene;
   moved.views[3].camera.fx *= 1.01;
@@ -592,6 +602,15 @@ TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
   std::string edited = body;
   std::memcpy(&edited[header_end + 8], &next, sizeof(next));
   ExpectRefused(&reader, bad, Reseal(edited), "next iteration 99");
+  // Finished in the warm-up; then the random generator's state 0 (stage, next iteration and
+  // finished flag, the SH degree, the summary's mutual count and three times, then the state).
+  edited = body;
+  edited[header_end + 12] = 1;
+  ExpectRefused(&reader, bad, Reseal(edited), "marked finished at stage 0");
+  edited = body;
+  const uint64_t zero = 0;
+  std::memcpy(&edited[header_end + 13 + 4 + sizeof(int) + 3 * sizeof(double)], &zero, 8);
+  ExpectRefused(&reader, bad, Reseal(edited), "random generator state 0");
   // The surfel optimiser's position block (the last one named "means", width 3): its step.
   const std::string means = std::string("means", 6) + std::string("\x03\0\0\0", 4);
   const size_t at = body.rfind(means);
