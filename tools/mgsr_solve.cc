@@ -349,10 +349,17 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
     return Fail("--lambda_normal must be >= 0 (or -1 for the default)");
   }
   ro.depth_tv_from_scene = FLAGS_depth_tv_warmup_2d == -1 && FLAGS_depth_tv_mutual_2d == -1;
+  // Weights whose -1 means "the default" (some chosen from the scene by the pipeline).
   for (auto [flag, value, name] :
        {std::tuple{FLAGS_depth_tv_warmup_2d, &options.depth_tv_warmup_2d, "--depth_tv_warmup_2d"},
-        std::tuple{FLAGS_depth_tv_mutual_2d, &options.depth_tv_mutual_2d,
-                   "--depth_tv_mutual_2d"}}) {
+        std::tuple{FLAGS_depth_tv_mutual_2d, &options.depth_tv_mutual_2d, "--depth_tv_mutual_2d"},
+        std::tuple{FLAGS_lambda_distortion, &options.lambda_distortion, "--lambda_distortion"},
+        std::tuple{FLAGS_lambda_multiview_ncc, &options.lambda_multiview_ncc,
+                   "--lambda_multiview_ncc"},
+        std::tuple{FLAGS_lambda_multiview_depth, &options.lambda_multiview_depth,
+                   "--lambda_multiview_depth"},
+        std::tuple{FLAGS_normal_edge_weight, &options.normal_edge_weight,
+                   "--normal_edge_weight"}}) {
     if (flag >= 0) {
       *value = flag;
     } else if (flag != -1) {
@@ -361,29 +368,8 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   }
   options.tv_on_geometry = FLAGS_tv_on_geometry;
   ro.depth_tv_disparity = FLAGS_depth_tv_disparity;
-  if (FLAGS_lambda_distortion >= 0) {
-    options.lambda_distortion = FLAGS_lambda_distortion;
-  } else if (FLAGS_lambda_distortion != -1) {
-    return Fail("--lambda_distortion must be >= 0 (or -1 for the default)");
-  }
-  for (auto [flag, value, name] :
-       {std::tuple{FLAGS_lambda_multiview_ncc, &options.lambda_multiview_ncc,
-                   "--lambda_multiview_ncc"},
-        std::tuple{FLAGS_lambda_multiview_depth, &options.lambda_multiview_depth,
-                   "--lambda_multiview_depth"}}) {
-    if (flag >= 0) {
-      *value = flag;
-    } else if (flag != -1) {
-      return Fail(std::string(name) + " must be >= 0 (or -1 for the default)");
-    }
-  }
   options.multiview_neighbours = FLAGS_multiview_neighbours;
   options.normal_depth_gradient = FLAGS_normal_depth_gradient;
-  if (FLAGS_normal_edge_weight >= 0) {
-    options.normal_edge_weight = FLAGS_normal_edge_weight;
-  } else if (FLAGS_normal_edge_weight != -1) {
-    return Fail("--normal_edge_weight must be >= 0 (or -1 for the default)");
-  }
   options.mutual_transmitted_weight = FLAGS_mutual_transmitted_weight;
   options.mutual_image_weight = 1.0 - FLAGS_mutual_transmitted_weight;
   if (FLAGS_auto_stop_window >= 0) options.auto_stop_window = FLAGS_auto_stop_window;

@@ -62,15 +62,7 @@ class MultiviewDepthLoss : public LossTermImpl<MultiviewDepthLoss> {
     const Camera& cam = *in.camera;
     const int w = D.width(), h = D.height(), stride = std::max(1, c_.stride);
     const int rows = (h + stride - 1) / stride;
-    size_t centres = 0;
-    for (int y = 0; y < h; y += stride) {
-      for (int x = 0; x < w; x += stride) {
-        const size_t i = static_cast<size_t>(y) * w + x;
-        if (A.data()[i] < c_.min_alpha) continue;
-        if (t.mask != nullptr && t.mask->data()[i] < 0.5) continue;
-        ++centres;
-      }
-    }
+    const size_t centres = multiview::CountSampledPixels(A, t.mask, stride, c_.min_alpha);
     if (centres == 0 || t.num_neighbours == 0) return 0.0;
     const double inv_count = 1.0 / (static_cast<double>(centres) * t.num_neighbours);
     T* gD = grad != nullptr ? grad->Get(Buffer::kDepth, D).data() : nullptr;
@@ -82,8 +74,7 @@ class MultiviewDepthLoss : public LossTermImpl<MultiviewDepthLoss> {
       double sum = 0;
       for (int x = 0; x < w; x += stride) {
         const size_t i = static_cast<size_t>(y) * w + x;
-        if (A.data()[i] < c_.min_alpha) continue;
-        if (t.mask != nullptr && t.mask->data()[i] < 0.5) continue;
+        if (!multiview::SampledPixel(A, t.mask, i, c_.min_alpha)) continue;
         const double depth = D.data()[i];
         if (!(depth > 0)) continue;
         double d_depth = 0;

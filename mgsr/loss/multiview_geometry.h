@@ -12,6 +12,23 @@
 namespace mgsr {
 namespace multiview {
 
+// The pixels a multi-view term samples: a grid of `stride` where the render covers the pixel
+// (alpha at least `min_alpha`) inside the mask (at least 0.5; no mask: everywhere). Both are
+// constants, so the count is the terms' normaliser.
+template <typename T>
+bool SampledPixel(const ImageT<T>& alpha, const ImageT<T>* mask, size_t i, double min_alpha) {
+  return alpha.data()[i] >= min_alpha && (mask == nullptr || mask->data()[i] >= 0.5);
+}
+template <typename T>
+size_t CountSampledPixels(const ImageT<T>& alpha, const ImageT<T>* mask, int stride,
+                          double min_alpha) {
+  size_t count = 0;
+  for (int y = 0; y < alpha.height(); y += stride)
+    for (int x = 0; x < alpha.width(); x += stride)
+      count += SampledPixel(alpha, mask, static_cast<size_t>(y) * alpha.width() + x, min_alpha);
+  return count;
+}
+
 // Bilinear sample of channel 0 of `img` at pixel coordinates (u, v), with d value / d (u, v).
 // False (nothing written) where the four taps are not all inside the image.
 template <typename T>

@@ -92,15 +92,7 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
   const int m = (2 * r + 1) * (2 * r + 1);
   const int rows = (h + stride - 1) / stride;
   // The sampled foreground centres: the normaliser (constant: alpha and the mask are constants).
-  size_t centres = 0;
-  for (int y = 0; y < h; y += stride) {
-    for (int x = 0; x < w; x += stride) {
-      const size_t i = static_cast<size_t>(y) * w + x;
-      if (A.data()[i] < c_.min_alpha) continue;
-      if (t.mask != nullptr && t.mask->data()[i] < 0.5) continue;
-      ++centres;
-    }
-  }
+  const size_t centres = multiview::CountSampledPixels(A, t.mask, stride, c_.min_alpha);
   if (centres == 0 || t.num_neighbours == 0) return 0.0;
   const double inv_count = 1.0 / (static_cast<double>(centres) * t.num_neighbours);
   T* gD = grad != nullptr ? grad->Get(Buffer::kDepth, D).data() : nullptr;
@@ -132,8 +124,7 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
     double sum = 0;
     for (int x = 0; x < w; x += stride) {
       const size_t i = static_cast<size_t>(y) * w + x;
-      if (A.data()[i] < c_.min_alpha) continue;
-      if (t.mask != nullptr && t.mask->data()[i] < 0.5) continue;
+      if (!multiview::SampledPixel(A, t.mask, i, c_.min_alpha)) continue;
       if (x - r < 0 || y - r < 0 || x + r >= w || y + r >= h) continue;
       const double depth = D.data()[i];
       const Eigen::Vector3d Nw(N.plane(0)[i], N.plane(1)[i], N.plane(2)[i]);
