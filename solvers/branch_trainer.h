@@ -42,6 +42,7 @@
 #include "solvers/density_strategy.h"
 #include "solvers/environment_background.h"
 #include "solvers/exposure_model.h"
+#include "solvers/learning_rates.h"
 #include "solvers/loss_table.h"
 #include "solvers/solver_options.h"
 #include "solvers/view_group.h"
@@ -72,9 +73,9 @@ struct BranchTrainerOptions {
   nlohmann::json density_config;
   double extent = 1;     // the scene's extent: density control's and the position rate's scale
   float background = 0;  // the grey level the branch renders and compares on
-  // The Adam learning rates at a step, per block and column (fills `rates`, sized to `width`).
-  std::function<void(int iteration, const std::string& name, int width, std::vector<float>* rates)>
-      learning_rates;
+  // The learning rates at a step, by kind of parameter; the primitive type maps its blocks onto
+  // them (P::LearningRates).
+  std::function<RateSchedule(int iteration)> rate_schedule;
   // The warm-up's auto-stop.
   int auto_stop_min_iteration = 15000, auto_stop_window = 100;
   double auto_stop_range = 0.01;
@@ -247,9 +248,13 @@ class BranchTrainer {
   // Adam's learning rates at `iteration` (a callable that allocates nothing).
   Adam::LearningRates RatesAt(int iteration) const {
     return [this, iteration](const std::string& name, int width, std::vector<float>* rates) {
-      options_.learning_rates(iteration, name, width, rates);
+      rate_table_(options_.rate_schedule(iteration), name, width, rates);
     };
   }
+  // The primitive type's rate table (P::LearningRates), set by PrimitiveTrainer.
+  using RateTable = void (*)(const RateSchedule&, const std::string& block, int width,
+                             std::vector<float>* rates);
+  RateTable rate_table_ = nullptr;
   // The model's parameter blocks, as density control and Adam see them: bound once (the blocks
   // point at the model's member vectors, which stay where they are while rows change), again
   // when a checkpoint replaced the model.
@@ -344,6 +349,7 @@ class PrimitiveTrainer : public BranchTrainer {
       : BranchTrainer(P::kBranch, options, exposure, rng),
         model_(std::move(initial)),
         render_options_(std::move(render_options)) {
+    rate_table_ = &P::LearningRates;
     for (float& b : render_options_.background) b = options.background;
     BeginDensity(model_.Blocks());
   }

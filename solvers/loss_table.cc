@@ -127,6 +127,10 @@ Status ApplyRow(const nlohmann::json& row, std::vector<LossSpec>* table) {
   return Status::Ok();
 }
 
+double MutualNormalWeight(const SolverOptions& o) {
+  return o.lambda_normal_mutual >= 0 ? o.lambda_normal_mutual : o.lambda_normal;
+}
+
 // The normal consistency's config: empty at the defaults, so the table reads as before.
 nlohmann::json NormalConfig(const SolverOptions& o) {
   nlohmann::json c = nlohmann::json::object();
@@ -176,9 +180,9 @@ std::vector<LossSpec> PaperLossTable(const SolverOptions& o) {
       Row(b2, mutual, "photo", "render", RenderConfig("image", o.lambda_l1),
           w * o.mutual_image_weight, 0, true),
       Row(b2, mutual, "normal_consistency", "normal_consistency", NormalConfig(o),
-          w * o.lambda_normal),
+          w * MutualNormalWeight(o)),
       Row(b2, mutual, "normal_tv", "tv", TvConfig("normal", "transmitted", geo),
-          w * o.lambda_normal),
+          w * MutualNormalWeight(o)),
       Row(b2, mutual, "depth_tv", "tv", TvConfig("depth", "transmitted", geo, disp_s),
           w * o.depth_tv_mutual_2d),
       Row(b2, mutual, "distortion", "distortion", nlohmann::json::object(),

@@ -26,39 +26,19 @@ double PositionLearningRate(const SolverOptions& o, int step, double extent) {
          std::exp(std::log(o.position_lr_init) * (1 - t) + std::log(o.position_lr_final) * t);
 }
 
-// The learning rates of a block at a step (BranchTrainerOptions::learning_rates).
-void Rates(const SolverOptions& o, int step, double extent, const std::string& name, int width,
-           std::vector<float>* rates) {
-  float r = 0;
-  if (name == "means")
-    r = static_cast<float>(PositionLearningRate(o, step, extent));
-  else if (name == "log_scales")
-    r = static_cast<float>(o.scaling_lr);
-  else if (name == "quats")
-    r = static_cast<float>(o.rotation_lr);
-  else if (name == "opacity_logits" || name == "ref_opacity_logits" || name == "beta_logits")
-    r = static_cast<float>(o.opacity_lr);
-  if (!o.reflection &&
-      (name == "ref_sh" || name == "ref_opacity_logits" || name == "beta_logits")) {
-    std::fill(rates->begin(), rates->end(), 0.0f);
-    return;
-  }
-  if (name == "sh" || name == "ref_sh") {
-    // Band 0 (the first 3 columns) at the feature rate, higher bands at 1/20 of it.
-    for (int k = 0; k < width; ++k)
-      (*rates)[k] = static_cast<float>(k < 3 ? o.feature_lr : o.feature_lr / 20);
-    return;
-  }
-  std::fill(rates->begin(), rates->end(), r);
-}
-
-// The rates of a step over a batch of views: the sqrt(batch) rule (SolverOptions::batch_sqrt_lr).
-void BatchRates(const SolverOptions& o, int step, double extent, const std::string& name, int width,
-                std::vector<float>* rates) {
-  Rates(o, step, extent, name, width, rates);
-  if (o.batch_views <= 1 || !o.batch_sqrt_lr) return;
-  const float f = static_cast<float>(std::sqrt(static_cast<double>(o.batch_views)));
-  for (float& r : *rates) r *= f;
+// The rates of a step by kind (the primitive types map their blocks onto them), with the
+// sqrt(batch) rule (SolverOptions::batch_sqrt_lr).
+RateSchedule RatesAtStep(const SolverOptions& o, int step, double extent) {
+  RateSchedule s;
+  s.position = PositionLearningRate(o, step, extent);
+  s.scale = o.scaling_lr;
+  s.rotation = o.rotation_lr;
+  s.opacity = o.opacity_lr;
+  s.color = o.feature_lr;
+  s.reflection = o.reflection;
+  if (o.batch_views > 1 && o.batch_sqrt_lr)
+    s.batch_factor = static_cast<float>(std::sqrt(static_cast<double>(o.batch_views)));
+  return s;
 }
 
 // What the mutual stage hands a learning branch from the supervising one (method.md 1.5): the
@@ -190,10 +170,7 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   common.extent = scene.extent;
   const SolverOptions* o = &options_;
   const double extent = scene.extent;
-  common.learning_rates = [o, extent](int it, const std::string& name, int width,
-                                      std::vector<float>* rates) {
-    BatchRates(*o, it, extent, name, width, rates);
-  };
+  common.rate_schedule = [o, extent](int it) { return RatesAtStep(*o, it, extent); };
   common.auto_stop_min_iteration = options.warmup_min_iterations;
   common.auto_stop_window = options.auto_stop_window;
   common.auto_stop_range = options.auto_stop_range;

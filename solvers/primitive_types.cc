@@ -15,6 +15,29 @@ void Take(RenderGradients* g, Buffer b, Image* to) {
 
 }  // namespace
 
+void SurfelPrimitive::LearningRates(const RateSchedule& s, const std::string& block, int width,
+                                    std::vector<float>* rates) {
+  static constexpr BlockRate kTable[] = {{"means", RateKind::kPosition},
+                                         {"log_scales", RateKind::kScale},
+                                         {"quats", RateKind::kRotation},
+                                         {"opacity_logits", RateKind::kOpacity},
+                                         {"sh", RateKind::kColor}};
+  TableRates(kTable, "the surfel primitive", s, block, width, rates);
+}
+
+void GaussianPrimitive::LearningRates(const RateSchedule& s, const std::string& block, int width,
+                                      std::vector<float>* rates) {
+  static constexpr BlockRate kTable[] = {{"means", RateKind::kPosition},
+                                         {"log_scales", RateKind::kScale},
+                                         {"quats", RateKind::kRotation},
+                                         {"opacity_logits", RateKind::kOpacity},
+                                         {"sh", RateKind::kColor},
+                                         {"ref_sh", RateKind::kReflectedColor},
+                                         {"ref_opacity_logits", RateKind::kReflectedOpacity},
+                                         {"beta_logits", RateKind::kReflectedOpacity}};
+  TableRates(kTable, "the Gaussian primitive", s, block, width, rates);
+}
+
 PrimitiveLayout SurfelPrimitive::Layout() {
   PrimitiveLayout l;
   l.scale_axes = 2;

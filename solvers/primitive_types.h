@@ -36,6 +36,9 @@ struct SurfelPrimitive : ProjectedPrimitive<SurfelModel, SurfelRenderer> {
   }
   // Flat disks: two scale axes; the opacity reset caps the opacity at 0.01.
   static PrimitiveLayout Layout();
+  // Each block's learning rate by kind (method.md 1.8).
+  static void LearningRates(const RateSchedule& s, const std::string& block, int width,
+                            std::vector<float>* rates);
 
   static RenderBuffers Buffers(const Camera& camera, const Render& r);
   static void TakeGradients(RenderGradients* from, RenderGrad* to);
@@ -62,6 +65,9 @@ struct GaussianPrimitive : ProjectedPrimitive<GaussianModel, GaussianRenderer> {
   // Three scale axes; the reflected opacity follows the primitive's; the opacity reset caps both
   // opacities at 0.01 and beta at 0.1 (method.md 1.10).
   static PrimitiveLayout Layout();
+  // Each block's learning rate by kind; the reflected layer's blocks freeze without reflection.
+  static void LearningRates(const RateSchedule& s, const std::string& block, int width,
+                            std::vector<float>* rates);
 
   static RenderBuffers Buffers(const Camera& camera, const Render& r);
   static void TakeGradients(RenderGradients* from, RenderGrad* to);

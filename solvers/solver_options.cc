@@ -166,6 +166,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"lambda_normal", Text(lambda_normal)},
           {"normal_from_iteration", Text(normal_from_iteration)},
           {"normal_depth_gradient", Text(normal_depth_gradient)},
+          {"lambda_normal_mutual", Text(lambda_normal_mutual)},
           {"normal_edge_weight", Text(normal_edge_weight)},
           {"lambda_distortion", Text(lambda_distortion)},
           {"distortion_from_iteration", Text(distortion_from_iteration)},

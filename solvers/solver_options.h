@@ -53,6 +53,8 @@ struct SolverOptions {
   // geometry.md). 4.0 over-smooths concavities.
   double lambda_normal = kNormalWeightWithForeground;
   int normal_from_iteration = 7000;  // warm-up: normal terms off before this
+  // >= 0: the normal terms' weight in the mutual stage (before w_2d); -1: lambda_normal.
+  double lambda_normal_mutual = -1;
   // false: the normal consistency does not pull the depth (only the rendered normals turn).
   bool normal_depth_gradient = true;
   // > 0: the normal consistency relaxes where the photo has edges (NormalConsistencyLoss).

@@ -137,6 +137,9 @@ DEFINE_double(lambda_multiview_ncc, -1,
 DEFINE_double(lambda_multiview_depth, -1,
               "Weight of the 2DGS multi-view forward-backward depth reprojection (-1: the "
               "default).");
+DEFINE_double(
+    lambda_normal_mutual, -1,
+    "Weight of the normal terms in the mutual stage (before w_2d); -1: --lambda_normal's.");
 DEFINE_bool(normal_depth_gradient, true,
             "The normal consistency also pulls the depth (false: only the rendered normals turn "
             "towards the depth's).");
@@ -271,9 +274,9 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
        {"Losses",
         {"loss_config", "list_losses", "lambda_l1", "lambda_normal", "lambda_distortion",
          "lambda_multiview_ncc", "lambda_multiview_depth", "multiview_neighbours",
-         "normal_depth_gradient", "normal_edge_weight", "depth_tv_warmup_2d", "depth_tv_mutual_2d",
-         "tv_on_geometry", "depth_tv_disparity", "w_2d", "w_3d", "w_depth",
-         "mutual_transmitted_weight"}},
+         "normal_depth_gradient", "normal_edge_weight", "lambda_normal_mutual",
+         "depth_tv_warmup_2d", "depth_tv_mutual_2d", "tv_on_geometry", "depth_tv_disparity", "w_2d",
+         "w_3d", "w_depth", "mutual_transmitted_weight"}},
        {"Exposure compensation",
         {"exposure", "exposure_lr", "exposure_prior", "exposure_offset_prior",
          "exposure_mean_prior", "exposure_per_branch", "exposure_fit"}},
@@ -370,6 +373,9 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   ro.depth_tv_disparity = FLAGS_depth_tv_disparity;
   options.multiview_neighbours = FLAGS_multiview_neighbours;
   options.normal_depth_gradient = FLAGS_normal_depth_gradient;
+  if (!(FLAGS_lambda_normal_mutual >= 0 || FLAGS_lambda_normal_mutual == -1))
+    return Fail("--lambda_normal_mutual must be >= 0 (or -1 for --lambda_normal's)");
+  options.lambda_normal_mutual = FLAGS_lambda_normal_mutual;
   options.mutual_transmitted_weight = FLAGS_mutual_transmitted_weight;
   options.mutual_image_weight = 1.0 - FLAGS_mutual_transmitted_weight;
   if (FLAGS_auto_stop_window >= 0) options.auto_stop_window = FLAGS_auto_stop_window;

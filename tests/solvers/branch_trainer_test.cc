@@ -114,6 +114,11 @@ struct BandPrimitive {
     to->color = std::move(from->images[static_cast<int>(Buffer::kColor)]);
   }
   static const std::vector<float>& Radii(const Renderer& r) { return r.radius(); }
+  // Every block of the stub at one rate.
+  static void LearningRates(const RateSchedule&, const std::string&, int width,
+                            std::vector<float>* rates) {
+    rates->assign(width, 0.02f);
+  }
   static PrimitiveLayout Layout() {
     PrimitiveLayout l;
     l.scale_axes = 0;
@@ -208,9 +213,7 @@ BranchTrainerOptions StubOptions() {
   o.schedule.densify_until = 40;
   o.schedule.densify_interval = 10;
   o.schedule.opacity_reset_interval = 25;
-  o.learning_rates = [](int, const std::string&, int width, std::vector<float>* rates) {
-    rates->assign(width, 0.02f);
-  };
+  o.rate_schedule = [](int) { return RateSchedule(); };
   o.auto_stop_min_iteration = 0;
   o.auto_stop_window = 10;
   o.auto_stop_range = 1e-3;
