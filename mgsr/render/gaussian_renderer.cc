@@ -3,8 +3,14 @@
 #include <glog/logging.h>
 
 #include "mgsr/core/profiler.h"
+#include "mgsr/render/raster_scratch.h"
 
 namespace mgsr {
+
+GaussianRenderer::GaussianRenderer() : scratch_(std::make_unique<RasterScratch>()) {}
+GaussianRenderer::~GaussianRenderer() = default;
+GaussianRenderer::GaussianRenderer(GaussianRenderer&&) noexcept = default;
+GaussianRenderer& GaussianRenderer::operator=(GaussianRenderer&&) noexcept = default;
 
 void GaussianRenderer::Forward(const GaussianModel& model, const GaussianRenderOptions& options,
                                GaussianRender* out) {
@@ -18,7 +24,7 @@ void GaussianRenderer::Forward(const GaussianModel& model, const GaussianRenderO
                   options.camera.height, &bins_);
   }
   ProfileScope scope("raster forward");
-  RasterizeGaussians(projected_, bins_, options, out, &scratch_);
+  RasterizeGaussians(projected_, bins_, options, out, scratch_.get());
 }
 
 void GaussianRenderer::Backward(const GaussianModel& model, const GaussianRenderOptions& options,
@@ -27,7 +33,8 @@ void GaussianRenderer::Backward(const GaussianModel& model, const GaussianRender
   CHECK_EQ(projected_.size(), model.size()) << "Backward without a matching Forward";
   {
     ProfileScope scope("raster backward");
-    RasterizeGaussiansBackward(projected_, bins_, options, render, grad, &d_projected_, &scratch_);
+    RasterizeGaussiansBackward(projected_, bins_, options, render, grad, &d_projected_,
+                               scratch_.get());
   }
   ProfileScope scope("projection & SH backward");
   grads->ResizeForBackward(model);

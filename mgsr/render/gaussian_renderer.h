@@ -5,6 +5,8 @@
 // follow the Forward of the same model and options.
 #pragma once
 
+#include <memory>
+
 #include "mgsr/model/gaussian_model.h"
 #include "mgsr/render/project_gaussians.h"
 #include "mgsr/render/rasterize_gaussians.h"
@@ -14,6 +16,13 @@ namespace mgsr {
 
 class GaussianRenderer {
  public:
+  // The pixel loops' scratch holds vectors whose layout depends on the instruction set the render
+  // stages are compiled for: it stays behind a pointer, out of this (installed) header.
+  GaussianRenderer();
+  ~GaussianRenderer();
+  GaussianRenderer(GaussianRenderer&&) noexcept;
+  GaussianRenderer& operator=(GaussianRenderer&&) noexcept;
+
   void Forward(const GaussianModel& model, const GaussianRenderOptions& options,
                GaussianRender* out);
   // Writes (overwrites) `grads` with d loss / d raw parameters for the upstream image gradients.
@@ -28,7 +37,7 @@ class GaussianRenderer {
   ProjectedGaussians projected_;
   TileBins bins_;
   ProjectedGaussiansGrad d_projected_;
-  RasterScratch scratch_;
+  std::unique_ptr<RasterScratch> scratch_;
 };
 
 }  // namespace mgsr

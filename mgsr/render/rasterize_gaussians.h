@@ -22,10 +22,12 @@
 #include "mgsr/core/camera.h"
 #include "mgsr/core/image.h"
 #include "mgsr/render/project_gaussians.h"
-#include "mgsr/render/raster_scratch.h"
 #include "mgsr/render/tile_binning.h"
 
 namespace mgsr {
+
+// The pixel loops' per-thread scratch (raster_scratch.h, internal: instruction-set dependent).
+struct RasterScratch;
 
 constexpr float kMinAlpha = kMinBlendAlpha;
 constexpr float kMaxAlpha = 0.99f;

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "mgsr/render/raster_scratch.h"
 #include "mgsr/render/simd16.h"
 
 namespace mgsr {

@@ -26,11 +26,13 @@
 #include "mgsr/core/camera.h"
 #include "mgsr/core/image.h"
 #include "mgsr/render/project_surfels.h"
-#include "mgsr/render/raster_scratch.h"
 #include "mgsr/render/rasterize_gaussians.h"  // shared constants (alpha clamps, termination)
 #include "mgsr/render/tile_binning.h"
 
 namespace mgsr {
+
+// The pixel loops' per-thread scratch (raster_scratch.h, internal: instruction-set dependent).
+struct RasterScratch;
 
 enum class SurfelLowPass {
   kReference,       // 2DGS: the filter at the surfel's full opacity

@@ -3,8 +3,14 @@
 #include <glog/logging.h>
 
 #include "mgsr/core/profiler.h"
+#include "mgsr/render/raster_scratch.h"
 
 namespace mgsr {
+
+SurfelRenderer::SurfelRenderer() : scratch_(std::make_unique<RasterScratch>()) {}
+SurfelRenderer::~SurfelRenderer() = default;
+SurfelRenderer::SurfelRenderer(SurfelRenderer&&) noexcept = default;
+SurfelRenderer& SurfelRenderer::operator=(SurfelRenderer&&) noexcept = default;
 
 void SurfelRenderer::Forward(const SurfelModel& model, const SurfelRenderOptions& options,
                              SurfelRender* out) {
@@ -18,7 +24,7 @@ void SurfelRenderer::Forward(const SurfelModel& model, const SurfelRenderOptions
                   options.camera.height, &bins_);
   }
   ProfileScope scope("raster forward");
-  RasterizeSurfels(projected_, bins_, options, out, &scratch_);
+  RasterizeSurfels(projected_, bins_, options, out, scratch_.get());
 }
 
 void SurfelRenderer::Backward(const SurfelModel& model, const SurfelRenderOptions& options,
@@ -27,7 +33,8 @@ void SurfelRenderer::Backward(const SurfelModel& model, const SurfelRenderOption
   CHECK_EQ(projected_.size(), model.size()) << "Backward without a matching Forward";
   {
     ProfileScope scope("raster backward");
-    RasterizeSurfelsBackward(projected_, bins_, options, render, grad, &d_projected_, &scratch_);
+    RasterizeSurfelsBackward(projected_, bins_, options, render, grad, &d_projected_,
+                             scratch_.get());
   }
   ProfileScope scope("projection & SH backward");
   grads->ResizeForBackward(model);

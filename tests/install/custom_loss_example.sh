@@ -10,6 +10,14 @@ scratch="$build/install_test"
 rm -rf "$scratch"
 cmake --install "$build" --prefix "$scratch/prefix" > "$scratch.install.log" 2>&1 ||
   { cat "$scratch.install.log"; exit 1; }
+# Only public headers: the pixel loops' internals (instruction-set dependent vectors) stay out.
+for internal in render/simd16.h render/raster_scratch.h render/projection_lanes.h; do
+  if [ -e "$scratch/prefix/include/mgsr/$internal" ]; then
+    echo "internal header installed: mgsr/$internal" >&2
+    exit 1
+  fi
+done
+test -e "$scratch/prefix/include/mgsr/render/gaussian_renderer.h"
 cmake -S "$src/examples/custom_loss" -B "$scratch/example" -DCMAKE_PREFIX_PATH="$scratch/prefix"
 cmake --build "$scratch/example" -j 2
 out=$("$scratch/example/custom_loss" "$src/examples/custom_loss/losses.json" "$scratch/work")

@@ -8,6 +8,7 @@
 #include "mgsr/model/gaussian_model.h"
 #include "mgsr/model/init_from_points.h"
 #include "mgsr/model/surfel_model.h"
+#include "mgsr/render/raster_scratch.h"
 
 namespace mgsr {
 namespace {

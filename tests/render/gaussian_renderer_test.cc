@@ -8,6 +8,7 @@
 #include <functional>
 
 #include "mgsr/core/rng.h"
+#include "mgsr/render/raster_scratch.h"
 #include "reference_gaussian_renderer.h"
 #include "render_test_util.h"
 #include "test_util.h"
