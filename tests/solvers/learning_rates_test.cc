@@ -1,10 +1,11 @@
 // Each primitive type's learning-rate table: every block of its model has a rate, the kinds map
 // onto the schedule, and a block no table lists stops the program instead of training at rate 0.
+#include "solvers/learning_rates.h"
+
 #include <gtest/gtest.h>
 
 #include "mgsr/model/gaussian_model.h"
 #include "mgsr/model/surfel_model.h"
-#include "solvers/learning_rates.h"
 #include "solvers/primitive_types.h"
 
 namespace mgsr {
