@@ -183,6 +183,8 @@ TriangleClosestPoint::TriangleClosestPoint(const TriangleMesh& mesh)
 
 TriangleClosestPoint::~TriangleClosestPoint() = default;
 
+double TriangleClosestPoint::search_slack() const { return index_->covering_radius; }
+
 bool TriangleClosestPoint::empty() const {
   return index_->cloud.points.empty() && index_->oversized.empty();
 }

@@ -33,6 +33,10 @@ class TriangleClosestPoint {
   bool empty() const;
   // The exact closest point on the mesh's triangles.
   ClosestPoint Query(const Eigen::Vector3d& p) const;
+  // How far beyond the nearest sample's triangle a query searches: the sampled triangles'
+  // covering radius. Oversized triangles (a stray vertex far away) are tested directly and do not
+  // widen it, so one of them cannot make every query visit every sample.
+  double search_slack() const;
   // Unit face normal of a triangle, oriented like the vertex normals when the mesh has them (so a
   // mesh whose winding disagrees with its normals still gets outward normals), else by winding.
   const Eigen::Vector3d& FaceNormal(int triangle) const { return face_normals_[triangle]; }

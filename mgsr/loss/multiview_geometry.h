@@ -83,6 +83,14 @@ inline bool WarpThroughPlane(const Camera& ref, const Camera& nb, const Eigen::V
   return true;
 }
 
+// d (pixel) / d (camera-space point) of `cam` at camera-space point x (2 x 3).
+inline Eigen::Matrix<double, 2, 3> ProjectionJacobian(const Camera& cam, const Eigen::Vector3d& x) {
+  Eigen::Matrix<double, 2, 3> J;
+  J << cam.fx / x.z(), 0, -cam.fx * x.x() / (x.z() * x.z()), 0, cam.fy / x.z(),
+      -cam.fy * x.y() / (x.z() * x.z());
+  return J;
+}
+
 // Forward-backward reprojection of the reference pixel centre p (depth D along the camera ray of
 // pixel p, z = D) through a neighbour's depth: the point goes to the neighbour, takes the depth the
 // neighbour sees there, and comes back. `error` is |p' - p| in reference pixels; `d_error_d_depth`
@@ -99,7 +107,7 @@ bool ForwardBackward(const Camera& ref, const Camera& nb, const ImageT<T>& nb_de
   // Into the neighbour.
   const Eigen::Vector3d xn = nb.WorldToCamera(X);
   if (!(xn.z() > 1e-9)) return false;
-  const Eigen::Vector2d pn(nb.fx * xn.x() / xn.z() + nb.cx, nb.fy * xn.y() / xn.z() + nb.cy);
+  const Eigen::Vector2d pn = nb.CameraToPixel(xn);
   double Dn, gu, gv;
   if (!BilinearDepth(nb_depth, pn.x(), pn.y(), &Dn, &gu, &gv)) return false;
   // Back from the neighbour's surface.
@@ -108,23 +116,17 @@ bool ForwardBackward(const Camera& ref, const Camera& nb, const ImageT<T>& nb_de
   const Eigen::Vector3d Xb = nb.Center() + Dn * wn;
   const Eigen::Vector3d xr = ref.WorldToCamera(Xb);
   if (!(xr.z() > 1e-9)) return false;
-  const Eigen::Vector2d pb(ref.fx * xr.x() / xr.z() + ref.cx, ref.fy * xr.y() / xr.z() + ref.cy);
+  const Eigen::Vector2d pb = ref.CameraToPixel(xr);
   const Eigen::Vector2d diff = pb - p;
   *error = diff.norm();
   if (d_error_d_depth == nullptr) return true;
   // d pn / d X (2x3) = J(xn) Rn; d X / d D = w.
-  Eigen::Matrix<double, 2, 3> Jn;
-  Jn << nb.fx / xn.z(), 0, -nb.fx * xn.x() / (xn.z() * xn.z()), 0, nb.fy / xn.z(),
-      -nb.fy * xn.y() / (xn.z() * xn.z());
-  const Eigen::Vector2d dpn = Jn * (nb.R * w);
+  const Eigen::Vector2d dpn = ProjectionJacobian(nb, xn) * (nb.R * w);
   // d Xb / d pn (3x2) = wn (dDn/dpn)^T + Dn d wn / d pn, with d wn / d pn = Rn^T diag(1/fx, 1/fy).
   Eigen::Matrix<double, 3, 2> dXb;
   dXb.col(0) = wn * gu + Dn * Rn_t.col(0) / nb.fx;
   dXb.col(1) = wn * gv + Dn * Rn_t.col(1) / nb.fy;
-  Eigen::Matrix<double, 2, 3> Jr;
-  Jr << ref.fx / xr.z(), 0, -ref.fx * xr.x() / (xr.z() * xr.z()), 0, ref.fy / xr.z(),
-      -ref.fy * xr.y() / (xr.z() * xr.z());
-  const Eigen::Vector2d dpb = Jr * (ref.R * (dXb * dpn));
+  const Eigen::Vector2d dpb = ProjectionJacobian(ref, xr) * (ref.R * (dXb * dpn));
   *d_error_d_depth = *error > 1e-12 ? diff.dot(dpb) / *error : 0.0;
   return true;
 }

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "mgsr/core/rng.h"
@@ -216,6 +217,165 @@ TEST_F(FuzzTest, ImagesAndMasks) {
 TEST_F(FuzzTest, BlenderJsonAndPointsPly) {
   const std::string scene = MakeScene(false, true);
   Fuzz(scene, {"transforms_train.json", "transforms_test.json", "points3d.ply"}, 90, 4);
+}
+
+// The classes a later audit added: camera fields of the json a reader must honour or refuse
+// (sizes, focal lengths, lens distortion, camera models, duplicate frames), at the file's top
+// level and per frame.
+TEST_F(FuzzTest, JsonCameraFields) {
+  const std::string scene = MakeScene(false, true);
+  const std::string path = scene + "/transforms_train.json";
+  std::string original;
+  ASSERT_TRUE(ReadFileToString(path, &original).ok());
+  const char* keys[] = {"w",  "h",  "fl_x", "fl_y", "cx", "cy",          "camera_angle_x",
+                        "k1", "k2", "p1",   "p2",   "k4", "camera_model"};
+  const nlohmann::json values[] = {1e12,    -5,   0.5,      0,         1e308,
+                                   24,      12.5, "OPENCV", "PINHOLE", "OPENCV_FISHEYE",
+                                   nullptr, "x",  0.1,      -0.2};
+  Rng rng(5);
+  int refused = 0;
+  const int cases = 40;
+  for (int c = 0; c < cases; ++c) {
+    nlohmann::json j = nlohmann::json::parse(original);
+    const std::string key = keys[rng.UniformInt(sizeof(keys) / sizeof(keys[0]))];
+    const nlohmann::json& value = values[rng.UniformInt(sizeof(values) / sizeof(values[0]))];
+    const int where = static_cast<int>(rng.UniformInt(3));  // file, a frame, a duplicated frame
+    if (where == 0) {
+      j[key] = value;
+    } else {
+      const size_t f = rng.UniformInt(j["frames"].size());
+      j["frames"][f][key] = value;
+      if (where == 2) j["frames"].push_back(j["frames"][f]);
+    }
+    ASSERT_TRUE(WriteStringToFileAtomic(path, j.dump()).ok());
+    const auto r = testing::RunCommand("timeout 60 " + kTools + "/mgsr_solve --workspace " + scene +
+                                       " --check");
+    const std::string label = "case " + std::to_string(c) + ": " + key + " = " + value.dump() +
+                              (where == 0   ? " (file)"
+                               : where == 1 ? " (frame)"
+                                            : " (duplicate)");
+    ASSERT_TRUE(r.exit_code == 0 || r.exit_code == 1) << label << "\n" << r.output;
+    if (where == 2) {
+      EXPECT_EQ(r.exit_code, 1) << label << ": a frame listed twice\n" << r.output;
+    }
+    if (r.exit_code == 0) continue;
+    ++refused;
+    int error_lines = 0;
+    std::istringstream lines(r.output);
+    for (std::string l; std::getline(lines, l);) error_lines += l.rfind("error: ", 0) == 0;
+    EXPECT_EQ(error_lines, 1) << label << "\n" << r.output;
+    EXPECT_NE(r.output.find(scene), std::string::npos) << label << ": names no file of the scene\n"
+                                                       << r.output;
+  }
+  ASSERT_TRUE(WriteStringToFileAtomic(path, original).ok());
+  EXPECT_GT(refused, cases / 4);
+}
+
+// Mesh files as mgsr_eval reads them: the face list's declared types and lengths, and values a
+// float32 property cannot hold.
+TEST_F(FuzzTest, PlyFaceTypesAndValues) {
+  const std::string dir = testing::ScratchDir();
+  const std::string good = dir + "/good.ply";
+  const std::string head =
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty "
+      "float z\nelement face 2\nproperty list ";
+  const std::string vertices = "0 0 0\n1 0 0\n0 1 0\n0 0 1\n";
+  ASSERT_TRUE(WriteStringToFileAtomic(good, head + "uchar int vertex_indices\nend_header\n" +
+                                                vertices + "3 0 1 2\n3 0 1 3\n")
+                  .ok());
+  const char* count_types[] = {"uchar", "int", "float", "uint"};
+  const char* index_types[] = {"int", "uint", "short", "float", "double", "uchar"};
+  const char* faces[] = {"3 0 1 2\n3 0 1 3\n", "2 0 1\n3 0 1 3\n",     "1 0\n3 0 1 3\n",
+                         "3 0 1 2\n3 0 1 9\n", "3 0 1 2\n3 0.5 1 3\n", "3 0 1 2\n"};
+  const char* coords[] = {"0 0 0\n", "1e39 0 0\n", "inf 0 0\n", "-1e38 0 0\n", "nan 0 0\n"};
+  Rng rng(6);
+  int refused = 0;
+  const int cases = 30;
+  for (int c = 0; c < cases; ++c) {
+    const std::string ct = count_types[rng.UniformInt(4)], it = index_types[rng.UniformInt(6)];
+    const std::string body = coords[rng.UniformInt(5)] + vertices.substr(6) +
+                             faces[rng.UniformInt(sizeof(faces) / sizeof(faces[0]))];
+    const std::string bad = dir + "/bad.ply";
+    ASSERT_TRUE(
+        WriteStringToFileAtomic(bad, head + ct + " " + it + " vertex_indices\nend_header\n" + body)
+            .ok());
+    const auto r =
+        testing::RunCommand("timeout 60 " + kTools + "/mgsr_eval --mesh " + bad + " --gt " + good);
+    const std::string label = "case " + std::to_string(c) + ": " + ct + "/" + it + "\n" + body;
+    ASSERT_TRUE(r.exit_code == 0 || r.exit_code == 1) << label << "\n" << r.output;
+    if (r.exit_code == 0) continue;
+    ++refused;
+    EXPECT_EQ(r.output.rfind("error: ", 0), 0u) << label << r.output;
+    EXPECT_NE(r.output.find("bad.ply"), std::string::npos) << label << r.output;
+  }
+  EXPECT_GT(refused, cases / 4);
+}
+
+// Flags with hostile values, with and without '=', and stray words: refused with one line (exit 2
+// for the command line, 1 for a value out of range) or accepted; never a crash, a hang or a run
+// that silently turned a flag on.
+TEST_F(FuzzTest, FlagValuesAndStrayWords) {
+  const std::string scene = MakeScene(false, false);
+  const char* flags[] = {"--warmup_max_iterations",
+                         "--mutual_iterations",
+                         "--batch_views",
+                         "--far_radius",
+                         "--downscale",
+                         "--lambda_normal",
+                         "--overwrite",
+                         "--resume",
+                         "--test_every",
+                         "--lambda_multiview_ncc",
+                         "--multiview_neighbours"};
+  const char* values[] = {"false", "-5", "inf", "1e12", "nan", "0", "-1", "2", "x", "true"};
+  Rng rng(7);
+  for (int c = 0; c < 40; ++c) {
+    const std::string flag = flags[rng.UniformInt(sizeof(flags) / sizeof(flags[0]))];
+    const std::string value = values[rng.UniformInt(sizeof(values) / sizeof(values[0]))];
+    const bool equals = rng.UniformInt(2) == 0;
+    const std::string args = flag + (equals ? "=" : " ") + value;
+    const auto r = testing::RunCommand("timeout 60 " + kTools + "/mgsr_solve --workspace " + scene +
+                                       " --check " + args);
+    const std::string label = "case " + std::to_string(c) + ": " + args;
+    ASSERT_TRUE(r.exit_code >= 0 && r.exit_code <= 2) << label << "\n" << r.output;
+    if (r.exit_code != 0) {
+      // Our one line ("error: ...") or gflags' for a value its type cannot parse ("ERROR: ...").
+      EXPECT_TRUE(r.output.rfind("error: ", 0) == 0 || r.output.rfind("ERROR: ", 0) == 0)
+          << label << "\n"
+          << r.output;
+    }
+    // A boolean flag followed by a word: the word is never silently dropped (refused as a stray
+    // word, or by gflags when it reads like a flag, "-5").
+    if (!equals && (flag == "--overwrite" || flag == "--resume")) {
+      EXPECT_NE(r.exit_code, 0) << label << "\n" << r.output;
+    }
+  }
+}
+
+// Two runs into one output folder at once: the second is refused with one line, the first ends
+// as if alone.
+TEST_F(FuzzTest, ConcurrentRunsIntoOneFolder) {
+  const std::string scene = MakeScene(false, false);
+  const std::string out = scene + "/../out";  // (ScratchDir again would empty the test's folder)
+  const std::string run = kTools + "/mgsr_solve --workspace " + scene + " --output " + out +
+                          " --overwrite --warmup_max_iterations 1500 --warmup_min_iterations 1000 "
+                          "--mutual_iterations 600 --checkpoint_every 0";
+  // The second starts once the first is training (its log exists).
+  const auto r =
+      testing::RunCommand("sh -c '(" + run + " > " + out + ".first 2>&1; echo $? > " + out +
+                          ".rc) & while [ ! -e " + out + "/log.csv ]; do sleep 0.05; done; " + run +
+                          " > " + out + ".second 2>&1; rc=$?; wait; exit $rc'");
+  std::string second;
+  ASSERT_TRUE(ReadFileToString(out + ".second", &second).ok());
+  EXPECT_EQ(r.exit_code, 1) << second;
+  EXPECT_NE(second.find("another run is writing into this output folder"), std::string::npos)
+      << second;
+  EXPECT_EQ(std::count(second.begin(), second.end(), '\n'), 1) << second;
+  std::string rc, first;
+  ASSERT_TRUE(ReadFileToString(out + ".rc", &rc).ok());
+  ASSERT_TRUE(ReadFileToString(out + ".first", &first).ok());
+  EXPECT_EQ(rc, "0\n") << first;
+  EXPECT_TRUE(FileExists(out + "/metrics.json"));
 }
 
 }  // namespace
