@@ -186,6 +186,10 @@ std::vector<std::string> ShapeNames() {
   return {"sphere", "torus", "rounded_box", "dented", "gear", "slot", "knot", "wall"};
 }
 
+bool ShapeHasSharpEdges(const std::string& name) {
+  return name == "gear" || name == "slot" || name == "wall";
+}
+
 bool MakeShape(const std::string& name, int detail, TriangleMesh* mesh) {
   detail = std::max(0, std::min(2, detail));
   if (name == "sphere")

@@ -32,6 +32,9 @@ TriangleMesh MakePrintedWall();
 // Names accepted by MakeShape: sphere, torus, rounded_box, dented, gear, slot, knot, wall (all
 // listed by ShapeNames()).
 std::vector<std::string> ShapeNames();
+// Shapes with sharp edges (gear, slot, wall): built without vertex normals, so they shade and
+// report their face normals exactly; fusion at a voxel's size rounds their edges.
+bool ShapeHasSharpEdges(const std::string& name);
 // Builds a shape by name at a detail level (0 = coarse .. 2 = fine); false if the name is unknown.
 bool MakeShape(const std::string& name, int detail, TriangleMesh* mesh);
 

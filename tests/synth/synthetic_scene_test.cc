@@ -43,7 +43,8 @@ TEST(ShapesTest, ClosedOutwardAndInsideTheUnitSphere) {
     double max_r = 0;
     for (const auto& v : m.vertices) max_r = std::max(max_r, v.norm());
     EXPECT_LE(max_r, 1.0 + 1e-9) << name;
-    EXPECT_EQ(m.vertex_normals.size(), m.vertices.size()) << name;
+    // Smooth shapes shade with vertex normals; sharp-edged ones with their exact face normals.
+    EXPECT_EQ(m.vertex_normals.size(), ShapeHasSharpEdges(name) ? 0u : m.vertices.size()) << name;
   }
   TriangleMesh sphere = MakeIcoSphere(0.8, 4);
   EXPECT_NEAR(SignedVolume(sphere), 4.0 / 3.0 * M_PI * 0.512, 0.01 * 4.0 / 3.0 * M_PI * 0.512);
@@ -95,7 +96,8 @@ TEST_P(SyntheticSceneTest, GroundTruthIsConsistentWithImagesMasksAndCameras) {
   ASSERT_TRUE(LoadScene(dir, so, &scene).ok());
   TriangleMesh mesh;
   ASSERT_TRUE(ReadTriangleMesh(dir + "/gt/mesh.ply", &mesh).ok());
-  ASSERT_GT(mesh.triangles.size(), 100u);
+  // (A flat slab is 12 triangles; every other shape has hundreds.)
+  ASSERT_GE(mesh.triangles.size(), 12u);
 
   // (1) The ground-truth mesh projects inside the masks for > 99% of vertices in every view.
   for (const View& v : scene.views) {
