@@ -295,9 +295,13 @@ int main(int argc, char** argv) {
   for (const b::SceneSpec& sc : context.scenes) {
     for (const b::MethodSpec& m : context.methods) total_runs += b::Covers(m, sc, "main");
   }
+  bool own_sizes = false;  // scenes with a size of their own (the detailed shapes)
+  for (const b::SceneSpec& sc : context.scenes) own_sizes |= FLAGS_size == 0 && sc.size > 0;
   const std::string scene_size =
-      FLAGS_workspace.empty() ? std::to_string(size) + " px, " + std::to_string(views) + " views"
-                              : "the workspace's own images";
+      FLAGS_workspace.empty()
+          ? std::to_string(size) + " px" + (own_sizes ? " (or the scene's own size)" : "") + ", " +
+                std::to_string(views) + " views"
+          : "the workspace's own images";
   std::printf("mgsr_bench: %zu scenes, %zu methods, %d runs, %s\n", context.scenes.size(),
               context.methods.size(), total_runs, scene_size.c_str());
   std::fflush(stdout);
@@ -312,7 +316,7 @@ int main(int argc, char** argv) {
     const std::string scene_dir = external ? fs::absolute(FLAGS_workspace).string()
                                            : mgsr::JoinPath(work, "scenes/" + sc.name);
     // A scene's own size (detailed shapes) unless --size says otherwise.
-    const int scene_size = FLAGS_size == 0 && sc.size > 0 ? sc.size : size;
+    const int own_size = FLAGS_size == 0 && sc.size > 0 ? sc.size : size;
     std::vector<std::string> scene_args = sc.synth_args;
     bool missing = false;
     for (std::string& a : scene_args) {
@@ -329,9 +333,9 @@ int main(int argc, char** argv) {
                                      "--output",
                                      scene_dir,
                                      "--width",
-                                     std::to_string(scene_size),
+                                     std::to_string(own_size),
                                      "--height",
-                                     std::to_string(scene_size),
+                                     std::to_string(own_size),
                                      "--num_views",
                                      std::to_string(sc.num_views > 0 ? sc.num_views : views),
                                      "--seed",
