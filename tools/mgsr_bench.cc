@@ -297,11 +297,11 @@ int main(int argc, char** argv) {
   }
   bool own_sizes = false;  // scenes with a size of their own (the detailed shapes)
   for (const b::SceneSpec& sc : context.scenes) own_sizes |= FLAGS_size == 0 && sc.size > 0;
-  const std::string scene_size =
-      FLAGS_workspace.empty()
-          ? std::to_string(size) + " px" + (own_sizes ? " (or the scene's own size)" : "") + ", " +
-                std::to_string(views) + " views"
-          : "the workspace's own images";
+  const std::string scene_size = FLAGS_workspace.empty()
+                                     ? std::to_string(size) + " px" +
+                                           (own_sizes ? " (or the scene's own size)" : "") + ", " +
+                                           std::to_string(views) + " views"
+                                     : "the workspace's own images";
   std::printf("mgsr_bench: %zu scenes, %zu methods, %d runs, %s\n", context.scenes.size(),
               context.methods.size(), total_runs, scene_size.c_str());
   std::fflush(stdout);
