@@ -20,14 +20,13 @@
 #include "mgsr/eval/metrics_json.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/image_io.h"
-#include "mgsr/io/mesh_glb.h"
 #include "mgsr/io/mesh_obj.h"
 #include "mgsr/io/output_folder.h"
 #include "mgsr/io/ply.h"
 #include "tools/tool_flags.h"
 
-DEFINE_string(mesh, "", "Predicted mesh (PLY, or binary glTF .glb).");
-DEFINE_string(gt, "", "Ground-truth mesh or point cloud (PLY, or binary glTF .glb).");
+DEFINE_string(mesh, "", "Predicted mesh (PLY, OBJ, or binary glTF .glb).");
+DEFINE_string(gt, "", "Ground-truth mesh or point cloud (PLY, OBJ, or binary glTF .glb).");
 DEFINE_int32(samples, 10000, "Points sampled on each surface.");
 DEFINE_double(fscore_threshold, 0.01, "Distance threshold of the F-score, in scene units.");
 DEFINE_uint64(seed, 0, "Sampling seed.");
@@ -89,16 +88,11 @@ mgsr::MeshMetricsOptions MeshOptionsFromFlags() {
   return o;
 }
 
-// A mesh file by its extension: .glb (binary glTF), .obj, otherwise PLY.
-mgsr::Status ReadMesh(const std::string& path, mgsr::TriangleMesh* mesh) {
-  return mgsr::ReadMeshFile(path, mesh);
-}
-
 int EvaluateMeshes(nlohmann::json* report) {
   mgsr::TriangleMesh pred, gt, visible;
-  mgsr::Status s = ReadMesh(FLAGS_mesh, &pred);
+  mgsr::Status s = mgsr::ReadMeshFile(FLAGS_mesh, &pred);
   if (!s.ok()) return Fail(s.message());
-  s = ReadMesh(FLAGS_gt, &gt);
+  s = mgsr::ReadMeshFile(FLAGS_gt, &gt);
   if (!s.ok()) return Fail(s.message());
   mgsr::MeshMetricsOptions o = MeshOptionsFromFlags();
   if (!FLAGS_gt_visible.empty()) {
@@ -197,7 +191,7 @@ int EvaluateRun(nlohmann::json* report) {
   if (!run["files"].contains("mesh.ply")) return Fail(metrics_path + ": the run wrote no mesh.ply");
   mgsr::GroundTruthGeometry gt;
   if (!FLAGS_gt.empty()) {
-    s = ReadMesh(FLAGS_gt, &gt.mesh);
+    s = mgsr::ReadMeshFile(FLAGS_gt, &gt.mesh);
     if (!s.ok()) return Fail(s.message());
     gt.mesh_path = FLAGS_gt;
   } else if (run.contains("scene") && run["scene"].is_string()) {

@@ -35,4 +35,17 @@ Status RequireImage(const std::string& term, const char* what, const ImageT<T>* 
   return Status::Ok();
 }
 
+// The inputs of a term on the 2DGS geometry: the depth (1 channel), the normal (3) and the alpha
+// (1) of one size, the mask when there is one, and the camera.
+inline Status RequireSurfaceGeometry(const std::string& term, const RenderBuffers& in,
+                                     const Targets& t) {
+  const Image* depth = in.Get(Buffer::kDepth);
+  MGSR_RETURN_IF_ERROR(RequireImage(term, "depth", depth, static_cast<const Image*>(nullptr), 1));
+  MGSR_RETURN_IF_ERROR(RequireImage(term, "normal", in.Get(Buffer::kNormal), depth, 3));
+  MGSR_RETURN_IF_ERROR(RequireImage(term, "alpha", in.Get(Buffer::kAlpha), depth, 1));
+  if (t.mask != nullptr) MGSR_RETURN_IF_ERROR(RequireImage(term, "mask", t.mask, depth, 1));
+  if (in.camera == nullptr) return Status::Error(term + ": needs the camera");
+  return Status::Ok();
+}
+
 }  // namespace mgsr

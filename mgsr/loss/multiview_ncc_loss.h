@@ -21,6 +21,7 @@
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -50,16 +51,8 @@ class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
   bool ReadsNeighbourDepth() const override { return c_.check_occlusion; }
   bool ReadsNeighbours() const override { return true; }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
-    MGSR_RETURN_IF_ERROR(RequireImage(Name(), "depth", in.Get(Buffer::kDepth),
-                                      static_cast<const Image*>(nullptr), 1));
-    MGSR_RETURN_IF_ERROR(
-        RequireImage(Name(), "normal", in.Get(Buffer::kNormal), in.Get(Buffer::kDepth), 3));
-    MGSR_RETURN_IF_ERROR(
-        RequireImage(Name(), "alpha", in.Get(Buffer::kAlpha), in.Get(Buffer::kDepth), 1));
+    MGSR_RETURN_IF_ERROR(RequireSurfaceGeometry(Name(), in, t));
     MGSR_RETURN_IF_ERROR(RequireImage(Name(), "grey photo", t.gray, in.Get(Buffer::kDepth), 1));
-    if (t.mask != nullptr)
-      MGSR_RETURN_IF_ERROR(RequireImage(Name(), "mask", t.mask, in.Get(Buffer::kDepth), 1));
-    if (in.camera == nullptr) return Status::Error(Name() + ": needs the camera");
     for (int k = 0; k < t.num_neighbours; ++k) {
       if (t.neighbours[k].camera == nullptr || t.neighbours[k].gray == nullptr)
         return Status::Error(Name() + ": neighbour " + std::to_string(k) + " has no photo");
@@ -107,6 +100,21 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
   const Eigen::Matrix3d K_inv = (Eigen::Matrix3d() << 1.0 / cam.fx, 0, -cam.cx / cam.fx, 0,
                                  1.0 / cam.fy, -cam.cy / cam.fy, 0, 0, 1)
                                     .finished();
+  // Each neighbour's pose relative to this view, once per call rather than per pixel: a camera
+  // point X maps to R_rel X + t_rel there, and tau = K_nb t_rel is the homography's plane part.
+  struct RelativePose {
+    Eigen::Matrix3d R_rel;
+    Eigen::Vector3d tau;
+  };
+  std::array<RelativePose, kMaxNeighbours> poses;
+  for (int nbi = 0; nbi < t.num_neighbours; ++nbi) {
+    const Camera& nc_cam = *t.neighbours[nbi].camera;
+    RelativePose& pose = poses[nbi];
+    pose.R_rel = nc_cam.R * cam.R.transpose();
+    const Eigen::Vector3d t_rel = nc_cam.t - pose.R_rel * cam.t;
+    pose.tau = Eigen::Vector3d(nc_cam.fx * t_rel.x() + nc_cam.cx * t_rel.z(),
+                               nc_cam.fy * t_rel.y() + nc_cam.cy * t_rel.z(), t_rel.z());
+  }
 #pragma omp parallel for schedule(dynamic, 4) if (static_cast <int64_t>(w) * h >= kParallelPixels)
   for (int row = 0; row < rows; ++row) {
     const int y = row * stride;
@@ -165,10 +173,8 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
               err > c_.max_reprojection_px)
             continue;
         }
-        const Eigen::Matrix3d R_rel = nc_cam.R * cam.R.transpose();
-        const Eigen::Vector3d t_rel = nc_cam.t - R_rel * cam.t;
-        const Eigen::Vector3d tau(nc_cam.fx * t_rel.x() + nc_cam.cx * t_rel.z(),
-                                  nc_cam.fy * t_rel.y() + nc_cam.cy * t_rel.z(), t_rel.z());
+        const Eigen::Matrix3d& R_rel = poses[nbi].R_rel;
+        const Eigen::Vector3d& tau = poses[nbi].tau;
         bool inside = true;
         double mean_b = 0;
         for (int k = 0; k < m && inside; ++k) {

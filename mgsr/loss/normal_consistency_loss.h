@@ -42,16 +42,7 @@ class NormalConsistencyLoss : public LossTermImpl<NormalConsistencyLoss> {
     return {Buffer::kAlpha};
   }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
-    MGSR_RETURN_IF_ERROR(RequireImage(Name(), "depth", in.Get(Buffer::kDepth),
-                                      static_cast<const Image*>(nullptr), 1));
-    MGSR_RETURN_IF_ERROR(
-        RequireImage(Name(), "normal", in.Get(Buffer::kNormal), in.Get(Buffer::kDepth), 3));
-    MGSR_RETURN_IF_ERROR(
-        RequireImage(Name(), "alpha", in.Get(Buffer::kAlpha), in.Get(Buffer::kDepth), 1));
-    if (t.mask != nullptr)
-      MGSR_RETURN_IF_ERROR(RequireImage(Name(), "mask", t.mask, in.Get(Buffer::kDepth), 1));
-    if (in.camera == nullptr) return Status::Error(Name() + ": needs the camera");
-    return Status::Ok();
+    return RequireSurfaceGeometry(Name(), in, t);
   }
 
   template <typename T>
