@@ -300,6 +300,15 @@ std::string ChooseBackground(const std::string& flag, double level, const Scene&
   return "reference (2DGS white, 3DGS black)";
 }
 
+// The test views' scores, summed over the views and then averaged.
+struct TestScores {
+  std::vector<int> views;
+  double psnr = 0, ssim = 0, psnr_aligned = 0, ssim_aligned = 0;
+  double depth_error = 0;  // mean |depth - truth| per view, summed over depth_views
+  int depth_views = 0;
+  nlohmann::json per_view = nlohmann::json::array();
+};
+
 }  // namespace
 
 Status ParseBackground(const std::string& background, double* level) {
@@ -401,19 +410,85 @@ Status ReconstructionPipeline::TrainAlongside(MutualBoostedSolver* solver,
   return ExtractSurface(solver, options, scene, surface, &none, {}, options_.group);
 }
 
-Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
-  *end = ReconstructionEnd::kFinished;
-  MGSR_RETURN_IF_ERROR(options_.Validate());
-  const ReconstructionOptions& o = options_;
-  SolverOptions options = o.solver;
-  std::string workspace = o.workspace;
+// Everything one run carries from stage to stage. The solver keeps references to `scene` and its
+// callbacks to `options`, so the state stays where Run put it.
+struct ReconstructionPipeline::RunState {
+  SolverOptions options;  // the solver's, with the scene's choices applied
+  std::string workspace;  // the input workspace (colmap's dense folder when given photos)
   double background_level = -1;
-  MGSR_RETURN_IF_ERROR(ParseBackground(o.background, &background_level));
-  const std::string ckpt_dir = JoinPath(o.output, "checkpoints");
-  const std::string ckpt = JoinPath(ckpt_dir, "latest.ckpt");
-  if (o.resume && !FileExists(ckpt)) return Status::Error(ckpt + ": no checkpoint to resume from");
+  std::string ckpt_dir, ckpt;
+  bool writer = true;  // process 0 of a group (or no group): writes every output
+  OutputFolder out;
+  Timer total;
+  nlohmann::json colmap_metrics;
+  Scene scene;
+  double load_seconds = 0;
+  std::string background_note, budget_mode, budget_why, region_note;
+  SurfaceOptions surface;
+  std::unique_ptr<MutualBoostedSolver> solver;
+  std::unique_ptr<ProgressLog> log;
+  std::unique_ptr<TestEvaluation> evaluation;
+  std::unique_ptr<CheckpointCallback> checkpointer;
+  GroundTruthGeometry ground_truth;
+  std::unique_ptr<RayCaster> gt_caster;
+  // The training views' exact depth, cast once for the three readers (warm-up check, ceiling, end).
+  std::unique_ptr<ExactDepthViews> gt_depth;
+  std::unique_ptr<DepthAfterWarmup> depth_after_warmup;
+  SolveSummary summary;
+  TestScores test;
+  TriangleMesh mesh;
+  std::string mesh_path;
+  double mesh_seconds = 0;
+  ReconstructionEnd end = ReconstructionEnd::kFinished;
+  bool stopped = false;  // a stage ended the run early without an error (check, Ctrl-C, follower)
+};
+
+Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
+  RunState st;
+  const Status s = RunStages(&st);
+  // A failure takes back the results this run wrote: no folder looks finished unless it is.
+  if (!s.ok()) st.out.Discard();
+  *end = st.end;
+  return s;
+}
+
+Status ReconstructionPipeline::RunStages(RunState* st) {
+  using Stage = Status (ReconstructionPipeline::*)(RunState*);
+  for (const Stage stage : {
+           &ReconstructionPipeline::OpenOutput,           // options checked, output locked
+           &ReconstructionPipeline::RunColmap,            // photos -> workspace
+           &ReconstructionPipeline::LoadInput,            // the scene
+           &ReconstructionPipeline::ChooseSceneSettings,  // backgrounds and weights
+           &ReconstructionPipeline::ChooseBudget,         // primitives per branch
+           &ReconstructionPipeline::ChooseMeshRegion,     // where the mesh may be
+           &ReconstructionPipeline::ChooseBatches,        // views per step; options final
+           &ReconstructionPipeline::CreateSolver,         // models, group, checkpoint
+           &ReconstructionPipeline::FollowOrCheck,        // other processes, --check
+           &ReconstructionPipeline::PrepareOutputs,       // folders, log, callbacks
+           &ReconstructionPipeline::TrainModels,          // warm-up and mutual rounds
+           &ReconstructionPipeline::WriteModels,          // point_cloud_*.ply, backgrounds
+           &ReconstructionPipeline::ScoreTestViews,       // PSNR/SSIM and renders
+           &ReconstructionPipeline::ExtractMesh,          // TSDF fusion -> mesh.ply
+           &ReconstructionPipeline::WriteMetrics,         // metrics.json; the run is done
+       }) {
+    MGSR_RETURN_IF_ERROR((this->*stage)(st));
+    if (st->stopped) break;
+  }
+  return Status::Ok();
+}
+
+Status ReconstructionPipeline::OpenOutput(RunState* st) {
+  const ReconstructionOptions& o = options_;
+  MGSR_RETURN_IF_ERROR(o.Validate());
+  st->options = o.solver;
+  st->workspace = o.workspace;
+  MGSR_RETURN_IF_ERROR(ParseBackground(o.background, &st->background_level));
+  st->ckpt_dir = JoinPath(o.output, "checkpoints");
+  st->ckpt = JoinPath(st->ckpt_dir, "latest.ckpt");
+  if (o.resume && !FileExists(st->ckpt))
+    return Status::Error(st->ckpt + ": no checkpoint to resume from");
   // In a group of processes, process 0 writes; the others train alongside it (TrainAlongside).
-  const bool writer = o.group == nullptr || o.group->rank() == 0;
+  st->writer = o.group == nullptr || o.group->rank() == 0;
   if (o.group != nullptr && o.group->size() > 1) {
     if (!o.images.empty()) {
       return Status::Error(
@@ -421,74 +496,73 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
           " MPI processes: run the photo pipeline in one process first (mgsr_solve --images ... "
           "--check, or mgsr_colmap), then mpirun on its workspace (OUTPUT/colmap/dense)");
     }
-    MGSR_RETURN_IF_ERROR(CheckBatchSplit(options.batch_views, o.group->size()));
+    MGSR_RETURN_IF_ERROR(CheckBatchSplit(st->options.batch_views, o.group->size()));
   }
   // Opening the output locks it, creating it when missing: first make sure the input is there
   // (an output inside a mistyped workspace path must not create that path).
-  if (o.images.empty() && !DirectoryExists(workspace))
-    return Status::Error(workspace + ": scene folder does not exist");
+  if (o.images.empty() && !DirectoryExists(st->workspace))
+    return Status::Error(st->workspace + ": scene folder does not exist");
   if (!o.images.empty() && !DirectoryExists(o.images))
     return Status::Error(o.images + ": folder of photos does not exist");
-  OutputFolder out;
-  if (!o.check_only && writer) {
-    const Status opened = OutputFolder::Open(o.output,
-                                             o.resume      ? OutputMode::kResume
-                                             : o.overwrite ? OutputMode::kOverwrite
-                                                           : OutputMode::kFresh,
-                                             &out);
-    if (!opened.ok()) return opened;
+  if (!o.check_only && st->writer) {
+    MGSR_RETURN_IF_ERROR(OutputFolder::Open(o.output,
+                                            o.resume      ? OutputMode::kResume
+                                            : o.overwrite ? OutputMode::kOverwrite
+                                                          : OutputMode::kFresh,
+                                            &st->out));
   }
-  // From here on a failure takes back the results it wrote: no folder looks finished unless it is.
-  const auto fail = [&out](const std::string& message) {
-    out.Discard();
-    return Status::Error(message);
-  };
+  st->total.Restart();
+  return Status::Ok();
+}
 
-  Timer total;
-  nlohmann::json colmap_metrics;
-  if (!o.images.empty()) {
-    ColmapPipelineOptions co = o.colmap;
-    co.images = o.images;
-    co.masks = o.masks;
-    co.workspace = JoinPath(o.output, "colmap");
-    const std::string dense = JoinPath(co.workspace, "dense");
-    if (o.resume && DirectoryExists(JoinPath(dense, "sparse"))) {
-      std::printf("colmap: reusing %s (--resume)\n", dense.c_str());
-    } else {
-      const Status prepared = out.Prepare();  // colmap writes into the output folder
-      if (!prepared.ok()) return fail(prepared.message());
-      ColmapPipelineSummary cs;
-      const Status ran = RunColmapPipeline(co, &cs);
-      if (!ran.ok()) return fail(ran.message());
-      if (o.on_colmap_summary) o.on_colmap_summary(cs);
-      colmap_metrics = {{"images_given", cs.images_given},
+Status ReconstructionPipeline::RunColmap(RunState* st) {
+  const ReconstructionOptions& o = options_;
+  if (o.images.empty()) return Status::Ok();
+  ColmapPipelineOptions co = o.colmap;
+  co.images = o.images;
+  co.masks = o.masks;
+  co.workspace = JoinPath(o.output, "colmap");
+  const std::string dense = JoinPath(co.workspace, "dense");
+  st->workspace = dense;
+  if (o.resume && DirectoryExists(JoinPath(dense, "sparse"))) {
+    std::printf("colmap: reusing %s (--resume)\n", dense.c_str());
+    return Status::Ok();
+  }
+  MGSR_RETURN_IF_ERROR(st->out.Prepare());  // colmap writes into the output folder
+  ColmapPipelineSummary cs;
+  MGSR_RETURN_IF_ERROR(RunColmapPipeline(co, &cs));
+  if (o.on_colmap_summary) o.on_colmap_summary(cs);
+  st->colmap_metrics = {{"images_given", cs.images_given},
                         {"images_registered", cs.images_registered},
                         {"unregistered", cs.unregistered},
                         {"points", cs.points},
                         {"mean_reprojection_error_px", cs.mean_reprojection_error}};
-      for (const auto& step : cs.steps) colmap_metrics["seconds"][step.name] = step.seconds;
-    }
-    workspace = dense;
-  }
+  for (const auto& step : cs.steps) st->colmap_metrics["seconds"][step.name] = step.seconds;
+  return Status::Ok();
+}
+
+Status ReconstructionPipeline::LoadInput(RunState* st) {
   Timer load_timer;
-  const SceneOptions& so = o.scene;
-  Scene scene;
-  Status s = LoadScene(workspace, so, &scene);
-  if (s.ok()) s = CheckTrainable(scene);
-  if (!s.ok()) return fail(s.message());
+  Scene& scene = st->scene;
+  MGSR_RETURN_IF_ERROR(LoadScene(st->workspace, options_.scene, &scene));
+  MGSR_RETURN_IF_ERROR(CheckTrainable(scene));
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-  const double load_seconds = load_timer.ElapsedSeconds();
+  st->load_seconds = load_timer.ElapsedSeconds();
   const Camera& cam0 = scene.views.front().camera;
   std::printf("scene: %s (%s), %zu train / %zu test views, %dx%d, %zu points, masks: %s\n",
-              workspace.c_str(), scene.source.c_str(), scene.TrainIndices().size(),
+              st->workspace.c_str(), scene.source.c_str(), scene.TrainIndices().size(),
               scene.TestIndices().size(), cam0.width, cam0.height, scene.points.size(),
               scene.has_masks() ? "yes" : "no (gamma = 1, mesh not masked)");
+  return Status::Ok();
+}
 
-  const std::string background_note =
-      ChooseBackground(o.background, background_level, scene, &options);
-  std::printf("background: %s\n", background_note.c_str());
+Status ReconstructionPipeline::ChooseSceneSettings(RunState* st) {
+  const ReconstructionOptions& o = options_;
+  SolverOptions& options = st->options;
+  st->background_note = ChooseBackground(o.background, st->background_level, st->scene, &options);
+  std::printf("background: %s\n", st->background_note.c_str());
   if (o.normal_weight_from_scene) {
-    const bool foreground = ForegroundKnown(scene);
+    const bool foreground = ForegroundKnown(st->scene);
     options.lambda_normal = foreground ? kNormalWeightWithForeground : kReferenceNormalWeight;
     std::printf("normal weight: %g (%s)\n", options.lambda_normal,
                 foreground ? "the views have masks or alpha"
@@ -502,53 +576,68 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
         "grounds and walls)\n");
   }
   if (o.depth_tv_disparity) {
-    options.tv_disparity_scale = ObjectDistance(scene);
+    options.tv_disparity_scale = ObjectDistance(st->scene);
     std::printf("depth TV: on the disparity s^2 / D, s = %.4g (the cameras' distance)\n",
                 options.tv_disparity_scale);
   }
   // A loss configuration edits the table these weights give, the scene's choices included.
   if (!o.loss_config.empty()) {
     options.losses = PaperLossTable(options);
-    const Status l = ApplyLossConfigFile(o.loss_config, &options.losses);
-    if (!l.ok()) return fail(l.message());
+    MGSR_RETURN_IF_ERROR(ApplyLossConfigFile(o.loss_config, &options.losses));
   }
+  return Status::Ok();
+}
+
+Status ReconstructionPipeline::ChooseBudget(RunState* st) {
+  const ReconstructionOptions& o = options_;
+  SolverOptions& options = st->options;
   // The budget: --budget for both branches unless --max_gaussians / --max_surfels give one.
-  const std::string budget_mode =
-      !o.budget.empty() ? o.budget : (options.density == "mcmc" ? "auto" : "scene");
+  st->budget_mode = !o.budget.empty() ? o.budget : (options.density == "mcmc" ? "auto" : "scene");
   size_t budget_3d = 0, budget_2d = 0;
-  std::string budget_why;
-  if (budget_mode == "auto") {
-    const SceneBudget b = AutoPrimitiveBudget(scene);
+  if (st->budget_mode == "auto") {
+    const SceneBudget b = AutoPrimitiveBudget(st->scene);
     budget_3d = b.gaussians;
     budget_2d = b.surfels;
-    budget_why = b.why;
-  } else if (budget_mode == "scene") {
-    budget_3d = budget_2d = DefaultPrimitiveBudget(scene);
-    budget_why = "scene: 4 per pixel of a training view, at least 500,000 (a bound, not a target)";
-  } else if (budget_mode == "none") {
-    budget_why = "none";
+    st->budget_why = b.why;
+  } else if (st->budget_mode == "scene") {
+    budget_3d = budget_2d = DefaultPrimitiveBudget(st->scene);
+    st->budget_why =
+        "scene: 4 per pixel of a training view, at least 500,000 (a bound, not a target)";
+  } else if (st->budget_mode == "none") {
+    st->budget_why = "none";
   } else {
-    budget_3d = budget_2d = std::stoull(budget_mode);
-    budget_why = "given: --budget " + budget_mode;
+    budget_3d = budget_2d = std::stoull(st->budget_mode);
+    st->budget_why = "given: --budget " + st->budget_mode;
   }
   options.max_gaussians = o.max_gaussians < 0 ? budget_3d : o.max_gaussians;
   options.max_surfels = o.max_surfels < 0 ? budget_2d : o.max_surfels;
-  if (o.max_gaussians >= 0 || o.max_surfels >= 0) budget_why += "; per branch as given";
+  if (o.max_gaussians >= 0 || o.max_surfels >= 0) st->budget_why += "; per branch as given";
   const auto budget_text = [](size_t n) {
     return n == 0 ? std::string("none") : std::to_string(n);
   };
   std::printf("budget: %s Gaussians, %s surfels (%s), density: %s\n",
               budget_text(options.max_gaussians).c_str(), budget_text(options.max_surfels).c_str(),
-              budget_why.c_str(), options.density.c_str());
+              st->budget_why.c_str(), options.density.c_str());
+  return Status::Ok();
+}
+
+Status ReconstructionPipeline::ChooseMeshRegion(RunState* st) {
   // The mesh's region, from the cameras unless given.
-  SurfaceOptions surface = o.surface;
-  std::string region_note;
-  s = ResolveMeshRegion(o.mesh_region, scene, &surface, &region_note);
-  if (!s.ok()) return fail(s.message());
-  std::printf("mesh region: %s\n", region_note.c_str());
-  if (options.batch_views > static_cast<int>(scene.TrainIndices().size())) {
-    return fail("--batch_views " + std::to_string(options.batch_views) + " is more than the " +
-                std::to_string(scene.TrainIndices().size()) + " training views of " + workspace);
+  st->surface = options_.surface;
+  MGSR_RETURN_IF_ERROR(
+      ResolveMeshRegion(options_.mesh_region, st->scene, &st->surface, &st->region_note));
+  std::printf("mesh region: %s\n", st->region_note.c_str());
+  return Status::Ok();
+}
+
+Status ReconstructionPipeline::ChooseBatches(RunState* st) {
+  const ReconstructionOptions& o = options_;
+  SolverOptions& options = st->options;
+  const size_t train_views = st->scene.TrainIndices().size();
+  if (options.batch_views > static_cast<int>(train_views)) {
+    return Status::Error("--batch_views " + std::to_string(options.batch_views) +
+                         " is more than the " + std::to_string(train_views) +
+                         " training views of " + st->workspace);
   }
   if (options.batch_views > 1) {
     if (o.batch_scale_iterations) {
@@ -561,252 +650,286 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
                 o.group != nullptr ? o.group->size() : 1,
                 o.group != nullptr && o.group->size() > 1 ? "es" : "");
   }
-  s = options.Validate();
-  if (!s.ok()) return fail(s.message());
+  // The options are final from here on.
+  return options.Validate();
+}
 
-  MutualBoostedSolver solver(options, scene);
+Status ReconstructionPipeline::CreateSolver(RunState* st) {
+  const ReconstructionOptions& o = options_;
+  st->solver = std::make_unique<MutualBoostedSolver>(st->options, st->scene);
+  MutualBoostedSolver& solver = *st->solver;
   if (o.group != nullptr) {
     // Processes that would not train the same model must not start: the same options (with the
     // scene's choices), the same views and cameras, the same checkpoint.
     for (const auto& [what, value] :
          {std::pair<std::string, std::string>{"options", solver.SettingsFingerprint()},
           {"scene", solver.SceneFingerprint()},
-          {"--resume", o.resume ? FileSha256(ckpt) : ""}}) {
-      s = o.group->CheckSame(what, value);
-      if (!s.ok()) return fail(s.message());
+          {"--resume", o.resume ? FileSha256(st->ckpt) : ""}}) {
+      MGSR_RETURN_IF_ERROR(o.group->CheckSame(what, value));
     }
     solver.SetViewGroup(o.group);
   }
   if (o.resume) {
-    s = solver.LoadCheckpoint(ckpt);
-    if (!s.ok()) return fail(s.message());
-    std::printf("resuming from %s\n", ckpt.c_str());
+    MGSR_RETURN_IF_ERROR(solver.LoadCheckpoint(st->ckpt));
+    std::printf("resuming from %s\n", st->ckpt.c_str());
   }
-  if (!writer) return TrainAlongside(&solver, options, scene, surface, end);
-  if (o.check_only) {
-    std::printf("check: the scene%s can be trained\n", o.resume ? " and the checkpoint" : "");
-    *end = ReconstructionEnd::kChecked;
-    return Status::Ok();
+  return Status::Ok();
+}
+
+Status ReconstructionPipeline::FollowOrCheck(RunState* st) {
+  if (!st->writer) {
+    st->stopped = true;
+    return TrainAlongside(st->solver.get(), st->options, st->scene, st->surface, &st->end);
   }
+  if (options_.check_only) {
+    std::printf("check: the scene%s can be trained\n",
+                options_.resume ? " and the checkpoint" : "");
+    st->end = ReconstructionEnd::kChecked;
+    st->stopped = true;
+  }
+  return Status::Ok();
+}
+
+Status ReconstructionPipeline::PrepareOutputs(RunState* st) {
+  const ReconstructionOptions& o = options_;
+  const SolverOptions& options = st->options;
+  MutualBoostedSolver& solver = *st->solver;
   // The previous run's results go only now that the scene and the checkpoint are accepted.
-  s = out.Prepare();
-  if (s.ok()) s = MakeDirectories(out.Path("renders"));
-  if (s.ok()) s = MakeDirectories(ckpt_dir);
-  if (!s.ok()) return fail(s.message());
+  MGSR_RETURN_IF_ERROR(st->out.Prepare());
+  MGSR_RETURN_IF_ERROR(MakeDirectories(st->out.Path("renders")));
+  MGSR_RETURN_IF_ERROR(MakeDirectories(st->ckpt_dir));
   const int trained_branches = (options.train_2d ? 1 : 0) + (options.train_3d ? 1 : 0);
-  ProgressLog log(out.Path("log.csv"), o.log_every,
-                  trained_branches * options.warmup_max_iterations +
-                      (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations,
-                  o.resume, options.train_2d, options.train_3d);
-  s = log.Flush();
-  if (!s.ok()) return fail(s.message());
-  solver.AddCallback(&log);
-  TestEvaluation evaluation(&solver, scene, options.background_3d, o.eval_every);
-  solver.AddCallback(&evaluation);
+  st->log = std::make_unique<ProgressLog>(
+      st->out.Path("log.csv"), o.log_every,
+      trained_branches * options.warmup_max_iterations +
+          (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations,
+      o.resume, options.train_2d, options.train_3d);
+  MGSR_RETURN_IF_ERROR(st->log->Flush());
+  solver.AddCallback(st->log.get());
+  st->evaluation =
+      std::make_unique<TestEvaluation>(&solver, st->scene, options.background_3d, o.eval_every);
+  solver.AddCallback(st->evaluation.get());
   // A checkpoint every --checkpoint_every iterations, the log flushed with it.
-  CheckpointCallback checkpointer(ckpt, o.checkpoint_every, [&log] { return log.Flush(); });
-  solver.AddCallback(&checkpointer);
-  GroundTruthGeometry ground_truth;
-  s = FindGroundTruth(scene.root, &ground_truth);
-  if (!s.ok()) std::fprintf(stderr, "warning: ground truth not used: %s\n", s.message().c_str());
-  std::unique_ptr<RayCaster> gt_caster;
-  // The training views' exact depth, cast once for the three readers (warm-up check, ceiling, end).
-  std::unique_ptr<ExactDepthViews> gt_depth;
-  if (ground_truth.found()) {
-    gt_caster = std::make_unique<RayCaster>(ground_truth.mesh);
-    gt_depth = std::make_unique<ExactDepthViews>(*gt_caster, TrainingCameras(scene));
+  ProgressLog* log = st->log.get();
+  st->checkpointer = std::make_unique<CheckpointCallback>(st->ckpt, o.checkpoint_every,
+                                                          [log] { return log->Flush(); });
+  solver.AddCallback(st->checkpointer.get());
+  const Status found = FindGroundTruth(st->scene.root, &st->ground_truth);
+  if (!found.ok())
+    std::fprintf(stderr, "warning: ground truth not used: %s\n", found.message().c_str());
+  if (st->ground_truth.found()) {
+    st->gt_caster = std::make_unique<RayCaster>(st->ground_truth.mesh);
+    st->gt_depth = std::make_unique<ExactDepthViews>(*st->gt_caster, TrainingCameras(st->scene));
   }
-  DepthAfterWarmup depth_after_warmup(&solver, options, scene, gt_depth.get(),
-                                      JoinPath(ckpt_dir, "depth_after_warmup.json"));
-  solver.AddCallback(&depth_after_warmup);
-  SolveSummary summary;
-  s = Train(&solver, &summary);
-  if (!s.ok())
-    return fail(checkpointer.status().ok() ? s.message() : checkpointer.status().message());
-  if (summary.termination_type == TerminationType::kInterrupted) {
+  st->depth_after_warmup =
+      std::make_unique<DepthAfterWarmup>(&solver, options, st->scene, st->gt_depth.get(),
+                                         JoinPath(st->ckpt_dir, "depth_after_warmup.json"));
+  solver.AddCallback(st->depth_after_warmup.get());
+  return Status::Ok();
+}
+
+Status ReconstructionPipeline::TrainModels(RunState* st) {
+  MutualBoostedSolver& solver = *st->solver;
+  const Status trained = Train(&solver, &st->summary);
+  if (!trained.ok()) return st->checkpointer->status().ok() ? trained : st->checkpointer->status();
+  if (st->summary.termination_type == TerminationType::kInterrupted) {
     // Ctrl-C: the state is at an iteration boundary; keep it.
-    s = solver.SaveCheckpoint(ckpt);
-    if (s.ok()) s = log.Flush();
-    if (!s.ok()) return fail(s.message());
+    MGSR_RETURN_IF_ERROR(solver.SaveCheckpoint(st->ckpt));
+    MGSR_RETURN_IF_ERROR(st->log->Flush());
     std::fprintf(stderr,
                  "interrupted %s: checkpoint written to %s; run again with --resume to "
                  "continue\n",
-                 summary.message.c_str(), ckpt.c_str());
-    *end = ReconstructionEnd::kInterrupted;
+                 st->summary.message.c_str(), st->ckpt.c_str());
+    st->end = ReconstructionEnd::kInterrupted;
+    st->stopped = true;
     return Status::Ok();
   }
-  std::printf("%s\n", summary.BriefReport().c_str());
-  if (o.profile) std::printf("%s", FormatProfile(summary.profile).c_str());
+  std::printf("%s\n", st->summary.BriefReport().c_str());
+  if (options_.profile) std::printf("%s", FormatProfile(st->summary.profile).c_str());
   std::fflush(stdout);  // the end of training shows at once, also when stdout is a file
-  if (o.checkpoint_every > 0) {
+  if (options_.checkpoint_every > 0) {
     // The finished state: --resume then skips training and only rebuilds the outputs (e.g. a mesh
     // with other fusion settings).
-    s = solver.SaveCheckpoint(ckpt);
-    if (!s.ok()) return fail(s.message());
+    MGSR_RETURN_IF_ERROR(solver.SaveCheckpoint(st->ckpt));
   }
-  s = log.Flush();
-  if (!s.ok()) return fail(s.message());
+  MGSR_RETURN_IF_ERROR(st->log->Flush());
+  if (stop_requested_) return StopWriting(st);
+  return Status::Ok();
+}
+
+Status ReconstructionPipeline::StopWriting(RunState* st) {
   // Ctrl-C while the outputs are written: the results so far are taken back and the finished
   // state is kept, so --resume writes them without training again.
-  const auto stop_writing = [&]() {
-    out.Discard();
-    const Status saved = solver.SaveCheckpoint(ckpt);
-    if (!saved.ok()) return fail(saved.message());
-    std::fprintf(stderr,
-                 "interrupted while writing the outputs: the results written so far are removed; "
-                 "the trained state is in %s: run again with --resume to write them\n",
-                 ckpt.c_str());
-    *end = ReconstructionEnd::kInterrupted;
-    return Status::Ok();
-  };
-  if (stop_requested_) return stop_writing();
+  st->out.Discard();
+  MGSR_RETURN_IF_ERROR(st->solver->SaveCheckpoint(st->ckpt));
+  std::fprintf(stderr,
+               "interrupted while writing the outputs: the results written so far are removed; "
+               "the trained state is in %s: run again with --resume to write them\n",
+               st->ckpt.c_str());
+  st->end = ReconstructionEnd::kInterrupted;
+  st->stopped = true;
+  return Status::Ok();
+}
 
+Status ReconstructionPipeline::WriteModels(RunState* st) {
+  const SolverOptions& options = st->options;
+  const MutualBoostedSolver& solver = *st->solver;
+  OutputFolder& out = st->out;
   // Models: only the branches this method trains (an untrained branch is its initialisation).
   if (options.train_2d) {
-    s = WriteSurfelPly(out.Path("point_cloud_2d.ply"), solver.surfels());
-    if (s.ok()) s = out.Record("point_cloud_2d.ply");
+    MGSR_RETURN_IF_ERROR(WriteSurfelPly(out.Path("point_cloud_2d.ply"), solver.surfels()));
+    MGSR_RETURN_IF_ERROR(out.Record("point_cloud_2d.ply"));
   }
-  for (const std::string& format : o.export_formats) {
-    if (!s.ok() || !options.train_3d) break;
+  for (const std::string& format : options_.export_formats) {
+    if (!options.train_3d) break;
     if (format == "glb") continue;  // the mesh's format, written with mesh.ply
     const std::string name = "point_cloud_3d." + format;
-    if (format == "ply") s = WriteGaussianPly(out.Path(name), solver.gaussians());
-    if (format == "splat") s = WriteSplatFile(out.Path(name), solver.gaussians());
-    if (format == "spz") s = WriteSpzFile(out.Path(name), solver.gaussians());
-    if (s.ok()) s = out.Record(name);
+    if (format == "ply") MGSR_RETURN_IF_ERROR(WriteGaussianPly(out.Path(name), solver.gaussians()));
+    if (format == "splat") MGSR_RETURN_IF_ERROR(WriteSplatFile(out.Path(name), solver.gaussians()));
+    if (format == "spz") MGSR_RETURN_IF_ERROR(WriteSpzFile(out.Path(name), solver.gaussians()));
+    MGSR_RETURN_IF_ERROR(out.Record(name));
   }
   // Learnt backgrounds (mgsr_render draws them behind new views).
   for (const Branch b : {Branch::kSurfels2D, Branch::kGaussians3D}) {
     const EnvironmentBackground* env = solver.environment(b);
-    if (!s.ok() || env == nullptr) continue;
+    if (env == nullptr) continue;
     const std::string name = EnvironmentFileName(BranchName(b));
-    s = WritePfm(out.Path(name), env->map().ToImage());
-    if (s.ok()) s = out.Record(name);
+    MGSR_RETURN_IF_ERROR(WritePfm(out.Path(name), env->map().ToImage()));
+    MGSR_RETURN_IF_ERROR(out.Record(name));
   }
-  if (!s.ok()) return fail(s.message());
+  return Status::Ok();
+}
 
+Status ReconstructionPipeline::ScoreTestViews(RunState* st) {
   // Test views: PSNR / SSIM of the composite (3DGS, or 2DGS for the 2dgs method) against the
   // ground truth on its background, and the renders a person looks at.
-  Timer eval_timer;
-  double psnr = 0, ssim = 0, psnr_aligned = 0, ssim_aligned = 0, depth_err = 0;
-  int depth_views = 0;
-  const auto test = scene.TestIndices();
-  nlohmann::json per_view = nlohmann::json::array();
-  for (int i : test) {
-    const View& v = scene.views[i];
-    ViewRender rendered = RenderView(&solver, options, v.camera);
-    const Appearance& g = rendered.appearance;
-    const Geometry& sr = rendered.geometry;
-    const Image gt = CompositeOnBackground(v, g.background);
-    const double p = std::min(100.0, Psnr(g.color, gt)), q = Ssim(g.color, gt);
-    psnr += p;
-    ssim += q;
-    // Exposure-aligned: the test views' light and exposure are not predictable from the training
-    // views.
-    const AlignedScores aligned =
-        ExposureAlignedScores(g.color, gt, v.mask.empty() ? nullptr : &v.mask);
-    psnr_aligned += std::min(100.0, aligned.psnr);
-    ssim_aligned += aligned.ssim;
-    const std::string stem = FileStem(v.name);
-    // Each render is written and then recorded in the manifest.
-    const auto write_render = [&out, &stem](const std::string& suffix, const Image& image) {
-      const std::string name = "renders/" + stem + "_" + suffix + ".png";
-      Status w = WriteImage(out.Path(name), image);
-      if (w.ok()) w = out.Record(name);
-      return w;
-    };
-    for (const auto& [suffix, image] :
-         std::vector<std::pair<std::string, const Image*>>{{"composite", &g.color},
-                                                           {"transmitted", &g.tran},
-                                                           {"reflected", &g.ref},
-                                                           {"weight", &g.weight},
-                                                           {"gt", &gt}}) {
-      s = write_render(suffix, *image);
-      if (!s.ok()) return fail(s.message());
-    }
-    // The same pictures as mgsr_render's: turbo-mapped depth over the object's own range, normals
-    // as colours, black where nothing was rendered.
-    s = write_render("depth2d",
-                     DepthColormap(sr.depth, sr.alpha, RenderedDepthRange(sr.depth, sr.alpha)));
-    if (s.ok()) s = write_render("normal2d", NormalColormap(sr.normal_world, sr.alpha));
-    if (!s.ok()) return fail(s.message());
-    if (stop_requested_) return stop_writing();
-    // Depth error against ground-truth depth maps when the scene has them (synthetic scenes);
-    // the signed error map also from the exact depth of a ground-truth mesh (suzanne).
-    Image gt_depth;
-    double err = 0;
-    int n = 0;
-    const bool has_depth_map =
-        ReadPfm(JoinPath(scene.root, "gt/depth/" + stem + ".pfm"), &gt_depth).ok() &&
-        gt_depth.SameShape(sr.depth);
-    if (has_depth_map || gt_caster != nullptr) {
-      const Image truth = has_depth_map ? Image() : RenderExactDepth(*gt_caster, v.camera);
-      s = write_render("depth2d_error",
-                       SignedDepthErrorImage(sr.depth, has_depth_map ? gt_depth : truth, &v.mask,
-                                             v.camera, kErrorMapFootprints));
-      if (!s.ok()) return fail(s.message());
-    }
-    if (has_depth_map) {
-      for (size_t k = 0; k < gt_depth.size(); ++k) {
-        if (gt_depth.data()[k] <= 0 || (!v.mask.empty() && v.mask.data()[k] < 0.5f)) continue;
-        err += std::abs(sr.depth.data()[k] - gt_depth.data()[k]);
-        ++n;
-      }
-      if (n > 0) {
-        depth_err += err / n;
-        ++depth_views;
-      }
-    }
-    per_view.push_back({{"name", v.name},
+  TestScores& t = st->test;
+  t.views = st->scene.TestIndices();
+  for (int i : t.views) {
+    MGSR_RETURN_IF_ERROR(ScoreTestView(st, st->scene.views[i]));
+    if (stop_requested_) return StopWriting(st);
+  }
+  if (!t.views.empty()) {
+    const double n = t.views.size();
+    t.psnr /= n;
+    t.ssim /= n;
+    t.psnr_aligned /= n;
+    t.ssim_aligned /= n;
+  }
+  return Status::Ok();
+}
+
+Status ReconstructionPipeline::ScoreTestView(RunState* st, const View& v) {
+  TestScores& t = st->test;
+  OutputFolder& out = st->out;
+  const ViewRender rendered = RenderView(st->solver.get(), st->options, v.camera);
+  const Appearance& g = rendered.appearance;
+  const Geometry& sr = rendered.geometry;
+  const Image gt = CompositeOnBackground(v, g.background);
+  const double p = std::min(100.0, Psnr(g.color, gt)), q = Ssim(g.color, gt);
+  t.psnr += p;
+  t.ssim += q;
+  // Exposure-aligned: the test views' light and exposure are not predictable from the training
+  // views.
+  const AlignedScores aligned =
+      ExposureAlignedScores(g.color, gt, v.mask.empty() ? nullptr : &v.mask);
+  t.psnr_aligned += std::min(100.0, aligned.psnr);
+  t.ssim_aligned += aligned.ssim;
+  const std::string stem = FileStem(v.name);
+  // Each render is written and then recorded in the manifest.
+  const auto write_render = [&out, &stem](const std::string& suffix, const Image& image) {
+    const std::string name = "renders/" + stem + "_" + suffix + ".png";
+    MGSR_RETURN_IF_ERROR(WriteImage(out.Path(name), image));
+    return out.Record(name);
+  };
+  for (const auto& [suffix, image] :
+       std::vector<std::pair<std::string, const Image*>>{{"composite", &g.color},
+                                                         {"transmitted", &g.tran},
+                                                         {"reflected", &g.ref},
+                                                         {"weight", &g.weight},
+                                                         {"gt", &gt}}) {
+    MGSR_RETURN_IF_ERROR(write_render(suffix, *image));
+  }
+  // The same pictures as mgsr_render's: turbo-mapped depth over the object's own range, normals
+  // as colours, black where nothing was rendered.
+  MGSR_RETURN_IF_ERROR(write_render(
+      "depth2d", DepthColormap(sr.depth, sr.alpha, RenderedDepthRange(sr.depth, sr.alpha))));
+  MGSR_RETURN_IF_ERROR(write_render("normal2d", NormalColormap(sr.normal_world, sr.alpha)));
+  t.per_view.push_back({{"name", v.name},
                         {"psnr", p},
                         {"ssim", q},
                         {"psnr_aligned", std::min(100.0, aligned.psnr)},
                         {"ssim_aligned", aligned.ssim}});
+  // Depth error against ground-truth depth maps when the scene has them (synthetic scenes);
+  // the signed error map also from the exact depth of a ground-truth mesh (suzanne).
+  Image gt_depth;
+  const bool has_depth_map =
+      ReadPfm(JoinPath(st->scene.root, "gt/depth/" + stem + ".pfm"), &gt_depth).ok() &&
+      gt_depth.SameShape(sr.depth);
+  if (!has_depth_map && st->gt_caster == nullptr) return Status::Ok();
+  const Image truth = has_depth_map ? Image() : RenderExactDepth(*st->gt_caster, v.camera);
+  MGSR_RETURN_IF_ERROR(write_render(
+      "depth2d_error", SignedDepthErrorImage(sr.depth, has_depth_map ? gt_depth : truth, &v.mask,
+                                             v.camera, kErrorMapFootprints)));
+  if (!has_depth_map) return Status::Ok();
+  double err = 0;
+  int n = 0;
+  for (size_t k = 0; k < gt_depth.size(); ++k) {
+    if (gt_depth.data()[k] <= 0 || (!v.mask.empty() && v.mask.data()[k] < 0.5f)) continue;
+    err += std::abs(sr.depth.data()[k] - gt_depth.data()[k]);
+    ++n;
   }
-  if (!test.empty()) {
-    psnr /= test.size();
-    ssim /= test.size();
-    psnr_aligned /= test.size();
-    ssim_aligned /= test.size();
+  if (n > 0) {
+    t.depth_error += err / n;
+    ++t.depth_views;
   }
+  return Status::Ok();
+}
 
+Status ReconstructionPipeline::ExtractMesh(RunState* st) {
   // Mesh: TSDF fusion of the geometry branch's depth over the training views (rendered at
   // --mesh_resolution_scale times their resolution), foreground and alpha >= 0.5, coloured by the
   // 3DGS transmitted (reflection-free) render (single-branch methods: that branch's depth and
   // colour).
-  if (stop_requested_) return stop_writing();
+  if (stop_requested_) return StopWriting(st);
   Timer mesh_timer;
-  TriangleMesh mesh;
   ProgressMeter mesh_progress("meshing", "views fused", 3.0, [](const std::string& line) {
     std::printf("%s\n", line.c_str());
     std::fflush(stdout);
   });
-  s = ExtractSurface(
-      &solver, options, scene, surface, &mesh,
-      [&](int done, int total) { mesh_progress.Update(done, total); }, o.group);
-  const std::string mesh_path = out.Path("mesh.ply");
-  if (s.ok() && mesh.triangles.empty()) {
-    s = Status::Error(mesh_path +
+  Status s = ExtractSurface(
+      st->solver.get(), st->options, st->scene, st->surface, &st->mesh,
+      [&](int done, int total) { mesh_progress.Update(done, total); }, options_.group);
+  st->mesh_path = st->out.Path("mesh.ply");
+  if (s.ok() && st->mesh.triangles.empty()) {
+    s = Status::Error(st->mesh_path +
                       ": the fused mesh is empty (no rendered depth of the foreground reached the "
                       "fusion volume: check the cameras, the masks and the scene's scale)");
   }
-  if (s.ok()) s = WriteTriangleMesh(mesh_path, mesh);
-  if (s.ok()) s = out.Record("mesh.ply");
-  const auto& formats = o.export_formats;
+  if (s.ok()) s = WriteTriangleMesh(st->mesh_path, st->mesh);
+  if (s.ok()) s = st->out.Record("mesh.ply");
+  const auto& formats = options_.export_formats;
   if (s.ok() && std::find(formats.begin(), formats.end(), "glb") != formats.end()) {
-    s = WriteMeshGlb(out.Path("mesh.glb"), mesh);
-    if (s.ok()) s = out.Record("mesh.glb");
+    s = WriteMeshGlb(st->out.Path("mesh.glb"), st->mesh);
+    if (s.ok()) s = st->out.Record("mesh.glb");
   }
   if (!s.ok()) {
-    const bool kept = FileExists(ckpt);
-    return fail(s.message() + (kept ? "; the trained state is kept in " + ckpt +
-                                          " (--resume rebuilds the outputs from it)"
-                                    : ""));
+    const bool kept = FileExists(st->ckpt);
+    return Status::Error(s.message() + (kept ? "; the trained state is kept in " + st->ckpt +
+                                                   " (--resume rebuilds the outputs from it)"
+                                             : ""));
   }
-  const double mesh_seconds = mesh_timer.ElapsedSeconds();
+  st->mesh_seconds = mesh_timer.ElapsedSeconds();
+  return Status::Ok();
+}
 
+nlohmann::json ReconstructionPipeline::MetricsJson(const RunState& st) const {
+  const ReconstructionOptions& o = options_;
+  const SolverOptions& options = st.options;
+  const SolveSummary& summary = st.summary;
+  const TestScores& t = st.test;
   nlohmann::json metrics = {
-      {"scene", std::filesystem::absolute(workspace).lexically_normal().string()},
+      {"scene", std::filesystem::absolute(st.workspace).lexically_normal().string()},
       {"preset", o.preset},
       {"method", o.method},
       {"mutual_mode", options.mutual_mode},
@@ -815,11 +938,11 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
       {"surfel_init", o.surfel_init},
       {"losses", LossTableToJson(options.LossTable())["losses"]},
       {"seconds",
-       {{"load", load_seconds},
+       {{"load", st.load_seconds},
         {"warmup", summary.warmup_seconds},
         {"mutual", summary.mutual_seconds},
-        {"mesh", mesh_seconds},
-        {"total", total.ElapsedSeconds()}}},
+        {"mesh", st.mesh_seconds},
+        {"total", st.total.ElapsedSeconds()}}},
       {"peak_memory_mb", PeakMemoryBytes() / 1048576.0},
       {"iterations",
        {{"warmup_2d", summary.branch(Branch::kSurfels2D).warmup_iterations},
@@ -831,32 +954,32 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
        {{"gaussians", options.train_3d ? summary.branch(Branch::kGaussians3D).primitives : 0},
         {"surfels", options.train_2d ? summary.branch(Branch::kSurfels2D).primitives : 0}}},
       {"test",
-       {{"views", test.size()},
-        {"psnr", psnr},
-        {"ssim", ssim},
-        {"psnr_aligned", psnr_aligned},
-        {"ssim_aligned", ssim_aligned},
-        {"per_view", per_view}}},
+       {{"views", t.views.size()},
+        {"psnr", t.psnr},
+        {"ssim", t.ssim},
+        {"psnr_aligned", t.psnr_aligned},
+        {"ssim_aligned", t.ssim_aligned},
+        {"per_view", t.per_view}}},
       {"mesh",
-       {{"path", mesh_path},
-        {"vertices", mesh.vertices.size()},
-        {"triangles", mesh.triangles.size()},
-        {"resolution_scale", surface.resolution_scale},
-        {"voxel_size", SurfaceTsdfOptions(scene, surface).voxel_size},
-        {"region", region_note},
-        {"pixel_footprint", TrainingFootprint(scene)}}}};
-  if (!colmap_metrics.is_null()) metrics["colmap"] = colmap_metrics;
+       {{"path", st.mesh_path},
+        {"vertices", st.mesh.vertices.size()},
+        {"triangles", st.mesh.triangles.size()},
+        {"resolution_scale", st.surface.resolution_scale},
+        {"voxel_size", SurfaceTsdfOptions(st.scene, st.surface).voxel_size},
+        {"region", st.region_note},
+        {"pixel_footprint", TrainingFootprint(st.scene)}}}};
+  if (!st.colmap_metrics.is_null()) metrics["colmap"] = st.colmap_metrics;
   if (o.profile) metrics["profile"] = ProfileToJson(summary.profile);
   metrics["budget"] = {{"gaussians", options.max_gaussians},
                        {"surfels", options.max_surfels},
-                       {"mode", budget_mode},
-                       {"why", budget_why},
+                       {"mode", st.budget_mode},
+                       {"why", st.budget_why},
                        {"density", options.density},
                        {"density_config", options.density_config}};
   metrics["background"] = {
-      {"2d", options.background_2d}, {"3d", options.background_3d}, {"choice", background_note}};
+      {"2d", options.background_2d}, {"3d", options.background_3d}, {"choice", st.background_note}};
   for (const Branch b : {Branch::kSurfels2D, Branch::kGaussians3D}) {
-    if (solver.environment(b) != nullptr)
+    if (st.solver->environment(b) != nullptr)
       metrics["background"]["environment"][BranchName(b)] = EnvironmentFileName(BranchName(b));
   }
   metrics["exposure"] = {{"mode", ExposureModeName(options.exposure)},
@@ -865,47 +988,55 @@ Status ReconstructionPipeline::Run(ReconstructionEnd* end) {
   if (options.exposure != ExposureMode::kOff) {
     // The learned transforms of the training views (the 3DGS branch's when per branch).
     nlohmann::json views = nlohmann::json::array();
-    const ExposureModel& ex = solver.exposure(Branch::kGaussians3D);
-    for (int v : scene.TrainIndices()) {
+    const ExposureModel& ex = st.solver->exposure(Branch::kGaussians3D);
+    for (int v : st.scene.TrainIndices()) {
       const ColorTransform& p = ex.transform(v);
-      views.push_back({{"name", scene.views[v].name},
+      views.push_back({{"name", st.scene.views[v].name},
                        {"matrix", std::vector<double>(p.begin(), p.begin() + 9)},
                        {"offset", std::vector<double>(p.begin() + 9, p.end())}});
     }
     metrics["exposure"]["views"] = views;
   }
-  if (depth_views > 0) {
-    metrics["test"]["depth_abs_error"] = depth_err / depth_views;
-    metrics["test"]["depth_abs_error_over_extent"] = depth_err / depth_views / scene.extent;
+  if (t.depth_views > 0) {
+    metrics["test"]["depth_abs_error"] = t.depth_error / t.depth_views;
+    metrics["test"]["depth_abs_error_over_extent"] =
+        t.depth_error / t.depth_views / st.scene.extent;
   }
-  if (ground_truth.found()) {
-    const Status reported = ReportGeometry(&solver, options, scene, ground_truth, gt_depth.get(),
-                                           surface, &mesh, depth_after_warmup.path(), &metrics);
+  return metrics;
+}
+
+Status ReconstructionPipeline::WriteMetrics(RunState* st) {
+  nlohmann::json metrics = MetricsJson(*st);
+  if (st->ground_truth.found()) {
+    const Status reported = ReportGeometry(st->solver.get(), st->options, st->scene,
+                                           st->ground_truth, st->gt_depth.get(), st->surface,
+                                           &st->mesh, st->depth_after_warmup->path(), &metrics);
     if (!reported.ok()) std::fprintf(stderr, "warning: %s\n", reported.message().c_str());
   }
-  if (stop_requested_) return stop_writing();
-  // Last: the manifest of every file this run wrote, so metrics.json vouches for the folder.
-  if (test.empty()) {
+  if (stop_requested_) return StopWriting(st);
+  const TestScores& t = st->test;
+  if (t.views.empty()) {
     // No held-out view: no image score at all, rather than a 0 that reads like a measurement.
     metrics["test"] = {{"views", 0},
                        {"note", "no test views (--test_every 0 and no split file): no PSNR/SSIM"}};
   }
-  metrics["files"] = out.Manifest();
-  s = out.Write("metrics.json", metrics.dump(2) + "\n");
-  if (!s.ok()) return fail(s.message());
-  out.Commit();
-  if (test.empty()) {
+  // Last: the manifest of every file this run wrote, so metrics.json vouches for the folder.
+  metrics["files"] = st->out.Manifest();
+  MGSR_RETURN_IF_ERROR(st->out.Write("metrics.json", metrics.dump(2) + "\n"));
+  st->out.Commit();
+  if (t.views.empty()) {
     std::printf("test views: none (--test_every 0 and no split file), so no PSNR/SSIM");
   } else {
-    std::printf("test views: PSNR %.2f dB, SSIM %.4f (exposure-aligned %.2f dB, %.4f)", psnr, ssim,
-                psnr_aligned, ssim_aligned);
+    std::printf("test views: PSNR %.2f dB, SSIM %.4f (exposure-aligned %.2f dB, %.4f)", t.psnr,
+                t.ssim, t.psnr_aligned, t.ssim_aligned);
   }
-  if (depth_views > 0)
-    std::printf(", 2DGS depth error %.4f (%.3f%% of the extent)", depth_err / depth_views,
-                100 * depth_err / depth_views / scene.extent);
-  std::printf("\nmesh: %s (%zu triangles); metrics: %s; total %.0f s\n", mesh_path.c_str(),
-              mesh.triangles.size(), out.Path("metrics.json").c_str(), total.ElapsedSeconds());
-  *end = ReconstructionEnd::kFinished;
+  if (t.depth_views > 0)
+    std::printf(", 2DGS depth error %.4f (%.3f%% of the extent)", t.depth_error / t.depth_views,
+                100 * t.depth_error / t.depth_views / st->scene.extent);
+  std::printf("\nmesh: %s (%zu triangles); metrics: %s; total %.0f s\n", st->mesh_path.c_str(),
+              st->mesh.triangles.size(), st->out.Path("metrics.json").c_str(),
+              st->total.ElapsedSeconds());
+  st->end = ReconstructionEnd::kFinished;
   return Status::Ok();
 }
 

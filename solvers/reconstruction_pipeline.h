@@ -8,6 +8,7 @@
 #include <csignal>
 #include <cstdint>
 #include <functional>
+#include <nlohmann/json_fwd.hpp>
 #include <string>
 
 #include "mgsr/core/status.h"
@@ -127,6 +128,33 @@ class ReconstructionPipeline {
   void RequestStop();
 
  private:
+  // The state one run hands from stage to stage (defined beside Run).
+  struct RunState;
+  // The stages, in order; Run calls them one after the other until one fails or ends the run
+  // early (sets RunState::stopped: --check, Ctrl-C, a process that only trains alongside).
+  Status RunStages(RunState* st);
+  Status OpenOutput(RunState* st);           // checks the options, locks the output folder
+  Status RunColmap(RunState* st);            // photos given: colmap makes the workspace
+  Status LoadInput(RunState* st);            // reads the scene and checks it can be trained
+  Status ChooseSceneSettings(RunState* st);  // backgrounds, weights, the loss configuration
+  Status ChooseBudget(RunState* st);         // the primitive budget of each branch
+  Status ChooseMeshRegion(RunState* st);     // the region the mesh is fused in
+  Status ChooseBatches(RunState* st);        // views per step; checks the final options
+  Status CreateSolver(RunState* st);         // the models; a group's agreement; --resume
+  Status FollowOrCheck(RunState* st);        // other processes of a group; --check ends here
+  Status PrepareOutputs(RunState* st);       // clears the old results; log and callbacks
+  Status TrainModels(RunState* st);          // training; the finished state checkpointed
+  Status WriteModels(RunState* st);          // the branches' models and learnt backgrounds
+  Status ScoreTestViews(RunState* st);       // test-view scores and renders
+  Status ExtractMesh(RunState* st);          // TSDF fusion of the 2DGS depth: mesh.ply
+  Status WriteMetrics(RunState* st);         // metrics.json (the run's manifest) and summary
+  // One test view's scores (added to st->test) and renders.
+  Status ScoreTestView(RunState* st, const View& view);
+  // metrics.json's content but for the ground-truth geometry and the manifest.
+  nlohmann::json MetricsJson(const RunState& st) const;
+  // Ctrl-C while writing the outputs: takes back the results so far, keeps the trained state.
+  Status StopWriting(RunState* st);
+
   // Solve with profiling as asked, RequestStop reaching the solver while it trains.
   Status Train(MutualBoostedSolver* solver, SolveSummary* summary);
   // A process of a group other than process 0: trains alongside it, renders its share of the

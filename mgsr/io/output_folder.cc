@@ -42,8 +42,11 @@ const std::vector<std::string>& OutputFolder::StateNames() {
 }
 
 Status OutputFolder::Open(const std::string& dir, OutputMode mode, OutputFolder* folder) {
+  // `folder` is set only once the lock is held: a refused open must leave nothing a Discard() of
+  // the caller could clear (the folder may be another run's).
   *folder = OutputFolder();
-  folder->dir_ = dir;
+  OutputFolder opened;
+  opened.dir_ = dir;
   std::error_code ec;
   if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
     return Status::Error(dir + ": output exists and is not a folder");
@@ -53,7 +56,7 @@ Status OutputFolder::Open(const std::string& dir, OutputMode mode, OutputFolder*
                          ": output folder is not empty (use --overwrite to replace a previous "
                          "run, or --resume to continue it)");
   }
-  folder->mode_ = mode;
+  opened.mode_ = mode;
   MGSR_RETURN_IF_ERROR(MakeDirectories(dir));
   const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (fd < 0)
@@ -67,10 +70,11 @@ Status OutputFolder::Open(const std::string& dir, OutputMode mode, OutputFolder*
                            "or choose another --output");
     return Status::Error(dir + ": cannot lock the output folder: " + std::strerror(err));
   }
-  folder->lock_ = std::shared_ptr<int>(new int(fd), [](int* p) {
+  opened.lock_ = std::shared_ptr<int>(new int(fd), [](int* p) {
     ::close(*p);
     delete p;
   });
+  *folder = std::move(opened);
   return Status::Ok();
 }
 

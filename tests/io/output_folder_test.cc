@@ -95,6 +95,13 @@ TEST(OutputFolderTest, OneRunAtATime) {
   EXPECT_EQ(s.message(), dir +
                              ": another run is writing into this output folder; wait for it to "
                              "end or choose another --output");
+  // The refused run cleans up after its own failure: that must not touch the first run's results.
+  ASSERT_TRUE(first.Prepare().ok());
+  ASSERT_TRUE(WriteStringToFileAtomic(first.Path("mesh.ply"), "first").ok());
+  ASSERT_TRUE(first.Record("mesh.ply").ok());
+  second.Discard();
+  EXPECT_TRUE(FileExists(dir + "/mesh.ply"));
+  EXPECT_TRUE(second.dir().empty());
   first = OutputFolder();  // the first run ends: its lock goes with it
   EXPECT_TRUE(OutputFolder::Open(dir, OutputMode::kOverwrite, &second).ok());
 }
