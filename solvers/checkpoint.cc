@@ -132,7 +132,7 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
       if (name == "max_gaussians" || name == "max_surfels")
         hint =
             " (derived from the scene's size in pixels and --budget: did --downscale, "
-            "--max_width, --budget or the photos change?)";
+            "--max_size, --max_width, --budget or the photos change?)";
       else if (name == "lambda_normal")
         hint = " (derived from whether the views have masks, unless --lambda_normal is given)";
       else if (name == "background_2d" || name == "background_3d" || name == "environment")

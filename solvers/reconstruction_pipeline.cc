@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 
@@ -31,6 +32,7 @@
 #include "solvers/backdrop.h"
 #include "solvers/checkpoint_callback.h"
 #include "solvers/density_control.h"
+#include "solvers/eta_estimator.h"
 #include "solvers/mutual_boosted_solver.h"
 #include "solvers/profile_report.h"
 #include "solvers/trained_views.h"
@@ -49,6 +51,26 @@ std::string FileSha256(const std::string& path) {
 // footprints: the surface biases it shows are fractions of a pixel to a few pixels.
 constexpr double kErrorMapFootprints = 2.0;
 
+// A test view's render and photo as they are scored: the photo composited on the branch's
+// background by its alpha; for an RGB photo with a separate mask, both composited through the
+// mask, so the score is the object's and not the photo's backdrop's (which the model was never
+// asked to reproduce on that background).
+struct ScoredPair {
+  Image render, truth;
+};
+ScoredPair ScoredImages(const View& v, const Image& render, float background) {
+  ScoredPair p{render, CompositeOnBackground(v, background)};
+  if (!v.alpha.empty() || v.mask.empty()) return p;
+  for (int c = 0; c < 3; ++c) {
+    for (size_t i = 0; i < p.render.plane_size(); ++i) {
+      const float m = v.mask.data()[i];
+      p.render.plane(c)[i] = render.plane(c)[i] * m + background * (1 - m);
+      p.truth.plane(c)[i] = v.image.plane(c)[i] * m + background * (1 - m);
+    }
+  }
+  return p;
+}
+
 // Test-view PSNR of the 3DGS composite every N iterations (after a 3DGS step, when the renderer's
 // state is free to reuse), against the photo on the 3DGS branch's background: the composite the
 // final evaluation scores.
@@ -65,8 +87,8 @@ class TestEvaluation : public IterationCallback {
     for (int v : test) {
       GaussianRender r;
       solver_->RenderGaussians(scene_.views[v].camera, &r);
-      const Image gt = CompositeOnBackground(scene_.views[v], background_);
-      psnr += std::min(100.0, Psnr(r.color, gt));
+      const ScoredPair scored = ScoredImages(scene_.views[v], r.color, background_);
+      psnr += std::min(100.0, Psnr(scored.render, scored.truth));
     }
     std::printf("[%s %5d] test PSNR %.2f dB (%zu views)\n",
                 i.stage == Stage::kWarmup ? "warmup" : "mutual", i.iteration, psnr / test.size(),
@@ -200,13 +222,16 @@ class ProgressLog : public IterationCallback {
  public:
   // A progress line follows each step of the last branch of a round (the 3DGS branch, or the 2DGS
   // branch when it trains alone); an untrained branch shows as "-".
+  // The budgets (0: none) bound where a growing model is heading, for the time left.
   ProgressLog(const std::string& csv_path, int every, int expected_total, bool append,
-              bool train_2d, bool train_3d)
+              bool train_2d, bool train_3d, size_t max_surfels, size_t max_gaussians)
       : path_(csv_path),
         every_(every),
         expected_(expected_total),
         train_2d_(train_2d),
-        train_3d_(train_3d) {
+        train_3d_(train_3d),
+        max_surfels_(max_surfels),
+        max_gaussians_(max_gaussians) {
     // A resumed run continues the log; a missing or empty one (peek fails alike) starts with its
     // header.
     const bool header =
@@ -233,8 +258,25 @@ class ProgressLog : public IterationCallback {
     csv_ << "\n";
     (is2d ? loss_2d_ : loss_3d_) = i.loss;
     ++steps_;
+    // The trained branches' primitives, and where they are heading: the budgets while the model
+    // still grows (a branch without one stays where it is).
+    const double surfels = train_2d_ ? i.num_surfels : 0,
+                 gaussians = train_3d_ ? i.num_gaussians : 0;
+    const double primitives = surfels + gaussians;
+    if (steps_ == 1) window_ = {steps_, i.seconds, primitives};
     if (i.iteration % every_ == 0 && is2d != train_3d_) {
-      const double eta = steps_ > 0 ? i.seconds / steps_ * std::max(0, expected_ - steps_) : 0;
+      eta_.AddWindow(steps_ - window_.steps, i.seconds - window_.seconds,
+                     0.5 * (primitives + window_.primitives));
+      const bool growing = primitives > window_.primitives;
+      const double heading =
+          (train_2d_
+               ? (growing && max_surfels_ > 0 ? std::max<double>(surfels, max_surfels_) : surfels)
+               : 0) +
+          (train_3d_ ? (growing && max_gaussians_ > 0 ? std::max<double>(gaussians, max_gaussians_)
+                                                      : gaussians)
+                     : 0);
+      window_ = {steps_, i.seconds, primitives};
+      const double eta = eta_.SecondsLeft(std::max(0, expected_ - steps_), heading);
       const std::string loss_2d = train_2d_ ? Format("%.4f", loss_2d_) : "-";
       const std::string loss_3d = train_3d_ ? Format("%.4f", loss_3d_) : "-";
       const std::string surfels = train_2d_ ? std::to_string(i.num_surfels) : "-";
@@ -259,6 +301,13 @@ class ProgressLog : public IterationCallback {
 
   int every_, expected_, steps_ = 0;
   bool train_2d_, train_3d_;
+  size_t max_surfels_, max_gaussians_;
+  // Where the latest progress window started: steps, seconds, primitives.
+  struct {
+    int steps;
+    double seconds, primitives;
+  } window_ = {0, 0, 0};
+  EtaEstimator eta_;
   double loss_2d_ = 0, loss_3d_ = 0;
 };
 
@@ -304,6 +353,8 @@ std::string ChooseBackground(const std::string& flag, double level, const Scene&
 struct TestScores {
   std::vector<int> views;
   double psnr = 0, ssim = 0, psnr_aligned = 0, ssim_aligned = 0;
+  double psnr_foreground = 0;  // over the views with a mask (foreground_views)
+  int foreground_views = 0;
   double depth_error = 0;  // mean |depth - truth| per view, summed over depth_views
   int depth_views = 0;
   nlohmann::json per_view = nlohmann::json::array();
@@ -547,6 +598,7 @@ Status ReconstructionPipeline::LoadInput(RunState* st) {
   MGSR_RETURN_IF_ERROR(LoadScene(st->workspace, options_.scene, &scene));
   MGSR_RETURN_IF_ERROR(CheckTrainable(scene));
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  for (const std::string& n : scene.notes) std::printf("photos: %s\n", n.c_str());
   st->load_seconds = load_timer.ElapsedSeconds();
   const Camera& cam0 = scene.views.front().camera;
   std::printf("scene: %s (%s), %zu train / %zu test views, %dx%d, %zu points, masks: %s\n",
@@ -703,7 +755,7 @@ Status ReconstructionPipeline::PrepareOutputs(RunState* st) {
       st->out.Path("log.csv"), o.log_every,
       trained_branches * options.warmup_max_iterations +
           (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations,
-      o.resume, options.train_2d, options.train_3d);
+      o.resume, options.train_2d, options.train_3d, options.max_surfels, options.max_gaussians);
   MGSR_RETURN_IF_ERROR(st->log->Flush());
   solver.AddCallback(st->log.get());
   st->evaluation =
@@ -825,14 +877,23 @@ Status ReconstructionPipeline::ScoreTestView(RunState* st, const View& v) {
   const ViewRender rendered = RenderView(st->solver.get(), st->options, v.camera);
   const Appearance& g = rendered.appearance;
   const Geometry& sr = rendered.geometry;
-  const Image gt = CompositeOnBackground(v, g.background);
-  const double p = std::min(100.0, Psnr(g.color, gt)), q = Ssim(g.color, gt);
+  const ScoredPair scored = ScoredImages(v, g.color, g.background);
+  const Image& gt = scored.truth;
+  const double p = std::min(100.0, Psnr(scored.render, gt)), q = Ssim(scored.render, gt);
   t.psnr += p;
   t.ssim += q;
   // Exposure-aligned: the test views' light and exposure are not predictable from the training
   // views.
   const AlignedScores aligned =
-      ExposureAlignedScores(g.color, gt, v.mask.empty() ? nullptr : &v.mask);
+      ExposureAlignedScores(scored.render, gt, v.mask.empty() ? nullptr : &v.mask);
+  // The object alone (where the mask is): comparable across framings of the same capture.
+  const double foreground = v.mask.empty()
+                                ? std::numeric_limits<double>::quiet_NaN()
+                                : std::min(100.0, ForegroundPsnr(scored.render, gt, v.mask));
+  if (std::isfinite(foreground)) {
+    t.psnr_foreground += foreground;
+    ++t.foreground_views;
+  }
   t.psnr_aligned += std::min(100.0, aligned.psnr);
   t.ssim_aligned += aligned.ssim;
   const std::string stem = FileStem(v.name);
@@ -860,6 +921,7 @@ Status ReconstructionPipeline::ScoreTestView(RunState* st, const View& v) {
                         {"ssim", q},
                         {"psnr_aligned", std::min(100.0, aligned.psnr)},
                         {"ssim_aligned", aligned.ssim}});
+  if (std::isfinite(foreground)) t.per_view.back()["psnr_foreground"] = foreground;
   // Depth error against ground-truth depth maps when the scene has them (synthetic scenes);
   // the signed error map also from the exact depth of a ground-truth mesh (suzanne).
   Image gt_depth;
@@ -997,6 +1059,8 @@ nlohmann::json ReconstructionPipeline::MetricsJson(const RunState& st) const {
     }
     metrics["exposure"]["views"] = views;
   }
+  if (t.foreground_views > 0)
+    metrics["test"]["psnr_foreground"] = t.psnr_foreground / t.foreground_views;
   if (t.depth_views > 0) {
     metrics["test"]["depth_abs_error"] = t.depth_error / t.depth_views;
     metrics["test"]["depth_abs_error_over_extent"] =

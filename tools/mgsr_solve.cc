@@ -54,7 +54,9 @@ DEFINE_string(method, "mgsr",
               "mgsr (both branches) | 2dgs (the 2DGS branch alone) | 3dgs (plain 3DGS alone, no "
               "reflection) | 3dgs-ref (the 3DGS branch with reflection, alone).");
 DEFINE_int32(downscale, 1, "Divide the input resolution by this factor.");
-DEFINE_int32(max_width, 1600, "Cap the image width after downscaling (0: no cap).");
+DEFINE_int32(max_size, 1600,
+             "Cap the images' long side after downscaling, keeping the aspect (0: no cap).");
+DEFINE_int32(max_width, 0, "Also cap the image width after downscaling (0: no cap).");
 DEFINE_int32(test_every, 8,
              "Without a split file, every Nth image (by name) is held out (0: none).");
 DEFINE_int32(far_points, 0,
@@ -259,8 +261,8 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
       "mgsr_solve (--workspace DIR | --images DIR [--masks DIR]) --output DIR [--preset "
       "fast|paper] [options]",
       {{"Input",
-        {"workspace", "images", "masks", "downscale", "max_width", "test_every", "background",
-         "far_points", "far_radius"}},
+        {"workspace", "images", "masks", "downscale", "max_size", "max_width", "test_every",
+         "background", "far_points", "far_radius"}},
        {"Photos to cameras (with --images)",
         {"colmap", "per_image_cameras", "camera_model", "exhaustive_max_images", "max_image_size"}},
        {"Output and run control",
@@ -410,6 +412,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   ro.background = FLAGS_background;
   ro.scene.downscale = FLAGS_downscale;
   ro.scene.max_width = FLAGS_max_width;
+  ro.scene.max_size = FLAGS_max_size;
   ro.scene.test_every = FLAGS_test_every;
   ro.scene.seed = FLAGS_seed;
   ro.scene.far_points = FLAGS_far_points;

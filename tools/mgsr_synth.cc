@@ -45,6 +45,13 @@ DEFINE_double(pose_noise_rel, 0,
               "Noisy poses: rms camera-centre error, as a fraction of the camera distance.");
 DEFINE_bool(masks, true, "Write masks/ and RGBA photos; false: RGB photos on grey, no masks.");
 DEFINE_bool(constant_light_copy, false, "Also render images_constant/ under one fixed light.");
+DEFINE_string(lens, "pinhole",
+              "The photos' lens: pinhole, opencv (barrel with tangential terms) or fisheye "
+              "(OpenCV's equidistant model); a distorted scene carries its lens in sparse/ and in "
+              "one nerfstudio transforms.json.");
+DEFINE_bool(per_frame_focal, false,
+            "Each view its own focal length (x0.85..1.15): per-frame intrinsics in "
+            "transforms.json, one COLMAP camera per view.");
 
 int main(int argc, char** argv) {
   mgsr_tools::ParseToolFlags(
@@ -55,7 +62,7 @@ int main(int argc, char** argv) {
         {"shape", "mesh", "detail", "texture", "specular", "shininess", "mirror", "num_points"}},
        {"Cameras and photos",
         {"num_views", "width", "height", "distance", "test_every", "supersampling",
-         "pose_noise_deg", "pose_noise_rel"}},
+         "pose_noise_deg", "pose_noise_rel", "lens", "per_frame_focal"}},
        {"Light", {"varying_light", "exposure_stops"}},
        {"Randomness", {"seed"}}},
       &argc, &argv);
@@ -88,6 +95,8 @@ int main(int argc, char** argv) {
   o.pose_noise_deg = FLAGS_pose_noise_deg;
   o.pose_noise_rel = FLAGS_pose_noise_rel;
   o.masks = FLAGS_masks;
+  o.lens = FLAGS_lens;
+  o.per_frame_focal = FLAGS_per_frame_focal;
   mgsr::Timer timer;
   const mgsr::Status s = mgsr::WriteSyntheticScene(o, FLAGS_output);
   if (!s.ok()) {

@@ -28,6 +28,25 @@ double Psnr(const Image& a, const Image& b) {
   return 10.0 * std::log10(1.0 / mse);
 }
 
+double ForegroundPsnr(const Image& a, const Image& b, const Image& mask) {
+  CHECK(a.SameShape(b)) << "PSNR of images with different shapes";
+  CHECK(mask.width() == a.width() && mask.height() == a.height()) << "mask of another size";
+  double se = 0;
+  size_t n = 0;
+  for (size_t i = 0; i < a.plane_size(); ++i) {
+    if (!(mask.data()[i] >= 0.5f)) continue;
+    for (int c = 0; c < a.channels(); ++c) {
+      const double d = static_cast<double>(a.plane(c)[i]) - b.plane(c)[i];
+      se += d * d;
+      ++n;
+    }
+  }
+  if (n == 0) return std::numeric_limits<double>::quiet_NaN();
+  const double mse = se / n;
+  if (mse <= 0) return std::numeric_limits<double>::infinity();
+  return 10.0 * std::log10(1.0 / mse);
+}
+
 double Ssim(const Image& a, const Image& b) {
   CHECK(a.SameShape(b)) << "SSIM of images with different shapes";
   constexpr double kC1 = 0.01 * 0.01, kC2 = 0.03 * 0.03;

@@ -12,6 +12,9 @@ namespace mgsr {
 
 // Both images must have the same shape. Identical images give +infinity.
 double Psnr(const Image& a, const Image& b);
+// PSNR over the pixels where `mask` (one channel, a's size) is at least 0.5: the object alone,
+// whatever the framing puts around it. NaN when the mask selects nothing.
+double ForegroundPsnr(const Image& a, const Image& b, const Image& mask);
 double Ssim(const Image& a, const Image& b);
 
 // The normalised 1-D Gaussian window used by SSIM (size 11, sigma 1.5).

@@ -4,6 +4,7 @@
 #include <map>
 #include <set>
 
+#include "mgsr/core/lens.h"
 #include "mgsr/io/colmap_model.h"
 #include "mgsr/io/file_util.h"
 #include "mgsr/io/scene.h"
@@ -62,8 +63,29 @@ Status LoadColmapScene(const std::string& root, const SceneOptions& options, Sce
   MGSR_RETURN_IF_ERROR(ValidateColmapModel(model, model_dir));
   if (model.images.empty()) return Status::Error(model_dir + ": the model has no images");
 
-  std::map<uint32_t, const ColmapCamera*> cameras;
-  for (const ColmapCamera& c : model.cameras) cameras[c.camera_id] = &c;
+  // Each camera's lens and the pinhole image it is undistorted to (the maps only when the photos
+  // are read): once per camera, shared by its images.
+  std::map<uint32_t, Undistortion> lenses;
+  std::map<uint32_t, int> views_per_camera;
+  for (const ColmapImage& im : model.images) ++views_per_camera[im.camera_id];
+  for (const ColmapCamera& c : model.cameras) {
+    if (!views_per_camera.count(c.camera_id)) continue;
+    const std::string where = model_dir + ": camera " + std::to_string(c.camera_id);
+    const CameraModelInfo* info = FindCameraModel(c.model_id);
+    if (info == nullptr)
+      return Status::Error(where + ": unknown model id " + std::to_string(c.model_id));
+    Lens lens;
+    Status s = LensFromColmap(info->name, c.params.data(), static_cast<int>(c.params.size()),
+                              static_cast<int>(c.width), static_cast<int>(c.height), &lens);
+    if (!s.ok()) return s.WithContext(where + ": ");
+    Undistortion& u = lenses[c.camera_id];
+    MGSR_RETURN_IF_ERROR(MakeUndistortion(lens, options.load_images, where, &u));
+    if (!lens.IsPinhole()) {
+      scene->notes.push_back("camera " + std::to_string(c.camera_id) + " (" +
+                             std::to_string(views_per_camera[c.camera_id]) +
+                             " views): " + u.Describe());
+    }
+  }
 
   // Views sorted by image name (ids need not follow file order).
   std::vector<const ColmapImage*> images;
@@ -99,8 +121,21 @@ Status LoadColmapScene(const std::string& root, const SceneOptions& options, Sce
     const ColmapImage& im = *images[i];
     View& v = scene->views[i];
     v.name = im.name;
-    Status s = MakePinholeCamera(*cameras.at(im.camera_id), im, &v.camera);
-    if (!s.ok()) return s.WithContext(model_dir + ": ");
+    const Undistortion& u = lenses.at(im.camera_id);
+    Camera& c = v.camera;
+    c.width = u.lens.width;
+    c.height = u.lens.height;
+    c.fx = u.fx;
+    c.fy = u.fy;
+    c.cx = u.cx;
+    c.cy = u.cy;
+    c.SetRotationFromQuaternion(im.qvec[0], im.qvec[1], im.qvec[2], im.qvec[3]);
+    c.t = im.tvec;
+    if (!c.IsValid()) {
+      return Status::Error(model_dir + ": image " + im.name +
+                           ": invalid camera (non-positive focal length, zero size or NaN/inf "
+                           "values)");
+    }
     v.is_test = has_split ? test_names.count(im.name) > 0
                           : (options.test_every > 0 && i % options.test_every == 0);
   }
@@ -123,7 +158,8 @@ Status LoadColmapScene(const std::string& root, const SceneOptions& options, Sce
           continue;
         }
       }
-      statuses[i] = LoadViewImages(JoinPath(image_dir, v.name), mask_path, options, &v);
+      statuses[i] = LoadViewImages(JoinPath(image_dir, v.name), mask_path, options, &v,
+                                   &lenses.at(images[i]->camera_id));
     }
     for (const Status& s : statuses) MGSR_RETURN_IF_ERROR(s);
     // Without a masks folder, RGBA images give their alpha as the mask.

@@ -122,7 +122,8 @@ Status ValidateViews(const Scene& scene) {
 
 Status LoadByLayout(const std::string& path, const SceneOptions& options, Scene* scene) {
   const bool colmap = DirectoryExists(JoinPath(path, "sparse"));
-  const bool blender = FileExists(JoinPath(path, "transforms_train.json"));
+  const bool blender = FileExists(JoinPath(path, "transforms_train.json")) ||
+                       FileExists(JoinPath(path, "transforms.json"));
   if (colmap) return LoadColmapScene(path, options, scene);
   // `colmap image_undistorter` output inside a workspace: dense/images + dense/sparse/.
   const std::string dense = JoinPath(path, "dense");
@@ -130,8 +131,8 @@ Status LoadByLayout(const std::string& path, const SceneOptions& options, Scene*
     return LoadColmapScene(dense, options, scene);
   if (blender) return LoadBlenderScene(path, options, scene);
   return Status::Error(path +
-                       ": not a scene (expected sparse/ for COLMAP or transforms_train.json "
-                       "for Blender)");
+                       ": not a scene (expected sparse/ for COLMAP, transforms.json for "
+                       "nerfstudio / instant-ngp, or transforms_train.json for Blender)");
 }
 
 }  // namespace
@@ -139,17 +140,29 @@ Status LoadByLayout(const std::string& path, const SceneOptions& options, Scene*
 Status LoadScene(const std::string& path, const SceneOptions& options, Scene* scene) {
   if (options.downscale < 1) return Status::Error("--downscale must be >= 1");
   if (options.max_width < 0) return Status::Error("--max_width must be >= 0");
+  if (options.max_size < 0) return Status::Error("--max_size must be >= 0");
   if (!DirectoryExists(path)) return Status::Error(path + ": scene folder does not exist");
   if (options.far_points < 0) return Status::Error("--far_points must be >= 0");
   if (!(options.far_radius > 1)) return Status::Error("--far_radius must be > 1");
   MGSR_RETURN_IF_ERROR(LoadByLayout(path, options, scene));
   MGSR_RETURN_IF_ERROR(ValidateViews(*scene));
+  // Say when the cap made the photos smaller (a user plans time and detail by it).
+  const View& first = scene->views.front();
+  const int downscaled_long =
+      std::max(first.photo_width, first.photo_height) / std::max(1, options.downscale);
+  if (options.load_images && options.max_size > 0 && downscaled_long > options.max_size) {
+    scene->notes.push_back(
+        "resized from " + std::to_string(first.photo_width) + "x" +
+        std::to_string(first.photo_height) + " to " + std::to_string(first.camera.width) + "x" +
+        std::to_string(first.camera.height) + ": the long side is capped at " +
+        std::to_string(options.max_size) + " px (--max_size; 0 keeps the photos' size)");
+  }
   AddFarPoints(options.far_points, options.far_radius, options.seed, scene);
   return Status::Ok();
 }
 
 Status LoadViewImages(const std::string& image_path, const std::string& mask_path,
-                      const SceneOptions& options, View* view) {
+                      const SceneOptions& options, View* view, const Undistortion* undistortion) {
   Image raw;
   MGSR_RETURN_IF_ERROR(ReadImage(image_path, &raw));
   Camera& cam = view->camera;
@@ -178,12 +191,22 @@ Status LoadViewImages(const std::string& image_path, const std::string& mask_pat
     // A mask may be grey, RGB or RGBA; take the first channel (method.md 1.13: mask[0]).
     mask = ExtractChannels(m, 0, 1);
   }
+  if (undistortion != nullptr && !undistortion->map_x.empty()) {
+    rgb = UndistortImage(*undistortion, rgb);
+    if (!alpha.empty()) alpha = UndistortImage(*undistortion, alpha);
+    if (!mask.empty()) mask = UndistortImage(*undistortion, mask);
+  }
   int width = raw.width(), height = raw.height();
   if (options.downscale > 1) {
     width =
         std::max(1, static_cast<int>(std::lround(static_cast<double>(width) / options.downscale)));
     height =
         std::max(1, static_cast<int>(std::lround(static_cast<double>(height) / options.downscale)));
+  }
+  if (options.max_size > 0 && std::max(width, height) > options.max_size) {
+    const double scale = static_cast<double>(options.max_size) / std::max(width, height);
+    width = std::max(1, static_cast<int>(std::lround(width * scale)));
+    height = std::max(1, static_cast<int>(std::lround(height * scale)));
   }
   if (options.max_width > 0 && width > options.max_width) {
     height = std::max(
@@ -196,6 +219,8 @@ Status LoadViewImages(const std::string& image_path, const std::string& mask_pat
     if (!mask.empty()) mask = ResizeImage(mask, width, height);
     cam = cam.Resized(width, height);
   }
+  view->photo_width = raw.width();
+  view->photo_height = raw.height();
   view->image = std::move(rgb);
   view->alpha = std::move(alpha);
   view->mask = std::move(mask);

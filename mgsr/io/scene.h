@@ -1,10 +1,15 @@
-// Scene: what the solver trains on, read from a COLMAP workspace or a Blender/NeRF-synthetic
-// folder.
+// Scene: what the solver trains on, read from a COLMAP workspace, a nerfstudio / instant-ngp
+// transforms.json or a Blender/NeRF-synthetic folder. Photos through a distorted lens are
+// resampled once to pinhole images (mgsr/io/undistort.h); the solver sees pinhole cameras only.
 //
 // COLMAP workspace:  images/, optional masks/<stem>.png|jpg (or <name>.png), sparse/0/ or sparse/
-//                    (binary or text), optional split.txt / test.txt listing test image names; or
-//                    the `colmap image_undistorter` output (dense/images + dense/sparse/), given as
-//                    the workspace or as the dense/ folder itself.
+//                    (binary or text; every camera model but FOV and THIN_PRISM_FISHEYE), optional
+//                    split.txt / test.txt listing test image names; or the `colmap
+//                    image_undistorter` output (dense/images + dense/sparse/), given as the
+//                    workspace or as the dense/ folder itself.
+// nerfstudio:        one transforms.json: global or per-frame fl_x fl_y cx cy w h, camera_model
+//                    PINHOLE / OPENCV / OPENCV_FISHEYE with k1..k4 p1 p2, train_filenames /
+//                    test_filenames (else every test_every-th frame), ply_file_path, mask_path.
 // Blender folder:    transforms_train.json, transforms_test.json, images referenced by file_path
 //                    (RGBA), masks from the frame's mask_path, masks/<basename>.png, or alpha.
 #pragma once
@@ -17,6 +22,7 @@
 #include "mgsr/core/camera.h"
 #include "mgsr/core/image.h"
 #include "mgsr/core/status.h"
+#include "mgsr/io/undistort.h"
 
 namespace mgsr {
 
@@ -27,12 +33,15 @@ struct View {
   Image alpha;  // 1 channel, empty when the file had no alpha
   Image mask;   // 1 channel in [0, 1] (foreground = 1), empty when the scene has no masks
   bool is_test = false;
+  int photo_width = 0, photo_height = 0;  // the photo's own size (before downscale and caps)
 };
 
 struct SceneOptions {
-  int downscale = 1;     // divide the resolution by this factor
-  int max_width = 1600;  // then cap the width (0 = no cap), as the reference loader does
-  int test_every = 8;    // without a split file, every Nth image (by name) is a test view; 0 = none
+  int downscale = 1;  // divide the resolution by this factor
+  // Then cap the long side (0 = no cap), as 3DGS's loader does above 1.6k, and the width.
+  int max_size = 1600;
+  int max_width = 0;
+  int test_every = 8;  // without a split file, every Nth image (by name) is a test view; 0 = none
   bool load_images = true;     // false: cameras and points only
   int random_points = 100000;  // points drawn when the model has none
   // Unbounded captures: this many more points on a sphere far around the cameras (AddFarPoints),
@@ -44,7 +53,7 @@ struct SceneOptions {
 
 struct Scene {
   std::string root;
-  std::string source;  // "colmap" or "blender"
+  std::string source;  // "colmap", "nerfstudio" or "blender"
   std::vector<View> views;
   std::vector<Eigen::Vector3f> points;        // initialisation points
   std::vector<Eigen::Vector3f> point_colors;  // in [0, 1]
@@ -52,6 +61,8 @@ struct Scene {
   Eigen::Vector3d center = Eigen::Vector3d::Zero();
   double extent = 1.0;  // 1.1 x max distance of training cameras from their centroid (ref. 1.8)
   std::vector<std::string> warnings;
+  // What the loader did to the photos that a user should know (lenses undistorted, sizes capped).
+  std::vector<std::string> notes;
 
   std::vector<int> TrainIndices() const;
   std::vector<int> TestIndices() const;
@@ -78,9 +89,12 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
 
 // Shared steps, exposed for the loaders and tests.
 // Reads an image (and its mask, when mask_path is non-empty), checks the size against the camera,
-// splits off alpha and resizes image, mask and camera per the options.
+// splits off alpha, resamples a distorted photo to its pinhole image (`undistortion`, when given:
+// the view's camera already has the pinhole intrinsics) and resizes image, mask and camera per
+// the options.
 Status LoadViewImages(const std::string& image_path, const std::string& mask_path,
-                      const SceneOptions& options, View* view);
+                      const SceneOptions& options, View* view,
+                      const Undistortion* undistortion = nullptr);
 // Centre and extent from the training cameras (reference getNerfppNorm).
 void ComputeSceneExtent(Scene* scene);
 // Uniform points inside the volume that all training cameras see (relaxed to most cameras if

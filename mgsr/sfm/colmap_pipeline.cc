@@ -73,18 +73,34 @@ class StepRunner {
     std::string unfinished_line, unit;
     double done = 0, total = 0;
     ProgressMeter meter(step, "", 5.0, options_.log);
+    // A step whose log says nothing countable for a while (exhaustive matching of a few photos is
+    // one block) still gets a line at least every quiet_seconds, so a run never looks hung.
+    double last_line_at = 0;
     const auto show_progress = [&] {
       std::ifstream in(summary_->log_path, std::ios::binary);
-      if (!in || ec) return;
-      in.seekg(static_cast<std::streamoff>(read_to));
-      std::string text = unfinished_line + std::string((std::istreambuf_iterator<char>(in)),
-                                                       std::istreambuf_iterator<char>());
-      read_to += text.size() - unfinished_line.size();
-      const size_t last_newline = text.rfind('\n');
-      unfinished_line = last_newline == std::string::npos ? text : text.substr(last_newline + 1);
-      text.resize(last_newline == std::string::npos ? 0 : last_newline + 1);
-      if (LatestColmapProgress(text, num_images_, &done, &total, &unit)) meter.set_unit(unit);
-      if (total > 0) meter.UpdateAt(done, total, timer.ElapsedSeconds());
+      if (in && !ec) {
+        in.seekg(static_cast<std::streamoff>(read_to));
+        std::string text = unfinished_line + std::string((std::istreambuf_iterator<char>(in)),
+                                                         std::istreambuf_iterator<char>());
+        read_to += text.size() - unfinished_line.size();
+        const size_t last_newline = text.rfind('\n');
+        unfinished_line = last_newline == std::string::npos ? text : text.substr(last_newline + 1);
+        text.resize(last_newline == std::string::npos ? 0 : last_newline + 1);
+        if (LatestColmapProgress(text, num_images_, &done, &total, &unit)) meter.set_unit(unit);
+        if (total > 0 && meter.UpdateAt(done, total, timer.ElapsedSeconds()))
+          last_line_at = timer.ElapsedSeconds();
+      }
+      const double now = timer.ElapsedSeconds();
+      if (now - last_line_at >= options_.quiet_seconds) {
+        char line[160];
+        std::snprintf(line, sizeof(line), "%s: running, %.0f s", step.c_str(), now);
+        std::string text = line;
+        if (total > 0)
+          text += " (" + std::to_string(static_cast<long>(done)) + "/" +
+                  std::to_string(static_cast<long>(total)) + " " + unit + " so far)";
+        options_.log(text);
+        last_line_at = now;
+      }
     };
     // Headless: colmap links Qt, which needs a display unless told otherwise.
     const ProgramResult r =

@@ -26,6 +26,8 @@ struct ColmapPipelineOptions {
   int exhaustive_max_images = 100;  // exhaustive matching up to this many photos, sequential above
   int max_image_size = 2000;        // SIFT on images downscaled to this size (longest side)
   int num_threads = -1;             // -1: all cores
+  // A step's log line at least this often, also while colmap's own log shows nothing to count.
+  double quiet_seconds = 10;
   // Progress lines ("feature extraction ... 3.2 s"); nullptr: silent.
   std::function<void(const std::string&)> log;
 

@@ -170,6 +170,8 @@ Status SynthOptions::Validate() const {
   if (supersampling < 1 || supersampling > 8)
     return Status::Error("--supersampling must be in [1, 8]");
   if (test_every < 0) return Status::Error("--test_every must be >= 0");
+  if (lens != "pinhole" && lens != "opencv" && lens != "fisheye")
+    return Status::Error("unknown --lens '" + lens + "' (pinhole, opencv or fisheye)");
   if (!(mirror >= 0 && mirror <= 1)) return Status::Error("--mirror must be in [0, 1]");
   if (!(exposure_stops >= 0 && exposure_stops <= 6))
     return Status::Error("--exposure_stops must be in [0, 6]");
@@ -211,6 +213,43 @@ Status MakeObjectMesh(const SynthOptions& o, TriangleMesh* mesh) {
   return Status::Ok();
 }
 
+namespace {
+
+// View i's focal-length factor with per_frame_focal: its own generator, so the rest of the scene
+// (cameras, lights) is the same with and without it.
+double PerFrameFocalScale(uint64_t seed, int view) {
+  Rng rng(seed ^ (0xF0CA1ull + 7919ull * view));
+  return rng.Uniform(0.85, 1.15);
+}
+
+}  // namespace
+
+Lens SyntheticLens(const std::string& name, const Camera& c) {
+  Lens l;
+  l.width = c.width;
+  l.height = c.height;
+  l.fx = c.fx;
+  l.fy = c.fy;
+  l.cx = c.cx;
+  l.cy = c.cy;
+  if (name == "opencv") {
+    // A phone-like barrel distortion with a little decentring.
+    l.kind = Lens::Kind::kRadial;
+    l.model = "OPENCV";
+    l.k[0] = -0.3;
+    l.k[1] = 0.1;
+    l.p1 = 0.002;
+    l.p2 = -0.0015;
+  } else if (name == "fisheye") {
+    l.kind = Lens::Kind::kFisheye;
+    l.model = "OPENCV_FISHEYE";
+    l.k[0] = -0.12;
+    l.k[1] = 0.02;
+    l.k[2] = -0.004;
+  }
+  return l;
+}
+
 Status MakeSyntheticScene(const SynthOptions& o, SyntheticScene* s) {
   MGSR_RETURN_IF_ERROR(o.Validate());
   *s = SyntheticScene();
@@ -241,6 +280,12 @@ Status MakeSyntheticScene(const SynthOptions& o, SyntheticScene* s) {
       const double azimuth = 2 * kPi * (i + rng.Uniform(-0.2, 0.2)) / o.num_views;
       s->cameras.push_back(
           SceneOrbitCamera(s->layout, azimuth, o.distance, o.width, o.height, fx, &rng));
+    }
+    if (o.per_frame_focal) {
+      Camera& c = s->cameras.back();
+      const double f = PerFrameFocalScale(o.seed, i);
+      c.fx *= f;
+      c.fy *= f;
     }
     char name[32];
     std::snprintf(name, sizeof(name), "v%03d.png", i);
@@ -308,7 +353,7 @@ Eigen::Vector3d SyntheticRenderer::ShadeHit(const RayHit& hit, const Eigen::Vect
 }
 
 void SyntheticRenderer::Render(const Camera& cam, const ViewLight& light, Image* rgba, Image* depth,
-                               Image* normal) const {
+                               Image* normal, const Lens* lens) const {
   const int w = cam.width, h = cam.height, ss = options_.supersampling;
   const bool scene_level = scene_.type != SceneType::kObject;
   const double exposure = std::pow(2.0, light.exposure_stops);
@@ -317,6 +362,14 @@ void SyntheticRenderer::Render(const Camera& cam, const ViewLight& light, Image*
   *normal = Image(w, h, 3);
   const Eigen::Vector3d origin = cam.Center();
   const Eigen::Matrix3d Rt = cam.R.transpose();
+  // Camera-space ray (z = 1) through pixel coordinates (u, v): through the lens when there is one.
+  const auto pixel_ray = [&](double u, double v) -> Eigen::Vector3d {
+    if (lens == nullptr) return cam.PixelToRay(u, v);
+    Eigen::Vector2d xy;
+    if (!lens->Undistort({(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy}, &xy))
+      return cam.PixelToRay(u, v);  // outside the model's range (not for the lenses made here)
+    return {xy.x(), xy.y(), 1.0};
+  };
 #pragma omp parallel for schedule(dynamic, 4)
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
@@ -325,7 +378,7 @@ void SyntheticRenderer::Render(const Camera& cam, const ViewLight& light, Image*
       for (int sy = 0; sy < ss; ++sy) {
         for (int sx = 0; sx < ss; ++sx) {
           // Unnormalised direction with camera-space z = 1: the hit distance t is the z-depth.
-          const Eigen::Vector3d d = Rt * cam.PixelToRay(x + (sx + 0.5) / ss, y + (sy + 0.5) / ss);
+          const Eigen::Vector3d d = Rt * pixel_ray(x + (sx + 0.5) / ss, y + (sy + 0.5) / ss);
           RayHit hit;
           if (!caster_->Intersect(origin, d, 1e-9, 1e9, &hit)) {
             if (scene_level) sum += Environment(d.normalized(), light) * exposure;
@@ -342,7 +395,7 @@ void SyntheticRenderer::Render(const Camera& cam, const ViewLight& light, Image*
         for (int c = 0; c < 3; ++c) rgba->at(c, y, x) = static_cast<float>(LinearToSrgb(sum[c]));
       }
       rgba->at(3, y, x) = scene_level ? 1.0f : static_cast<float>(hits) / (ss * ss);
-      const Eigen::Vector3d d = Rt * cam.PixelToRay(x + 0.5, y + 0.5);
+      const Eigen::Vector3d d = Rt * pixel_ray(x + 0.5, y + 0.5);
       RayHit hit;
       if (caster_->Intersect(origin, d, 1e-9, 1e9, &hit)) {
         depth->at(0, y, x) = static_cast<float>(hit.t);
@@ -388,7 +441,8 @@ const char* const kSceneEntries[] = {"images",
                                      "points3d.ply",
                                      "lights.json",
                                      "transforms_train.json",
-                                     "transforms_test.json"};
+                                     "transforms_test.json",
+                                     "transforms.json"};
 
 // An empty or missing folder takes a scene; so does an older scene of ours (it has lights.json),
 // whose entries are removed first; anything else is refused, never mixed with.
@@ -415,9 +469,15 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
   SyntheticScene s;
   MGSR_RETURN_IF_ERROR(MakeSyntheticScene(o, &s));
   MGSR_RETURN_IF_ERROR(PrepareSceneFolder(out));
-  for (const char* d : {"images", "sparse/0", "gt/depth", "gt/normal"}) {
+  const bool distorted = o.lens != "pinhole";
+  // A lens or per-view focal lengths need nerfstudio's single json (the Blender pair has neither).
+  const bool single_json = distorted || o.per_frame_focal;
+  for (const char* d : {"images", "sparse/0", "gt", "gt/depth", "gt/normal"}) {
+    if (distorted && std::string(d).rfind("gt/", 0) == 0) continue;
     MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, d)));
   }
+  std::vector<Lens> lenses;
+  for (const Camera& c : s.cameras) lenses.push_back(SyntheticLens(o.lens, c));
   const bool masks = o.masks && s.type == SceneType::kObject;
   if (masks) MGSR_RETURN_IF_ERROR(MakeDirectories(JoinPath(out, "masks")));
   if (o.constant_light_copy)
@@ -428,7 +488,8 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
 
   for (size_t i = 0; i < s.cameras.size(); ++i) {
     Image rgba, depth, normal;
-    renderer.Render(s.cameras[i], s.lights[i], &rgba, &depth, &normal);
+    renderer.Render(s.cameras[i], s.lights[i], &rgba, &depth, &normal,
+                    distorted ? &lenses[i] : nullptr);
     Image mask(rgba.width(), rgba.height(), 1);
     for (size_t k = 0; k < mask.size(); ++k)
       mask.data()[k] = rgba.plane(3)[k] >= 0.5f ? 1.0f : 0.0f;
@@ -448,10 +509,13 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
       }
       MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "images/" + s.names[i]), rgb));
     }
-    MGSR_RETURN_IF_ERROR(WritePfm(JoinPath(out, "gt/depth/" + stem + ".pfm"), depth));
-    MGSR_RETURN_IF_ERROR(WritePfm(JoinPath(out, "gt/normal/" + stem + ".pfm"), normal));
+    if (!distorted) {
+      MGSR_RETURN_IF_ERROR(WritePfm(JoinPath(out, "gt/depth/" + stem + ".pfm"), depth));
+      MGSR_RETURN_IF_ERROR(WritePfm(JoinPath(out, "gt/normal/" + stem + ".pfm"), normal));
+    }
     if (o.constant_light_copy) {
-      renderer.Render(s.cameras[i], FixedLight(), &rgba, &depth, &normal);
+      renderer.Render(s.cameras[i], FixedLight(), &rgba, &depth, &normal,
+                      distorted ? &lenses[i] : nullptr);
       MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "images_constant/" + s.names[i]), rgba));
     }
   }
@@ -464,16 +528,22 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
     MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(JoinPath(out, "gt/region.json"), region.dump(2)));
   }
 
-  // COLMAP model: one shared PINHOLE camera, every view, and surface points seen by >= 2 training
-  // views with exact projections as their observations (test views carry no observations).
+  // COLMAP model: one shared camera (one per view with per_frame_focal; PINHOLE, or the lens's
+  // OPENCV / OPENCV_FISHEYE), every view, and surface points seen by >= 2 training views with
+  // exact projections (through the lens) as their observations (test views carry none).
   ColmapModel model;
-  ColmapCamera cam;
-  cam.camera_id = 1;
-  cam.model_id = 1;
-  cam.width = o.width;
-  cam.height = o.height;
-  cam.params = {s.cameras[0].fx, s.cameras[0].fy, s.cameras[0].cx, s.cameras[0].cy};
-  model.cameras.push_back(cam);
+  for (size_t i = 0; i < (o.per_frame_focal ? s.cameras.size() : 1); ++i) {
+    const Lens& l = lenses[i];
+    ColmapCamera cam;
+    cam.camera_id = static_cast<uint32_t>(i + 1);
+    cam.model_id = o.lens == "opencv" ? 4 : o.lens == "fisheye" ? 5 : 1;
+    cam.width = o.width;
+    cam.height = o.height;
+    cam.params = {l.fx, l.fy, l.cx, l.cy};
+    if (o.lens == "opencv") cam.params.insert(cam.params.end(), {l.k[0], l.k[1], l.p1, l.p2});
+    if (o.lens == "fisheye") cam.params.insert(cam.params.end(), {l.k[0], l.k[1], l.k[2], l.k[3]});
+    model.cameras.push_back(cam);
+  }
   Rng pose_rng(o.seed ^ 0xBADC0DEull);
   std::vector<Camera> recorded;
   for (const Camera& c : s.cameras) recorded.push_back(RecordedCamera(c, o, &pose_rng));
@@ -482,7 +552,7 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
     im.image_id = static_cast<uint32_t>(i + 1);
     im.qvec = recorded[i].RotationQuaternion();
     im.tvec = recorded[i].t;
-    im.camera_id = 1;
+    im.camera_id = o.per_frame_focal ? static_cast<uint32_t>(i + 1) : 1;
     im.name = s.names[i];
     model.images.push_back(im);
   }
@@ -534,7 +604,8 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
       const Camera& c = s.cameras[i];
       const Eigen::Vector3d Xc = c.WorldToCamera(X);
       if (Xc.z() <= 0.1) continue;
-      const Eigen::Vector2d uv = c.CameraToPixel(Xc);
+      const Eigen::Vector2d xy = lenses[i].Distort({Xc.x() / Xc.z(), Xc.y() / Xc.z()});
+      const Eigen::Vector2d uv(c.fx * xy.x() + c.cx, c.fy * xy.y() + c.cy);
       if (uv.x() < 0 || uv.y() < 0 || uv.x() >= c.width || uv.y() >= c.height) continue;
       const Eigen::Vector3d center = c.Center();
       if (caster.Occluded(center, X - center, 1e-9, 1 - 1e-6)) continue;
@@ -598,10 +669,43 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
                       {"exposure_stops", l.exposure_stops}});
   }
   MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(JoinPath(out, "split.txt"), split));
-  MGSR_RETURN_IF_ERROR(
-      WriteStringToFileAtomic(JoinPath(out, "transforms_train.json"), train.dump(2)));
-  MGSR_RETURN_IF_ERROR(
-      WriteStringToFileAtomic(JoinPath(out, "transforms_test.json"), test.dump(2)));
+  if (single_json) {
+    // nerfstudio's transforms.json: the shared lens at the top, each frame's focal length where
+    // it has its own, the split as test_filenames.
+    nlohmann::json ns = train;
+    ns.erase("camera_angle_x");
+    const Lens& l = lenses[0];
+    ns["camera_model"] = o.lens == "opencv"    ? "OPENCV"
+                         : o.lens == "fisheye" ? "OPENCV_FISHEYE"
+                                               : "PINHOLE";
+    if (o.lens == "opencv") {
+      ns["k1"] = l.k[0];
+      ns["k2"] = l.k[1];
+      ns["p1"] = l.p1;
+      ns["p2"] = l.p2;
+    } else if (o.lens == "fisheye") {
+      for (int k = 0; k < 4; ++k) ns["k" + std::to_string(k + 1)] = l.k[k];
+    }
+    ns["frames"] = nlohmann::json::array();
+    ns["test_filenames"] = nlohmann::json::array();
+    size_t next_train = 0, next_test = 0;
+    for (size_t i = 0; i < s.cameras.size(); ++i) {
+      nlohmann::json frame =
+          s.is_test[i] ? test["frames"][next_test++] : train["frames"][next_train++];
+      if (o.per_frame_focal) {
+        frame["fl_x"] = s.cameras[i].fx;
+        frame["fl_y"] = s.cameras[i].fy;
+      }
+      if (s.is_test[i]) ns["test_filenames"].push_back(frame["file_path"]);
+      ns["frames"].push_back(frame);
+    }
+    MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(JoinPath(out, "transforms.json"), ns.dump(2)));
+  } else {
+    MGSR_RETURN_IF_ERROR(
+        WriteStringToFileAtomic(JoinPath(out, "transforms_train.json"), train.dump(2)));
+    MGSR_RETURN_IF_ERROR(
+        WriteStringToFileAtomic(JoinPath(out, "transforms_test.json"), test.dump(2)));
+  }
   nlohmann::json info = {{"shape", o.mesh_path.empty() ? o.shape : o.mesh_path},
                          {"texture", o.texture},
                          {"seed", o.seed},
@@ -616,6 +720,8 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
                          {"pose_noise_rel", o.pose_noise_rel},
                          {"masks", masks},
                          {"scene_type", o.scene_type},
+                         {"lens", o.lens},
+                         {"per_frame_focal", o.per_frame_focal},
                          {"views", lights}};
   return WriteStringToFileAtomic(JoinPath(out, "lights.json"), info.dump(2));
 }

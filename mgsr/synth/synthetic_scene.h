@@ -15,6 +15,7 @@
 
 #include "mgsr/core/camera.h"
 #include "mgsr/core/image.h"
+#include "mgsr/core/lens.h"
 #include "mgsr/core/status.h"
 #include "mgsr/core/triangle_mesh.h"
 #include "mgsr/synth/scene_layout.h"
@@ -57,6 +58,15 @@ struct SynthOptions {
   // false: no masks/ and no alpha; RGB photos with the object on a grey background. Scene-level
   // captures never have masks (their photos are RGB whatever this says).
   bool masks = true;
+  // The photos' lens: "pinhole", "opencv" (barrel distortion with tangential terms) or "fisheye"
+  // (OpenCV's equidistant model), rendered exactly (a ray per distorted pixel). Distorted scenes
+  // carry their lens in the COLMAP model (OPENCV / OPENCV_FISHEYE) and in one nerfstudio
+  // transforms.json instead of the Blender pair, and have no gt/depth or gt/normal maps (those
+  // would be in the distorted frame; gt/mesh.ply remains).
+  std::string lens = "pinhole";
+  // Each view its own focal length (x0.85..1.15, seeded): per-frame intrinsics in the json, one
+  // camera per view in the COLMAP model.
+  bool per_frame_focal = false;
   // Scene-level: half the side of the central region's square (the object has radius 1); the
   // cameras stand `distance` away from its centre, horizontally.
   double region_half = 2.0;
@@ -71,6 +81,10 @@ struct ViewLight {
   double environment = 1.0;  // environment (ambient and reflection) strength
   double exposure_stops = 0.0;
 };
+
+// The lens a synthetic scene's photos are taken through (SynthOptions::lens), for `camera`'s
+// intrinsics.
+Lens SyntheticLens(const std::string& lens, const Camera& camera);
 
 struct SyntheticScene {
   SceneType type = SceneType::kObject;
@@ -102,8 +116,9 @@ class SyntheticRenderer {
   ~SyntheticRenderer();
   // RGBA (sRGB, straight alpha; scene-level: the sky where nothing is hit, alpha 1), z-depth at
   // pixel centres (0 = nothing hit) and world-space unit normals (0 = nothing hit).
+  // With a lens, each pixel's rays go through it (the camera's intrinsics are the lens's).
   void Render(const Camera& camera, const ViewLight& light, Image* rgba, Image* depth,
-              Image* normal) const;
+              Image* normal, const Lens* lens = nullptr) const;
   const RayCaster& caster() const { return *caster_; }
 
  private:

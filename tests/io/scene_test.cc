@@ -128,6 +128,19 @@ TEST_F(SceneTest, DownscaleAndMaxWidthResizeImagesAndIntrinsics) {
   ASSERT_TRUE(Load(&half, w).ok());
   EXPECT_EQ(half.views[1].image.width(), 8);
   EXPECT_EQ(half.views[1].camera.width, 8);
+  EXPECT_EQ(half.views[1].photo_width, 32);
+  // The long side is capped, the aspect kept, and the log says so.
+  ASSERT_TRUE(Load(&full).ok());
+  EXPECT_TRUE(full.notes.empty());
+  SceneOptions l;
+  l.max_size = 16;
+  ASSERT_TRUE(Load(&half, l).ok());
+  EXPECT_EQ(half.views[1].camera.width, 16);
+  EXPECT_EQ(half.views[1].camera.height, 16);
+  ASSERT_EQ(half.notes.size(), 1u);
+  EXPECT_NE(half.notes[0].find("resized from 32x32 to 16x16: the long side is capped at 16 px"),
+            std::string::npos)
+      << half.notes[0];
 }
 
 TEST_F(SceneTest, AlphaBecomesTheMaskWithoutAMasksFolder) {
@@ -261,12 +274,52 @@ TEST_F(SceneTest, ZeroImages) {
   ExpectLoadFails("the model has no images");
 }
 
-TEST_F(SceneTest, DistortedCameraIsRefusedWithAFix) {
-  EditModel([](ColmapModel* m) {
-    m->cameras[0].model_id = 2;  // SIMPLE_RADIAL: f, cx, cy, k
-    m->cameras[0].params = {m->cameras[0].params[0], 16, 16, 0.01};
-  });
-  ExpectLoadFails("run `colmap image_undistorter`");
+// Every COLMAP camera model trains: a distorted one through undistortion (the log's note names
+// the model), the two without an OpenCV equivalent are refused with the fix.
+TEST_F(SceneTest, EveryColmapCameraModelLoadsOrIsRefusedWithAFix) {
+  Scene original;
+  ASSERT_TRUE(LoadScene(dir_, SceneOptions(), &original).ok());
+  const double f = original.views[0].camera.fx;
+  for (int id = 0; id <= 10; ++id) {
+    const CameraModelInfo* info = FindCameraModel(id);
+    ASSERT_NE(info, nullptr);
+    static int model_id;
+    static double focal;
+    model_id = id;
+    focal = f;
+    EditModel([](ColmapModel* m) {
+      const CameraModelInfo* info = FindCameraModel(model_id);
+      ColmapCamera& c = m->cameras[0];
+      c.model_id = model_id;
+      // Focal lengths, the principal point, then small coefficients of alternating sign.
+      const bool one_focal = std::string(info->name).rfind("SIMPLE", 0) == 0 ||
+                             std::string(info->name) == "RADIAL" ||
+                             std::string(info->name) == "RADIAL_FISHEYE";
+      c.params = one_focal ? std::vector<double>{focal, 16, 16}
+                           : std::vector<double>{focal, focal, 16, 16};
+      for (int k = static_cast<int>(c.params.size()); k < info->num_params; ++k)
+        c.params.push_back((k % 2 ? -0.01 : 0.004) / k);
+    });
+    Scene scene;
+    const Status s = LoadScene(dir_, SceneOptions(), &scene);
+    const std::string name = info->name;
+    if (name == "FOV" || name == "THIN_PRISM_FISHEYE") {
+      ASSERT_FALSE(s.ok()) << name;
+      EXPECT_NE(s.message().find("camera model " + name + " is not supported"), std::string::npos)
+          << s.message();
+      EXPECT_NE(s.message().find("colmap image_undistorter"), std::string::npos) << s.message();
+      continue;
+    }
+    ASSERT_TRUE(s.ok()) << name << ": " << s.message();
+    EXPECT_NEAR(scene.views[0].camera.fx, f, 0.05 * f) << name;
+    if (info->has_distortion) {
+      ASSERT_EQ(scene.notes.size(), 1u) << name;
+      EXPECT_NE(scene.notes[0].find(name + " lens"), std::string::npos) << scene.notes[0];
+      EXPECT_NE(scene.notes[0].find("undistorted"), std::string::npos) << scene.notes[0];
+    } else {
+      EXPECT_TRUE(scene.notes.empty()) << name;
+    }
+  }
 }
 
 TEST_F(SceneTest, TruncatedModelFile) {
@@ -483,14 +536,19 @@ TEST_F(BlenderFieldsTest, FieldsItCannotHonourAreRefused) {
   json_["w"] = 1e12;
   ExpectRefused("'w' must be a whole number of pixels in [1, 65536]");
   json_ = original;
-  json_["k1"] = 0.1;
-  ExpectRefused("lens distortion ('k1') is not supported here");
+  json_["k4"] = 0.1;  // nerfstudio: coefficients without a model are OPENCV's, which has no k4
+  ExpectRefused("'k4' is not a coefficient of camera_model OPENCV");
   json_ = original;
   json_["frames"][2]["p2"] = -0.01;
-  ExpectRefused("lens distortion ('p2') is not supported here");
+  json_["frames"][2]["camera_model"] = "OPENCV_FISHEYE";
+  ExpectRefused("'p2' is not a coefficient of camera_model OPENCV_FISHEYE");
   json_ = original;
-  json_["camera_model"] = "OPENCV_FISHEYE";
-  ExpectRefused("camera_model OPENCV_FISHEYE is not supported here");
+  json_["camera_model"] = "PINHOLE";
+  json_["k1"] = 0.1;
+  ExpectRefused("'k1' is not a coefficient of camera_model PINHOLE");
+  json_ = original;
+  json_["camera_model"] = "EQUIRECTANGULAR";
+  ExpectRefused("camera_model EQUIRECTANGULAR is not supported");
   json_ = original;
   json_["frames"].push_back(json_["frames"][0]);
   ExpectRefused("is listed twice");

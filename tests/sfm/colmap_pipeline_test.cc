@@ -34,6 +34,7 @@ std::string WriteFakeColmap(const std::string& dir) {
 cmd="$1"; shift
 echo "fake colmap $cmd"
 if [ "$cmd" = "$FAKE_COLMAP_FAIL" ]; then echo "something broke" >&2; exit 3; fi
+if [ "$cmd" = exhaustive_matcher ] && [ -n "$FAKE_COLMAP_QUIET" ]; then sleep "$FAKE_COLMAP_QUIET"; fi
 if [ "$cmd" = feature_extractor ] && [ -n "$FAKE_COLMAP_SLOW" ]; then
   for i in 1 2 3 4; do echo "Processed file [$i/4]"; sleep "$FAKE_COLMAP_SLOW"; done
 fi
@@ -215,6 +216,23 @@ TEST_F(FakeColmapPipeline, ASlowStepShowsProgressWithTimeLeft) {
     if (l.rfind("feature extraction: ", 0) == 0) progress += l + "\n";
   EXPECT_NE(progress.find("/4 images ("), std::string::npos) << progress;
   EXPECT_NE(progress.find(" left"), std::string::npos) << progress;
+}
+
+// A step whose log says nothing countable (exhaustive matching of a few photos is one block)
+// still reports that it runs, at least every quiet_seconds (10 s by default).
+TEST_F(FakeColmapPipeline, AQuietStepStillSaysItRuns) {
+  Register({"a.png", "b.png", "c.jpg", "d.png"});
+  setenv("FAKE_COLMAP_QUIET", "2.6", 1);
+  options_.quiet_seconds = 1.0;
+  std::vector<std::string> lines;
+  options_.log = [&](const std::string& l) { lines.push_back(l); };
+  ColmapPipelineSummary s;
+  const Status st = RunColmapPipeline(options_, &s);
+  unsetenv("FAKE_COLMAP_QUIET");
+  ASSERT_TRUE(st.ok()) << st.message();
+  int running = 0;
+  for (const std::string& l : lines) running += l.rfind("exhaustive matching: running, ", 0) == 0;
+  EXPECT_GE(running, 2) << ::testing::PrintToString(lines);
 }
 
 TEST(ColmapProgress, ReadsTheLatestCountOfEachStep) {

@@ -580,7 +580,7 @@ TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
     MutualBoostedSolver s(other, scene);
     ExpectRefused(&s, bad, data,
                   "(derived from the scene's size in pixels and --budget: did "
-                  "--downscale, --max_width, --budget or the photos change?)");
+                  "--downscale, --max_size, --max_width, --budget or the photos change?)");
   }
 
   // Another scene: a moved camera, or another scene altogether.
