@@ -16,8 +16,8 @@ constexpr double kHalfPixel = 0.5;
 std::string Undistortion::Describe() const {
   char buffer[160];
   std::snprintf(buffer, sizeof(buffer),
-                "undistorted to pinhole (bicubic remap), fx %.1f -> %.1f, fy %.1f -> %.1f",
-                lens.fx, fx, lens.fy, fy);
+                "undistorted to pinhole (bicubic remap), fx %.1f -> %.1f, fy %.1f -> %.1f", lens.fx,
+                fx, lens.fy, fy);
   return lens.model + " lens (" + lens.CoefficientText() + ") " + buffer;
 }
 

@@ -306,14 +306,22 @@ Status RunColmapPipeline(const ColmapPipelineOptions& options, ColmapPipelineSum
   summary->log_path = JoinPath(ws, "colmap.log");
   fs::remove(summary->log_path, ec);
 
+  // Only the photos: colmap would otherwise try every file in the folder (a K.txt, notes) and
+  // count them in its progress.
+  const std::string image_list = JoinPath(ws, "image_list.txt");
+  {
+    std::string list;
+    for (const std::string& n : names) list += n + "\n";
+    MGSR_RETURN_IF_ERROR(WriteStringToFileAtomic(image_list, list));
+  }
   StepRunner run(colmap, options, summary, static_cast<int>(names.size()));
-  MGSR_RETURN_IF_ERROR(
-      run.Run("feature extraction",
-              {"feature_extractor", "--database_path", database, "--image_path", options.images,
-               "--ImageReader.single_camera", options.single_camera ? "1" : "0",
-               "--ImageReader.camera_model", options.camera_model, "--SiftExtraction.use_gpu", "0",
-               "--SiftExtraction.num_threads", Threads(options), "--SiftExtraction.max_image_size",
-               std::to_string(options.max_image_size)}));
+  MGSR_RETURN_IF_ERROR(run.Run(
+      "feature extraction",
+      {"feature_extractor", "--database_path", database, "--image_path", options.images,
+       "--image_list_path", image_list, "--ImageReader.single_camera",
+       options.single_camera ? "1" : "0", "--ImageReader.camera_model", options.camera_model,
+       "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads", Threads(options),
+       "--SiftExtraction.max_image_size", std::to_string(options.max_image_size)}));
 
   const bool exhaustive = static_cast<int>(names.size()) <= options.exhaustive_max_images;
   if (exhaustive) {

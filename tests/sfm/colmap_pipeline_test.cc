@@ -130,6 +130,15 @@ TEST_F(FakeColmapPipeline, RunsEveryStepAndSummarises) {
   EXPECT_TRUE(DirectoryExists(JoinPath(s.scene_dir, "masks")));
   EXPECT_FALSE(DirectoryExists(JoinPath(options_.workspace, "masks.links")));
   EXPECT_EQ(lines.size(), 10u);  // "step ..." and "step done in" for each step
+  // colmap is handed the photos alone, not every file of the folder.
+  std::string list, log;
+  ASSERT_TRUE(ReadFileToString(JoinPath(options_.workspace, "image_list.txt"), &list).ok());
+  EXPECT_EQ(list, "a.png\nb.png\nc.jpg\nd.png\n");
+  ASSERT_TRUE(ReadFileToString(s.log_path, &log).ok());
+  EXPECT_NE(log.find("feature_extractor --database_path"), std::string::npos) << log;
+  EXPECT_NE(log.find("--image_list_path " + JoinPath(options_.workspace, "image_list.txt")),
+            std::string::npos)
+      << log;
 
   // More photos than the exhaustive limit: sequential matching.
   options_.exhaustive_max_images = 3;
