@@ -8,6 +8,8 @@
 #include <filesystem>
 #include <string>
 
+#include "mgsr/io/file_util.h"
+#include "mgsr/io/image_io.h"
 #include "mgsr/io/scene.h"
 #include "mgsr/synth/synthetic_scene.h"
 
@@ -119,6 +121,28 @@ double CentralDifference(const Loss& loss, double* value, double h = 1e-6) {
   const double minus = loss();
   *value = keep;
   return (plus - minus) / (2 * h);
+}
+
+// A JPEG of `image` with an EXIF APP1 segment whose IFD0 holds Orientation = `orientation`
+// (little-endian TIFF), as cameras write it, at dir/o<orientation>.jpg.
+inline std::string WriteJpegWithOrientation(const std::string& dir, const Image& image,
+                                            int orientation) {
+  const std::string plain = dir + "/plain.jpg";
+  EXPECT_TRUE(WriteImage(plain, image).ok());
+  std::string jpeg;
+  EXPECT_TRUE(ReadFileToString(plain, &jpeg).ok());
+  std::string tiff = std::string("II*\0", 4) + std::string("\x08\0\0\0", 4);  // IFD0 at 8
+  tiff += std::string("\x01\0", 2);                                           // one entry
+  tiff += std::string("\x12\x01\x03\0\x01\0\0\0", 8);  // tag 0x0112, SHORT, count 1
+  tiff += std::string(1, static_cast<char>(orientation)) + std::string("\0\0\0", 3);
+  tiff += std::string("\0\0\0\0", 4);  // no next IFD
+  const std::string body = std::string("Exif\0\0", 6) + tiff;
+  const size_t length = body.size() + 2;
+  const std::string app1 = std::string("\xFF\xE1", 2) + static_cast<char>(length >> 8) +
+                           static_cast<char>(length & 0xFF) + body;
+  const std::string path = dir + "/o" + std::to_string(orientation) + ".jpg";
+  EXPECT_TRUE(WriteStringToFileAtomic(path, jpeg.substr(0, 2) + app1 + jpeg.substr(2)).ok());
+  return path;
 }
 
 }  // namespace mgsr::testing

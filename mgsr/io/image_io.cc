@@ -1,7 +1,9 @@
 #include "mgsr/io/image_io.h"
 
 #include <algorithm>
+#include <cstdint>
 #include <cstring>
+#include <fstream>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -47,6 +49,95 @@ cv::Mat ToMat8(const Image& image) {
 }
 
 }  // namespace
+
+int ExifOrientation(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string head(1 << 17, '\0');
+  in.read(&head[0], static_cast<std::streamsize>(head.size()));
+  head.resize(static_cast<size_t>(in.gcount()));
+  const auto byte = [&](size_t i) { return static_cast<uint8_t>(head[i]); };
+  if (head.size() < 4 || byte(0) != 0xFF || byte(1) != 0xD8) return 1;  // not a JPEG
+  // JPEG segments up to the image data: APP1 "Exif\0\0" holds a TIFF header and IFD0.
+  size_t p = 2;
+  while (p + 4 <= head.size() && byte(p) == 0xFF) {
+    const uint8_t marker = byte(p + 1);
+    const size_t length = (static_cast<size_t>(byte(p + 2)) << 8) | byte(p + 3);
+    if (marker == 0xDA || length < 2) break;  // start of scan: no more metadata
+    const size_t body = p + 4, end = p + 2 + length;
+    if (marker == 0xE1 && end <= head.size() && length >= 8 &&
+        head.compare(body, 6, std::string("Exif\0\0", 6)) == 0) {
+      const size_t tiff = body + 6;
+      if (tiff + 8 > end) return 1;
+      const bool little = head[tiff] == 'I';
+      const auto u16 = [&](size_t i) {
+        return little ? static_cast<uint32_t>(byte(i) | (byte(i + 1) << 8))
+                      : static_cast<uint32_t>((byte(i) << 8) | byte(i + 1));
+      };
+      const auto u32 = [&](size_t i) {
+        return little ? (u16(i) | (u16(i + 2) << 16)) : ((u16(i) << 16) | u16(i + 2));
+      };
+      const size_t ifd = tiff + u32(tiff + 4);
+      if (ifd + 2 > end) return 1;
+      const uint32_t entries = u16(ifd);
+      for (uint32_t k = 0; k < entries; ++k) {
+        const size_t e = ifd + 2 + 12 * k;
+        if (e + 12 > end) return 1;
+        if (u16(e) == 0x0112) {  // Orientation, SHORT
+          const uint32_t v = u16(e + 8);
+          return v >= 1 && v <= 8 ? static_cast<int>(v) : 1;
+        }
+      }
+      return 1;
+    }
+    p = end;
+  }
+  return 1;
+}
+
+Image ApplyExifOrientation(const Image& image, int orientation) {
+  if (orientation <= 1 || orientation > 8) return image;
+  const int w = image.width(), h = image.height();
+  const bool swap = orientation >= 5;  // 5..8 turn a quarter: width and height trade places
+  Image out(swap ? h : w, swap ? w : h, image.channels());
+  for (int c = 0; c < image.channels(); ++c) {
+    for (int y = 0; y < out.height(); ++y) {
+      for (int x = 0; x < out.width(); ++x) {
+        // The stored pixel shown at (x, y), per the tag's definition of row 0 and column 0.
+        int sx = x, sy = y;
+        switch (orientation) {
+          case 2:
+            sx = w - 1 - x;
+            break;
+          case 3:
+            sx = w - 1 - x;
+            sy = h - 1 - y;
+            break;
+          case 4:
+            sy = h - 1 - y;
+            break;
+          case 5:
+            sx = y;
+            sy = x;
+            break;
+          case 6:
+            sx = y;
+            sy = h - 1 - x;
+            break;
+          case 7:
+            sx = w - 1 - y;
+            sy = h - 1 - x;
+            break;
+          case 8:
+            sx = w - 1 - y;
+            sy = x;
+            break;
+        }
+        out.at(c, y, x) = image.at(c, sy, sx);
+      }
+    }
+  }
+  return out;
+}
 
 Status ReadImage(const std::string& path, Image* image) {
   if (!FileExists(path)) return Status::Error(path + ": image file is missing");

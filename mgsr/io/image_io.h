@@ -16,6 +16,14 @@ Status ReadImage(const std::string& path, Image* image);
 // Written atomically (temporary file + rename).
 Status WriteImage(const std::string& path, const Image& image);
 
+// The EXIF orientation of a JPEG (1..8, as the tag defines it: 1 upright, 3 turned 180 degrees,
+// 6 and 8 turned a quarter, 2 4 5 7 mirrored); 1 when the file has none or is not a JPEG.
+// COLMAP, nerfstudio and instant-ngp read the stored pixel grid and ignore this tag, so the
+// loaders do too unless the camera says otherwise; the photo pipeline hands colmap upright copies.
+int ExifOrientation(const std::string& path);
+// The image as a viewer shows it: `orientation` (1..8) undone.
+Image ApplyExifOrientation(const Image& image, int orientation);
+
 // Area-averaging resize (for downscaling inputs) or bilinear when enlarging.
 Image ResizeImage(const Image& image, int width, int height);
 

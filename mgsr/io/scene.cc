@@ -166,6 +166,18 @@ Status LoadViewImages(const std::string& image_path, const std::string& mask_pat
   Image raw;
   MGSR_RETURN_IF_ERROR(ReadImage(image_path, &raw));
   Camera& cam = view->camera;
+  // A photo whose camera was made from its upright view (its EXIF orientation honoured) while
+  // its pixels are stored turned: turn them (COLMAP's own workspaces use the stored grid).
+  const int stored_width = raw.width(), stored_height = raw.height();
+  int orientation = 1;
+  if (raw.width() != cam.width || raw.height() != cam.height) {
+    orientation = ExifOrientation(image_path);
+    const Image upright = ApplyExifOrientation(raw, orientation);
+    if (upright.width() == cam.width && upright.height() == cam.height)
+      raw = upright;
+    else
+      orientation = 1;
+  }
   if (raw.width() != cam.width || raw.height() != cam.height) {
     return Status::Error(image_path + ": image is " + std::to_string(raw.width()) + "x" +
                          std::to_string(raw.height()) + " but its camera says " +
@@ -183,6 +195,8 @@ Status LoadViewImages(const std::string& image_path, const std::string& mask_pat
   if (!mask_path.empty()) {
     Image m;
     MGSR_RETURN_IF_ERROR(ReadImage(mask_path, &m));
+    if (orientation != 1 && m.width() == stored_width && m.height() == stored_height)
+      m = ApplyExifOrientation(m, orientation);
     if (m.width() != raw.width() || m.height() != raw.height()) {
       return Status::Error(mask_path + ": mask is " + std::to_string(m.width()) + "x" +
                            std::to_string(m.height()) + " but its image is " +

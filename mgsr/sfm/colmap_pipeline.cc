@@ -15,6 +15,7 @@
 #include "mgsr/core/timer.h"
 #include "mgsr/io/colmap_model.h"
 #include "mgsr/io/file_util.h"
+#include "mgsr/io/image_io.h"
 
 namespace mgsr {
 namespace {
@@ -306,6 +307,38 @@ Status RunColmapPipeline(const ColmapPipelineOptions& options, ColmapPipelineSum
   summary->log_path = JoinPath(ws, "colmap.log");
   fs::remove(summary->log_path, ec);
 
+  // colmap reads the stored pixels and ignores EXIF orientation: photos a camera stored turned
+  // (portrait phone shots) are handed to it upright, the others linked as they are.
+  std::string photos = options.images;
+  {
+    std::vector<std::string> turned;
+    for (const std::string& n : names) {
+      if (ExifOrientation(JoinPath(options.images, n)) != 1) turned.push_back(n);
+    }
+    if (!turned.empty()) {
+      photos = JoinPath(ws, "photos_upright");
+      fs::remove_all(photos, ec);
+      MGSR_RETURN_IF_ERROR(MakeDirectories(photos));
+      for (const std::string& n : names) {
+        const std::string from = JoinPath(options.images, n), to = JoinPath(photos, n);
+        const int orientation = ExifOrientation(from);
+        if (orientation == 1) {
+          fs::create_symlink(fs::absolute(from), to, ec);
+          if (ec) return Status::Error(to + ": cannot link the photo: " + ec.message());
+          continue;
+        }
+        Image image;
+        MGSR_RETURN_IF_ERROR(ReadImage(from, &image));
+        MGSR_RETURN_IF_ERROR(WriteImage(to, ApplyExifOrientation(image, orientation)));
+      }
+      if (options.log)
+        options.log("photos: " + std::to_string(turned.size()) + " of " +
+                    std::to_string(names.size()) +
+                    " turned upright as their EXIF orientation says (colmap reads the stored "
+                    "pixels), in " +
+                    photos);
+    }
+  }
   // Only the photos: colmap would otherwise try every file in the folder (a K.txt, notes) and
   // count them in its progress.
   const std::string image_list = JoinPath(ws, "image_list.txt");
@@ -317,7 +350,7 @@ Status RunColmapPipeline(const ColmapPipelineOptions& options, ColmapPipelineSum
   StepRunner run(colmap, options, summary, static_cast<int>(names.size()));
   MGSR_RETURN_IF_ERROR(run.Run(
       "feature extraction",
-      {"feature_extractor", "--database_path", database, "--image_path", options.images,
+      {"feature_extractor", "--database_path", database, "--image_path", photos,
        "--image_list_path", image_list, "--ImageReader.single_camera",
        options.single_camera ? "1" : "0", "--ImageReader.camera_model", options.camera_model,
        "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads", Threads(options),
@@ -340,7 +373,7 @@ Status RunColmapPipeline(const ColmapPipelineOptions& options, ColmapPipelineSum
   }
 
   const Status mapped =
-      run.Run("mapping", {"mapper", "--database_path", database, "--image_path", options.images,
+      run.Run("mapping", {"mapper", "--database_path", database, "--image_path", photos,
                           "--output_path", sparse, "--Mapper.num_threads", Threads(options),
                           // colmap drops models under 10 images by default; a small photo set
                           // should still reconstruct (3 is what the solver needs).
@@ -370,7 +403,7 @@ Status RunColmapPipeline(const ColmapPipelineOptions& options, ColmapPipelineSum
   // Undistorted into a temporary folder, renamed when complete: a failed run never leaves a
   // dense/ that looks usable.
   MGSR_RETURN_IF_ERROR(
-      run.Run("undistortion", {"image_undistorter", "--image_path", options.images, "--input_path",
+      run.Run("undistortion", {"image_undistorter", "--image_path", photos, "--input_path",
                                model_dir, "--output_path", dense_tmp, "--output_type", "COLMAP"}));
   if (!options.masks.empty()) {
     if (!DirectoryExists(options.masks))

@@ -3,8 +3,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
+#include <limits>
 
+#include "mgsr/eval/image_metrics.h"
 #include "mgsr/io/file_util.h"
+#include "mgsr/io/scene.h"
+#include "mgsr/synth/synthetic_scene.h"
 #include "test_util.h"
 
 namespace mgsr {
@@ -76,6 +81,87 @@ TEST(ImageIoTest, DownscaleAveragesBlocks) {
   const Image half = ResizeImage(im, 2, 1);
   EXPECT_NEAR(half.at(0, 0, 0), (0 + 1 + 4 + 5) / 4.0f, 1e-6);
   EXPECT_NEAR(half.at(0, 0, 1), (2 + 3 + 6 + 7) / 4.0f, 1e-6);
+}
+
+}  // namespace
+}  // namespace mgsr
+
+namespace mgsr {
+namespace {
+
+// Every EXIF orientation is read from the file and undone as the tag defines it: each corner of
+// a 6 x 4 photo lands where a viewer shows it.
+TEST(ImageIoTest, ExifOrientationIsReadAndUndone) {
+  const std::string dir = testing::ScratchDir();
+  Image image(6, 4, 3);
+  // Blocky quadrants so JPEG keeps them apart: top-left dark, top-right bright red, bottom-left
+  // bright green, bottom-right white.
+  for (int y = 0; y < 4; ++y) {
+    for (int x = 0; x < 6; ++x) {
+      const bool right = x >= 3, bottom = y >= 2;
+      image.at(0, y, x) = right ? 1.0f : (bottom ? 0.0f : 0.1f);
+      image.at(1, y, x) = bottom ? 1.0f : 0.1f;
+      image.at(2, y, x) = right && bottom ? 1.0f : 0.1f;
+    }
+  }
+  // Where the stored top-left corner appears (row, column as shown) for each orientation.
+  const int shown_w[9] = {0, 6, 6, 6, 6, 4, 4, 4, 4};
+  for (int o = 1; o <= 8; ++o) {
+    const std::string path = testing::WriteJpegWithOrientation(dir, image, o);
+    EXPECT_EQ(ExifOrientation(path), o);
+    Image stored;
+    ASSERT_TRUE(ReadImage(path, &stored).ok());
+    EXPECT_EQ(stored.width(), 6);  // the stored grid, as COLMAP reads it
+    const Image shown = ApplyExifOrientation(stored, o);
+    EXPECT_EQ(shown.width(), shown_w[o]) << o;
+    // The stored top-left (dark) pixel: corner per the tag (2: top-right, 3: bottom-right,
+    // 4: bottom-left, 5: top-left, 6: top-right, 7: bottom-right, 8: bottom-left).
+    const int w = shown.width(), h = shown.height();
+    const int row[9] = {0, 0, 0, h - 1, h - 1, 0, 0, h - 1, h - 1};
+    const int col[9] = {0, 0, w - 1, w - 1, 0, 0, w - 1, w - 1, 0};
+    EXPECT_LT(shown.at(0, row[o], col[o]), 0.3f) << "orientation " << o;
+    EXPECT_LT(shown.at(1, row[o], col[o]), 0.3f) << "orientation " << o;
+  }
+  const std::string png = dir + "/x.png";
+  ASSERT_TRUE(WriteImage(png, image).ok());
+  EXPECT_EQ(ExifOrientation(png), 1);
+  EXPECT_EQ(ExifOrientation(dir + "/missing.jpg"), 1);
+}
+
+}  // namespace
+}  // namespace mgsr
+
+namespace mgsr {
+namespace {
+
+// A photo stored turned, whose camera was made from its upright view (its EXIF orientation
+// honoured by the tool that posed it), loads upright; the mask stored like the photo turns too.
+TEST(ImageIoTest, APhotoStoredTurnedLoadsUprightWhenItsCameraIsUpright) {
+  const std::string dir = testing::ScratchDir();
+  SynthOptions o = testing::SmallSynthOptions();
+  o.width = 40;
+  o.height = 24;
+  ASSERT_TRUE(WriteSyntheticScene(o, dir).ok());
+  Scene original;
+  ASSERT_TRUE(LoadScene(dir, SceneOptions(), &original).ok());
+  Image upright;
+  ASSERT_TRUE(ReadImage(dir + "/images/v001.png", &upright).ok());
+  // Stored turned a quarter (orientation 6 is undone by a clockwise turn; 8 turns the other way).
+  const Image stored = ApplyExifOrientation(ExtractChannels(upright, 0, 3), 8);
+  ASSERT_EQ(stored.width(), 24);
+  const std::string jpeg = testing::WriteJpegWithOrientation(dir, stored, 6);
+  std::filesystem::rename(jpeg, dir + "/images/v001.png");
+  Image mask;
+  ASSERT_TRUE(ReadImage(dir + "/masks/v001.png", &mask).ok());
+  ASSERT_TRUE(WriteImage(dir + "/masks/v001.png", ApplyExifOrientation(mask, 8)).ok());
+  Scene turned;
+  const Status s = LoadScene(dir, SceneOptions(), &turned);
+  ASSERT_TRUE(s.ok()) << s.message();
+  const View& v = turned.views[1];
+  EXPECT_EQ(v.image.width(), 40);
+  EXPECT_GT(Psnr(v.image, original.views[1].image), 25.0);  // JPEG, not bit-exact
+  EXPECT_EQ(v.mask.width(), 40);
+  EXPECT_EQ(Psnr(v.mask, original.views[1].mask), std::numeric_limits<double>::infinity());
 }
 
 }  // namespace

@@ -244,6 +244,40 @@ TEST_F(FakeColmapPipeline, AQuietStepStillSaysItRuns) {
   EXPECT_GE(running, 2) << ::testing::PrintToString(lines);
 }
 
+// colmap ignores EXIF orientation: a photo stored turned goes to it upright (a copy in the
+// workspace), the others as links, and every step reads that folder.
+TEST_F(FakeColmapPipeline, PhotosStoredTurnedAreHandedToColmapUpright) {
+  Register({"a.png", "b.png", "c.jpg", "d.png"});
+  Image photo(6, 4, 3);
+  for (size_t i = 0; i < photo.size(); ++i) photo.data()[i] = 0.5f;
+  const std::string turned = testing::WriteJpegWithOrientation(dir_, photo, 6);
+  std::filesystem::copy_file(turned, JoinPath(photos_, "c.jpg"),
+                             std::filesystem::copy_options::overwrite_existing);
+  std::vector<std::string> lines;
+  options_.log = [&](const std::string& l) { lines.push_back(l); };
+  ColmapPipelineSummary s;
+  ASSERT_TRUE(RunColmapPipeline(options_, &s).ok());
+  const std::string upright = JoinPath(options_.workspace, "photos_upright");
+  Image c;
+  ASSERT_TRUE(ReadImage(JoinPath(upright, "c.jpg"), &c).ok());
+  EXPECT_EQ(c.width(), 4);
+  EXPECT_EQ(c.height(), 6);
+  EXPECT_TRUE(std::filesystem::is_symlink(JoinPath(upright, "a.png")));
+  EXPECT_NE(std::find(lines.begin(), lines.end(),
+                      "photos: 1 of 4 turned upright as their EXIF orientation says (colmap reads "
+                      "the stored pixels), in " +
+                          upright),
+            lines.end())
+      << ::testing::PrintToString(lines);
+  std::string log;
+  ASSERT_TRUE(ReadFileToString(s.log_path, &log).ok());
+  for (const char* step : {"feature_extractor", "mapper", "image_undistorter"}) {
+    const size_t at = log.find(std::string("colmap ") + step);
+    ASSERT_NE(at, std::string::npos) << step;
+    EXPECT_NE(log.find("--image_path " + upright, at), std::string::npos) << step;
+  }
+}
+
 TEST(ColmapProgress, ReadsTheLatestCountOfEachStep) {
   double done = 0, total = 0;
   std::string unit;
