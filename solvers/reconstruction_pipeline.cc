@@ -1,5 +1,7 @@
 #include "solvers/reconstruction_pipeline.h"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -1006,6 +1008,12 @@ nlohmann::json ReconstructionPipeline::MetricsJson(const RunState& st) const {
         {"mesh", st.mesh_seconds},
         {"total", st.total.ElapsedSeconds()}}},
       {"peak_memory_mb", PeakMemoryBytes() / 1048576.0},
+      // How the machine was used: threads, and how they waited (the tools choose passive waits
+      // unless OMP_WAIT_POLICY or GOMP_SPINCOUNT is set).
+      {"threads",
+       {{"count", omp_get_max_threads()},
+        {"omp_wait_policy", std::getenv("OMP_WAIT_POLICY") ? std::getenv("OMP_WAIT_POLICY") : ""},
+        {"gomp_spincount", std::getenv("GOMP_SPINCOUNT") ? std::getenv("GOMP_SPINCOUNT") : ""}}},
       {"iterations",
        {{"warmup_2d", summary.branch(Branch::kSurfels2D).warmup_iterations},
         {"warmup_3d", summary.branch(Branch::kGaussians3D).warmup_iterations},

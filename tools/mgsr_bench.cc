@@ -19,6 +19,7 @@
 #include "mgsr/core/subprocess.h"
 #include "mgsr/core/timer.h"
 #include "mgsr/io/file_util.h"
+#include "tools/openmp_wait.h"
 #include "tools/tool_flags.h"
 
 DEFINE_string(output, "", "Report folder (created): README.md, results.csv, charts/, contact/.");
@@ -203,6 +204,7 @@ int RunProfile(const std::string& synth, const std::string& solve, const std::st
 }  // namespace
 
 int main(int argc, char** argv) {
+  mgsr_tools::PreferPassiveOpenMpWaits(argv);
   std::string command = "mgsr_bench";
   for (int i = 1; i < argc; ++i) command += std::string(" ") + argv[i];
   mgsr_tools::ParseToolFlags(

@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include "tools/colmap_flags.h"
+#include "tools/openmp_wait.h"
 #include "tools/tool_flags.h"
 
 DEFINE_string(images, "", "Folder of photos.");
@@ -13,6 +14,7 @@ DEFINE_string(masks, "", "Optional folder of foreground masks (<stem>.png).");
 DEFINE_string(workspace, "", "Output folder (created).");
 
 int main(int argc, char** argv) {
+  mgsr_tools::PreferPassiveOpenMpWaits(argv);
   mgsr_tools::ParseToolFlags("mgsr_colmap --images DIR --workspace DIR [--masks DIR] [options]",
                              {{"Input and output", {"images", "masks", "workspace"}},
                               {"COLMAP",

@@ -23,6 +23,7 @@
 #include "mgsr/io/mesh_obj.h"
 #include "mgsr/io/output_folder.h"
 #include "mgsr/io/ply.h"
+#include "tools/openmp_wait.h"
 #include "tools/tool_flags.h"
 
 DEFINE_string(mesh, "", "Predicted mesh (PLY, OBJ, or binary glTF .glb).");
@@ -244,6 +245,7 @@ int EvaluateRun(nlohmann::json* report) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  mgsr_tools::PreferPassiveOpenMpWaits(argv);
   mgsr_tools::ParseToolFlags(
       "mgsr_eval --mesh pred.ply --gt gt.ply | --renders DIR --gt_images DIR | --run DIR [--gt "
       "gt.ply]  [--json out.json]",

@@ -26,6 +26,7 @@
 #include "mgsr/render/gaussian_renderer.h"
 #include "mgsr/render/surfel_renderer.h"
 #include "mgsr/render/visualize.h"
+#include "tools/openmp_wait.h"
 #include "tools/tool_flags.h"
 
 DEFINE_string(run, "", "An mgsr_solve output folder (metrics.json, point_cloud_*.ply).");
@@ -120,6 +121,7 @@ mgsr::Image Sheet(const std::vector<mgsr::Image>& tiles, int columns) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  mgsr_tools::PreferPassiveOpenMpWaits(argv);
   mgsr_tools::ParseToolFlags(
       "mgsr_render --run OUTPUT_DIR --output FRAMES_DIR (--orbit N | --views test|train|all)",
       {{"Input and output", {"run", "output", "workspace"}},

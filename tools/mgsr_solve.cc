@@ -40,6 +40,7 @@
 #include "tools/tool_flags.h"
 #ifdef MGSR_WITH_MPI
 #include "solvers/mpi_view_group.h"
+#include "tools/openmp_wait.h"
 #endif
 
 DEFINE_string(workspace, "",
@@ -460,6 +461,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
 }
 
 int main(int argc, char** argv) {
+  mgsr_tools::PreferPassiveOpenMpWaits(argv);
   std::unique_ptr<mgsr::ViewGroup> group;
 #ifdef MGSR_WITH_MPI
   // Under mpirun: one process of the job (the others run the same command); process 0 prints and

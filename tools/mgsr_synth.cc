@@ -6,6 +6,7 @@
 
 #include "mgsr/core/timer.h"
 #include "mgsr/synth/synthetic_scene.h"
+#include "tools/openmp_wait.h"
 #include "tools/tool_flags.h"
 
 DEFINE_string(output, "", "Folder to write the scene into (created).");
@@ -54,6 +55,7 @@ DEFINE_bool(per_frame_focal, false,
             "transforms.json, one COLMAP camera per view.");
 
 int main(int argc, char** argv) {
+  mgsr_tools::PreferPassiveOpenMpWaits(argv);
   mgsr_tools::ParseToolFlags(
       "mgsr_synth --output DIR [--shape sphere] [--num_views 48] ...",
       {{"Output", {"output", "text", "masks", "constant_light_copy"}},
