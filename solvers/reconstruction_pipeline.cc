@@ -1008,8 +1008,8 @@ nlohmann::json ReconstructionPipeline::MetricsJson(const RunState& st) const {
         {"mesh", st.mesh_seconds},
         {"total", st.total.ElapsedSeconds()}}},
       {"peak_memory_mb", PeakMemoryBytes() / 1048576.0},
-      // How the machine was used: threads, and how they waited (the tools choose passive waits
-      // unless OMP_WAIT_POLICY or GOMP_SPINCOUNT is set).
+      // How the machine was used: threads, and how they waited (the tools spin briefly, 300
+      // rounds, unless OMP_WAIT_POLICY or GOMP_SPINCOUNT is set).
       {"threads",
        {{"count", omp_get_max_threads()},
         {"omp_wait_policy", std::getenv("OMP_WAIT_POLICY") ? std::getenv("OMP_WAIT_POLICY") : ""},

@@ -204,7 +204,7 @@ int RunProfile(const std::string& synth, const std::string& solve, const std::st
 }  // namespace
 
 int main(int argc, char** argv) {
-  mgsr_tools::PreferPassiveOpenMpWaits(argv);
+  mgsr_tools::PreferShortOpenMpSpins(argv);
   std::string command = "mgsr_bench";
   for (int i = 1; i < argc; ++i) command += std::string(" ") + argv[i];
   mgsr_tools::ParseToolFlags(

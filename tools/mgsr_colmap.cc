@@ -14,7 +14,7 @@ DEFINE_string(masks, "", "Optional folder of foreground masks (<stem>.png).");
 DEFINE_string(workspace, "", "Output folder (created).");
 
 int main(int argc, char** argv) {
-  mgsr_tools::PreferPassiveOpenMpWaits(argv);
+  mgsr_tools::PreferShortOpenMpSpins(argv);
   mgsr_tools::ParseToolFlags("mgsr_colmap --images DIR --workspace DIR [--masks DIR] [options]",
                              {{"Input and output", {"images", "masks", "workspace"}},
                               {"COLMAP",

@@ -245,7 +245,7 @@ int EvaluateRun(nlohmann::json* report) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  mgsr_tools::PreferPassiveOpenMpWaits(argv);
+  mgsr_tools::PreferShortOpenMpSpins(argv);
   mgsr_tools::ParseToolFlags(
       "mgsr_eval --mesh pred.ply --gt gt.ply | --renders DIR --gt_images DIR | --run DIR [--gt "
       "gt.ply]  [--json out.json]",

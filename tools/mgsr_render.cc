@@ -121,7 +121,7 @@ mgsr::Image Sheet(const std::vector<mgsr::Image>& tiles, int columns) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  mgsr_tools::PreferPassiveOpenMpWaits(argv);
+  mgsr_tools::PreferShortOpenMpSpins(argv);
   mgsr_tools::ParseToolFlags(
       "mgsr_render --run OUTPUT_DIR --output FRAMES_DIR (--orbit N | --views test|train|all)",
       {{"Input and output", {"run", "output", "workspace"}},

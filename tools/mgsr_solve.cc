@@ -461,7 +461,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
 }
 
 int main(int argc, char** argv) {
-  mgsr_tools::PreferPassiveOpenMpWaits(argv);
+  mgsr_tools::PreferShortOpenMpSpins(argv);
   std::unique_ptr<mgsr::ViewGroup> group;
 #ifdef MGSR_WITH_MPI
   // Under mpirun: one process of the job (the others run the same command); process 0 prints and

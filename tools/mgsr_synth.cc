@@ -55,7 +55,7 @@ DEFINE_bool(per_frame_focal, false,
             "transforms.json, one COLMAP camera per view.");
 
 int main(int argc, char** argv) {
-  mgsr_tools::PreferPassiveOpenMpWaits(argv);
+  mgsr_tools::PreferShortOpenMpSpins(argv);
   mgsr_tools::ParseToolFlags(
       "mgsr_synth --output DIR [--shape sphere] [--num_views 48] ...",
       {{"Output", {"output", "text", "masks", "constant_light_copy"}},
