@@ -11,7 +11,8 @@
 # --counts LIST (3000,30000), --output DIR (build/peers_opensplat).
 #
 # How the runs are made equal: one synthetic object (mgsr_synth, constant light, no exposure
-# changes), one COLMAP workspace whose sparse points are the initial Gaussians (--num_points =
+# changes, RGB photos on a grey backdrop without masks: OpenSplat reads RGB and renders on its own
+# background colour, so a transparent backdrop would score its background), one COLMAP workspace whose sparse points are the initial Gaussians (--num_points =
 # the count), the first view withheld from both (OpenSplat --val-image, our split.txt). OpenSplat
 # densifies only after its warm-up (500 iterations by default) and ours holds the count with the
 # MCMC strategy's cap, so both train exactly `count` Gaussians for `iterations` steps. Reported:
@@ -76,6 +77,7 @@ for COUNT in ${COUNTS//,/ }; do
   rm -rf "$SCENE"
   "$BIN/mgsr_synth" --output "$SCENE" --width "$SIZE" --height "$SIZE" --num_views "$VIEWS" \
     --num_points "$COUNT" --varying_light=false --exposure_stops 0 --test_every "$VIEWS" \
+    --masks=false \
     --seed 1 >/dev/null
   VAL=$(head -n 1 "$SCENE/split.txt")
 
