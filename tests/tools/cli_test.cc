@@ -84,6 +84,43 @@ TEST_F(CliTest, ToolsSpinBrieflyUnlessTheUserChose) {
   }
 }
 
+// RGB photos with separate masks are scored on the object: the test views' truth is the photo
+// composited through its mask on the branch's background, not the photo's own backdrop.
+TEST_F(CliTest, RgbPhotosWithMasksAreScoredOnTheObject) {
+  const std::string dir = Copy();
+  // The photos as a camera takes them: the object before a magenta wall, no alpha.
+  for (const auto& entry : fs::directory_iterator(dir + "/images")) {
+    Image rgba;
+    ASSERT_TRUE(ReadImage(entry.path().string(), &rgba).ok());
+    Image rgb(rgba.width(), rgba.height(), 3);
+    const float wall[3] = {1.0f, 0.0f, 1.0f};
+    for (int c = 0; c < 3; ++c)
+      for (size_t i = 0; i < rgb.plane_size(); ++i)
+        rgb.plane(c)[i] = rgba.plane(c)[i] * rgba.plane(3)[i] + wall[c] * (1 - rgba.plane(3)[i]);
+    ASSERT_TRUE(WriteImage(entry.path().string(), rgb).ok());
+  }
+  const std::string out = dir + "/out";
+  const auto r =
+      testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + out +
+                          " --background 0.25 --warmup_max_iterations 4 "
+                          "--warmup_min_iterations 0 --mutual_iterations 2");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  Image truth, mask;
+  ASSERT_TRUE(ReadImage(out + "/renders/v000_gt.png", &truth).ok());
+  ASSERT_TRUE(ReadImage(dir + "/masks/v000.png", &mask).ok());
+  int background = 0;
+  for (size_t i = 0; i < mask.plane_size(); ++i) {
+    if (mask.plane(0)[i] > 0.01f) continue;
+    ++background;
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(truth.plane(c)[i], 0.25f, 0.01f);
+  }
+  EXPECT_GT(background, 100);
+  std::string text;
+  ASSERT_TRUE(ReadFileToString(out + "/metrics.json", &text).ok());
+  const nlohmann::json m = nlohmann::json::parse(text);
+  EXPECT_TRUE(m["test"].contains("psnr_foreground")) << m["test"].dump();
+}
+
 TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
   const std::string out = Copy() + "/out";
   const auto r =
