@@ -226,6 +226,7 @@ struct FrameIntrinsics {
   int width = 0, height = 0;
   double fx = 0, fy = 0, cx = 0, cy = 0;
   Lens lens;
+  std::string lens_key;  // LensKey(lens): frames with one key share an undistortion
 };
 
 }  // namespace
@@ -287,6 +288,7 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
     const std::string file = f.is_test && !test_meta.is_null() ? "transforms_test.json" : main_file;
     statuses[i] = FrameLens(f.own, meta, in.width, in.height, in.fx, in.fy, in.cx, in.cy,
                             JoinPath(root, file) + ": frame " + f.name, &in.lens);
+    in.lens_key = LensKey(in.lens);
   }
   for (const Status& s : statuses) MGSR_RETURN_IF_ERROR(s);
   // Frames that share a lens share its undistortion (the maps only when the photos are read).
@@ -294,7 +296,7 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
   std::map<std::string, int> lens_views;
   for (size_t i = 0; i < frames.size(); ++i) {
     const Lens& lens = intrinsics[i].lens;
-    const std::string key = LensKey(lens);
+    const std::string& key = intrinsics[i].lens_key;
     if (lens_views[key]++ > 0) continue;
     MGSR_RETURN_IF_ERROR(MakeUndistortion(lens, options.load_images,
                                           main_path + ": frame " + frames[i].name, &lenses[key]));
@@ -311,7 +313,7 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
     View& v = scene->views[i];
     v.name = f.name;
     v.is_test = f.is_test;
-    const Undistortion& u = lenses.at(LensKey(intrinsics[i].lens));
+    const Undistortion& u = lenses.at(intrinsics[i].lens_key);
     Camera& c = v.camera;
     c.width = intrinsics[i].width;
     c.height = intrinsics[i].height;

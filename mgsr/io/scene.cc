@@ -172,9 +172,11 @@ Status LoadViewImages(const std::string& image_path, const std::string& mask_pat
   int orientation = 1;
   if (raw.width() != cam.width || raw.height() != cam.height) {
     orientation = ExifOrientation(image_path);
-    const Image upright = ApplyExifOrientation(raw, orientation);
-    if (upright.width() == cam.width && upright.height() == cam.height)
-      raw = upright;
+    const bool swaps = orientation >= 5;  // a quarter turn: width and height trade places
+    const int upright_width = swaps ? raw.height() : raw.width();
+    const int upright_height = swaps ? raw.width() : raw.height();
+    if (orientation != 1 && upright_width == cam.width && upright_height == cam.height)
+      raw = ApplyExifOrientation(raw, orientation);
     else
       orientation = 1;
   }

@@ -311,17 +311,20 @@ Status RunColmapPipeline(const ColmapPipelineOptions& options, ColmapPipelineSum
   // (portrait phone shots) are handed to it upright, the others linked as they are.
   std::string photos = options.images;
   {
-    std::vector<std::string> turned;
+    std::vector<int> orientations;
+    size_t turned = 0;
     for (const std::string& n : names) {
-      if (ExifOrientation(JoinPath(options.images, n)) != 1) turned.push_back(n);
+      orientations.push_back(ExifOrientation(JoinPath(options.images, n)));
+      turned += orientations.back() != 1;
     }
-    if (!turned.empty()) {
+    if (turned > 0) {
       photos = JoinPath(ws, "photos_upright");
       fs::remove_all(photos, ec);
       MGSR_RETURN_IF_ERROR(MakeDirectories(photos));
-      for (const std::string& n : names) {
-        const std::string from = JoinPath(options.images, n), to = JoinPath(photos, n);
-        const int orientation = ExifOrientation(from);
+      for (size_t i = 0; i < names.size(); ++i) {
+        const std::string from = JoinPath(options.images, names[i]);
+        const std::string to = JoinPath(photos, names[i]);
+        const int orientation = orientations[i];
         if (orientation == 1) {
           fs::create_symlink(fs::absolute(from), to, ec);
           if (ec) return Status::Error(to + ": cannot link the photo: " + ec.message());
@@ -332,8 +335,7 @@ Status RunColmapPipeline(const ColmapPipelineOptions& options, ColmapPipelineSum
         MGSR_RETURN_IF_ERROR(WriteImage(to, ApplyExifOrientation(image, orientation)));
       }
       if (options.log)
-        options.log("photos: " + std::to_string(turned.size()) + " of " +
-                    std::to_string(names.size()) +
+        options.log("photos: " + std::to_string(turned) + " of " + std::to_string(names.size()) +
                     " turned upright as their EXIF orientation says (colmap reads the stored "
                     "pixels), in " +
                     photos);
