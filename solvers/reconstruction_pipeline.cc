@@ -224,16 +224,19 @@ class ProgressLog : public IterationCallback {
  public:
   // A progress line follows each step of the last branch of a round (the 3DGS branch, or the 2DGS
   // branch when it trains alone); an untrained branch shows as "-".
-  // The budgets (0: none) bound where a growing model is heading, for the time left.
+  // For the time left: a density strategy that fills its budgets (MCMC) prices the rest of the
+  // run at the budgets (0: none); one they only bound, at the model's present size.
   ProgressLog(const std::string& csv_path, int every, int expected_total, bool append,
-              bool train_2d, bool train_3d, size_t max_surfels, size_t max_gaussians)
+              bool train_2d, bool train_3d, size_t max_surfels, size_t max_gaussians,
+              bool fills_budget)
       : path_(csv_path),
         every_(every),
         expected_(expected_total),
         train_2d_(train_2d),
         train_3d_(train_3d),
         max_surfels_(max_surfels),
-        max_gaussians_(max_gaussians) {
+        max_gaussians_(max_gaussians),
+        fills_budget_(fills_budget) {
     // A resumed run continues the log; a missing or empty one (peek fails alike) starts with its
     // header.
     const bool header =
@@ -269,14 +272,12 @@ class ProgressLog : public IterationCallback {
     if (i.iteration % every_ == 0 && is2d != train_3d_) {
       eta_.AddWindow(steps_ - window_.steps, i.seconds - window_.seconds,
                      0.5 * (primitives + window_.primitives));
-      const bool growing = primitives > window_.primitives;
-      const double heading =
-          (train_2d_
-               ? (growing && max_surfels_ > 0 ? std::max<double>(surfels, max_surfels_) : surfels)
-               : 0) +
-          (train_3d_ ? (growing && max_gaussians_ > 0 ? std::max<double>(gaussians, max_gaussians_)
-                                                      : gaussians)
-                     : 0);
+      const auto heading_for = [&](bool trained, double count, size_t budget) {
+        if (!trained) return 0.0;
+        return fills_budget_ && budget > 0 ? std::max<double>(count, budget) : count;
+      };
+      const double heading = heading_for(train_2d_, surfels, max_surfels_) +
+                             heading_for(train_3d_, gaussians, max_gaussians_);
       window_ = {steps_, i.seconds, primitives};
       const double eta = eta_.SecondsLeft(std::max(0, expected_ - steps_), heading);
       const std::string loss_2d = train_2d_ ? Format("%.4f", loss_2d_) : "-";
@@ -304,6 +305,7 @@ class ProgressLog : public IterationCallback {
   int every_, expected_, steps_ = 0;
   bool train_2d_, train_3d_;
   size_t max_surfels_, max_gaussians_;
+  bool fills_budget_;
   // Where the latest progress window started: steps, seconds, primitives.
   struct {
     int steps;
@@ -757,7 +759,8 @@ Status ReconstructionPipeline::PrepareOutputs(RunState* st) {
       st->out.Path("log.csv"), o.log_every,
       trained_branches * options.warmup_max_iterations +
           (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations,
-      o.resume, options.train_2d, options.train_3d, options.max_surfels, options.max_gaussians);
+      o.resume, options.train_2d, options.train_3d, options.max_surfels, options.max_gaussians,
+      options.density == "mcmc");
   MGSR_RETURN_IF_ERROR(st->log->Flush());
   solver.AddCallback(st->log.get());
   st->evaluation =
