@@ -68,5 +68,11 @@ void BM_GaussianStages(benchmark::State& state) {
 BENCHMARK(BM_GaussianForward)->Apply(mgsr::bench::RenderBenchmarkArgs);
 BENCHMARK(BM_GaussianForwardBackward)->Apply(mgsr::bench::RenderBenchmarkArgs);
 BENCHMARK(BM_GaussianStages)->Apply(mgsr::bench::StageBenchmarkArgs);
+BENCHMARK(BM_GaussianForwardBackward)
+    ->Name("BM_GaussianForwardBackwardRealSize")
+    ->Apply(mgsr::bench::RealSizeBenchmarkArgs);
+BENCHMARK(BM_GaussianStages)
+    ->Name("BM_GaussianStagesRealSize")
+    ->Apply(mgsr::bench::RealSizeBenchmarkArgs);
 
 }  // namespace

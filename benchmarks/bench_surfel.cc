@@ -71,5 +71,11 @@ void BM_SurfelStages(benchmark::State& state) {
 BENCHMARK(BM_SurfelForward)->Apply(mgsr::bench::RenderBenchmarkArgs);
 BENCHMARK(BM_SurfelForwardBackward)->Apply(mgsr::bench::RenderBenchmarkArgs);
 BENCHMARK(BM_SurfelStages)->Apply(mgsr::bench::StageBenchmarkArgs);
+BENCHMARK(BM_SurfelForwardBackward)
+    ->Name("BM_SurfelForwardBackwardRealSize")
+    ->Apply(mgsr::bench::RealSizeBenchmarkArgs);
+BENCHMARK(BM_SurfelStages)
+    ->Name("BM_SurfelStagesRealSize")
+    ->Apply(mgsr::bench::RealSizeBenchmarkArgs);
 
 }  // namespace

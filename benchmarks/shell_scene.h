@@ -81,6 +81,14 @@ inline void RenderBenchmarkArgs(benchmark::internal::Benchmark* b) {
   b->ArgNames({"width", "count", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
 }
 
+// Real photo sizes: 1440 x 1440 px (2.07 MP, the pixels of a 1920 x 1080 photo; the shell is
+// square) with 250,000 primitives, 1 and 2 threads: where binning, the backward's per-pixel state
+// and memory traffic weigh more than at 256 px.
+inline void RealSizeBenchmarkArgs(benchmark::internal::Benchmark* b) {
+  for (int threads : {1, 2}) b->Args({1440, 250000, threads});
+  b->ArgNames({"width", "count", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
+}
+
 // The argument grid of the *Stages benchmarks: 256 px, 10k and 100k primitives, 1 and 2 threads.
 inline void StageBenchmarkArgs(benchmark::internal::Benchmark* b) {
   for (int count : {10000, 100000}) {
