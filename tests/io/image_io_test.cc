@@ -1,10 +1,13 @@
 #include "mgsr/io/image_io.h"
 
 #include <gtest/gtest.h>
+#include <zlib.h>
 
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
 #include <limits>
+#include <vector>
 
 #include "mgsr/eval/image_metrics.h"
 #include "mgsr/io/file_util.h"
@@ -162,6 +165,73 @@ TEST(ImageIoTest, APhotoStoredTurnedLoadsUprightWhenItsCameraIsUpright) {
   EXPECT_GT(Psnr(v.image, original.views[1].image), 25.0);  // JPEG, not bit-exact
   EXPECT_EQ(v.mask.width(), 40);
   EXPECT_EQ(Psnr(v.mask, original.views[1].mask), std::numeric_limits<double>::infinity());
+}
+
+}  // namespace
+}  // namespace mgsr
+
+namespace mgsr {
+namespace {
+
+// A PNG written byte by byte (zlib for the data): `channels` 1 (grey) or 3 (RGB), 16 bits.
+std::string Png16(const std::vector<uint16_t>& samples, int width, int height, int channels) {
+  const auto u32 = [](uint32_t v) {
+    return std::string{static_cast<char>(v >> 24), static_cast<char>(v >> 16),
+                       static_cast<char>(v >> 8), static_cast<char>(v)};
+  };
+  const auto chunk = [&](const std::string& type, const std::string& data) {
+    const std::string body = type + data;
+    const uint32_t crc = static_cast<uint32_t>(
+        crc32(0, reinterpret_cast<const Bytef*>(body.data()), static_cast<uInt>(body.size())));
+    return u32(static_cast<uint32_t>(data.size())) + body + u32(crc);
+  };
+  std::string raw;
+  for (int y = 0; y < height; ++y) {
+    raw += '\0';  // filter: none
+    for (int i = 0; i < width * channels; ++i) {
+      const uint16_t v = samples[static_cast<size_t>(y) * width * channels + i];
+      raw += static_cast<char>(v >> 8);
+      raw += static_cast<char>(v & 0xFF);
+    }
+  }
+  uLongf size = compressBound(static_cast<uLong>(raw.size()));
+  std::string packed(size, '\0');
+  compress(reinterpret_cast<Bytef*>(&packed[0]), &size, reinterpret_cast<const Bytef*>(raw.data()),
+           static_cast<uLong>(raw.size()));
+  packed.resize(size);
+  const std::string ihdr =
+      u32(width) + u32(height) + std::string{16, static_cast<char>(channels == 1 ? 0 : 2), 0, 0, 0};
+  return std::string("\x89PNG\r\n\x1a\n", 8) + chunk("IHDR", ihdr) + chunk("IDAT", packed) +
+         chunk("IEND", "");
+}
+
+// 16-bit photos keep their precision, and grey ones become three equal channels in a scene.
+TEST(ImageIoTest, SixteenBitAndGreyPhotosAreRead) {
+  const std::string dir = testing::ScratchDir();
+  std::vector<uint16_t> rgb = {0, 1, 65535, 32768, 257, 12345};  // 2 x 1 pixels, RGB
+  ASSERT_TRUE(WriteStringToFileAtomic(dir + "/rgb16.png", Png16(rgb, 2, 1, 3)).ok());
+  Image im;
+  ASSERT_TRUE(ReadImage(dir + "/rgb16.png", &im).ok());
+  ASSERT_EQ(im.channels(), 3);
+  EXPECT_FLOAT_EQ(im.at(0, 0, 0), 0.0f);
+  EXPECT_NEAR(im.at(1, 0, 0), 1.0 / 65535, 1e-9);  // finer than any 8-bit step
+  EXPECT_FLOAT_EQ(im.at(2, 0, 0), 1.0f);
+  EXPECT_NEAR(im.at(2, 0, 1), 12345.0 / 65535, 1e-7);
+  std::vector<uint16_t> grey = {100, 60000};
+  ASSERT_TRUE(WriteStringToFileAtomic(dir + "/grey16.png", Png16(grey, 2, 1, 1)).ok());
+  ASSERT_TRUE(ReadImage(dir + "/grey16.png", &im).ok());
+  ASSERT_EQ(im.channels(), 1);
+  EXPECT_NEAR(im.at(0, 0, 1), 60000.0 / 65535, 1e-7);
+  // In a scene: a grey photo is replicated into RGB.
+  View v;
+  v.camera.width = 2;
+  v.camera.height = 1;
+  v.camera.fx = v.camera.fy = 2;
+  v.camera.cx = 1;
+  v.camera.cy = 0.5;
+  ASSERT_TRUE(LoadViewImages(dir + "/grey16.png", "", SceneOptions(), &v).ok());
+  ASSERT_EQ(v.image.channels(), 3);
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(v.image.at(c, 0, 1), 60000.0 / 65535, 1e-7);
 }
 
 }  // namespace
