@@ -291,15 +291,16 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
     in.lens_key = LensKey(in.lens);
   }
   for (const Status& s : statuses) MGSR_RETURN_IF_ERROR(s);
-  // Frames that share a lens share its undistortion (the maps only when the photos are read).
+  // Frames that share a lens share its pinhole intrinsics (the resampling maps are made per photo
+  // as it is read: per-frame lenses must not hold a map of every photo at once).
   std::map<std::string, Undistortion> lenses;
   std::map<std::string, int> lens_views;
   for (size_t i = 0; i < frames.size(); ++i) {
     const Lens& lens = intrinsics[i].lens;
     const std::string& key = intrinsics[i].lens_key;
     if (lens_views[key]++ > 0) continue;
-    MGSR_RETURN_IF_ERROR(MakeUndistortion(lens, options.load_images,
-                                          main_path + ": frame " + frames[i].name, &lenses[key]));
+    MGSR_RETURN_IF_ERROR(
+        MakeUndistortion(lens, false, main_path + ": frame " + frames[i].name, &lenses[key]));
   }
   for (const auto& [key, u] : lenses) {
     if (!u.lens.IsPinhole())

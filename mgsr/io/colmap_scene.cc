@@ -63,8 +63,9 @@ Status LoadColmapScene(const std::string& root, const SceneOptions& options, Sce
   MGSR_RETURN_IF_ERROR(ValidateColmapModel(model, model_dir));
   if (model.images.empty()) return Status::Error(model_dir + ": the model has no images");
 
-  // Each camera's lens and the pinhole image it is undistorted to (the maps only when the photos
-  // are read): once per camera, shared by its images.
+  // Each camera's lens and the pinhole intrinsics it is undistorted to, once per camera (the
+  // resampling maps are made per photo as it is read: a camera per photo must not hold a map of
+  // every photo at once).
   std::map<uint32_t, Undistortion> lenses;
   std::map<uint32_t, int> views_per_camera;
   for (const ColmapImage& im : model.images) ++views_per_camera[im.camera_id];
@@ -79,7 +80,7 @@ Status LoadColmapScene(const std::string& root, const SceneOptions& options, Sce
                               static_cast<int>(c.width), static_cast<int>(c.height), &lens);
     if (!s.ok()) return s.WithContext(where + ": ");
     Undistortion& u = lenses[c.camera_id];
-    MGSR_RETURN_IF_ERROR(MakeUndistortion(lens, options.load_images, where, &u));
+    MGSR_RETURN_IF_ERROR(MakeUndistortion(lens, false, where, &u));
     if (!lens.IsPinhole()) {
       scene->notes.push_back("camera " + std::to_string(c.camera_id) + " (" +
                              std::to_string(views_per_camera[c.camera_id]) +

@@ -207,10 +207,17 @@ Status LoadViewImages(const std::string& image_path, const std::string& mask_pat
     // A mask may be grey, RGB or RGBA; take the first channel (method.md 1.13: mask[0]).
     mask = ExtractChannels(m, 0, 1);
   }
-  if (undistortion != nullptr && !undistortion->map_x.empty()) {
-    rgb = UndistortImage(*undistortion, rgb);
-    if (!alpha.empty()) alpha = UndistortImage(*undistortion, alpha);
-    if (!mask.empty()) mask = UndistortImage(*undistortion, mask);
+  if (undistortion != nullptr && !undistortion->lens.IsPinhole()) {
+    // The maps for this photo alone, unless the caller made them.
+    Undistortion own;
+    const Undistortion* u = undistortion;
+    if (u->map_x.empty()) {
+      MGSR_RETURN_IF_ERROR(MakeUndistortion(u->lens, true, image_path, &own));
+      u = &own;
+    }
+    rgb = UndistortImage(*u, rgb);
+    if (!alpha.empty()) alpha = UndistortImage(*u, alpha);
+    if (!mask.empty()) mask = UndistortImage(*u, mask);
   }
   int width = raw.width(), height = raw.height();
   if (options.downscale > 1) {

@@ -90,8 +90,8 @@ Status LoadBlenderScene(const std::string& root, const SceneOptions& options, Sc
 // Shared steps, exposed for the loaders and tests.
 // Reads an image (and its mask, when mask_path is non-empty), checks the size against the camera,
 // splits off alpha, resamples a distorted photo to its pinhole image (`undistortion`, when given:
-// the view's camera already has the pinhole intrinsics) and resizes image, mask and camera per
-// the options.
+// the view's camera already has the pinhole intrinsics; its maps are made here when it has none)
+// and resizes image, mask and camera per the options.
 Status LoadViewImages(const std::string& image_path, const std::string& mask_path,
                       const SceneOptions& options, View* view,
                       const Undistortion* undistortion = nullptr);
