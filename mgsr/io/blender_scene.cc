@@ -27,6 +27,10 @@ struct Frame {
   json own;  // the frame's own intrinsics (nerfstudio: per-frame values win over the file's)
 };
 
+double JsonNumber(const json& meta, const char* key, double fallback) {
+  return meta.contains(key) && meta[key].is_number() ? meta[key].get<double>() : fallback;
+}
+
 // The camera keys a frame or the file may give (a frame's win over the file's).
 const char* const kIntrinsicKeys[] = {
     "fl_x",           "fl_y", "cx", "cy", "w",  "h",  "camera_angle_x",
@@ -62,8 +66,7 @@ Status CheckCameraKeys(const json& obj, const std::string& where) {
 Status FrameLens(const json& own, const json& meta, int width, int height, double fx, double fy,
                  double cx, double cy, const std::string& where, Lens* lens) {
   const auto number = [&](const char* key) {
-    const json& from = own.contains(key) ? own : meta;
-    return from.contains(key) && from[key].is_number() ? from[key].get<double>() : 0.0;
+    return JsonNumber(own, key, JsonNumber(meta, key, 0.0));
   };
   const auto given = [&](const char* key) { return number(key) != 0.0; };
   const bool any =
@@ -172,10 +175,6 @@ Status ReadTransforms(const std::string& root, const std::string& file, bool is_
     return Status::Error(path + ": invalid JSON: " + e.what());
   }
   return Status::Ok();
-}
-
-double JsonNumber(const json& meta, const char* key, double fallback) {
-  return meta.contains(key) && meta[key].is_number() ? meta[key].get<double>() : fallback;
 }
 
 // nerfstudio's split keys (train_filenames, val_filenames, test_filenames: file_path values) or,
