@@ -136,6 +136,8 @@ nlohmann::json NormalConfig(const SolverOptions& o) {
   nlohmann::json c = nlohmann::json::object();
   if (!o.normal_depth_gradient) c["depth_gradient"] = false;
   if (o.normal_edge_weight > 0) c["edge_weight"] = o.normal_edge_weight;
+  if (o.normal_robust_scale > 0) c["robust_scale"] = o.normal_robust_scale;
+  if (o.normal_one_sided) c["one_sided"] = true;
   return c;
 }
 

@@ -168,6 +168,8 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"normal_depth_gradient", Text(normal_depth_gradient)},
           {"lambda_normal_mutual", Text(lambda_normal_mutual)},
           {"normal_edge_weight", Text(normal_edge_weight)},
+          {"normal_robust_scale", Text(normal_robust_scale)},
+          {"normal_one_sided", Text(normal_one_sided)},
           {"lambda_distortion", Text(lambda_distortion)},
           {"distortion_from_iteration", Text(distortion_from_iteration)},
           {"lambda_multiview_ncc", Text(lambda_multiview_ncc)},

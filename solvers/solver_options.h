@@ -59,6 +59,10 @@ struct SolverOptions {
   bool normal_depth_gradient = true;
   // > 0: the normal consistency relaxes where the photo has edges (NormalConsistencyLoss).
   double normal_edge_weight = 0;
+  // > 0: the normal consistency's residual is bounded (NormalConsistencyLoss robust_scale).
+  double normal_robust_scale = 0;
+  // true: the normal consistency's depth normal from one-sided differences (NormalConsistencyLoss).
+  bool normal_one_sided = false;
   // 2DGS depth distortion (method.md 3.4). MGSR leaves it at 0; 2DGS uses 1000 from 3000 on.
   double lambda_distortion = 0.0;
   int distortion_from_iteration = 3000;

@@ -149,6 +149,13 @@ DEFINE_bool(normal_depth_gradient, true,
 DEFINE_double(normal_edge_weight, -1,
               "The normal consistency relaxes where the photo has edges: weight exp(-beta x "
               "gradient) per pixel (0: off; -1: the default of SolverOptions).");
+DEFINE_double(normal_robust_scale, -1,
+              "The normal consistency's residual r enters as s r / (r + s): pixels whose depth "
+              "normal disagrees strongly (creases, steps) stop smoothing the depth (0: off; -1: "
+              "the default of SolverOptions).");
+DEFINE_bool(normal_one_sided, false,
+            "The normal consistency takes the depth's normal from one-sided differences, towards "
+            "the neighbour whose depth is closer (a depth step gives neither side its slant).");
 DEFINE_int32(multiview_neighbours, 2, "Neighbouring views per view for the multi-view terms.");
 DEFINE_double(
     mutual_transmitted_weight, 0.2,
@@ -275,11 +282,27 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
          "seed"}},
        {"Batches and MPI", {"batch_views", "batch_sqrt_lr", "batch_keep_iterations"}},
        {"Losses",
-        {"loss_config", "list_losses", "lambda_l1", "lambda_normal", "lambda_distortion",
-         "lambda_multiview_ncc", "lambda_multiview_depth", "multiview_neighbours",
-         "normal_depth_gradient", "normal_edge_weight", "lambda_normal_mutual",
-         "depth_tv_warmup_2d", "depth_tv_mutual_2d", "tv_on_geometry", "depth_tv_disparity", "w_2d",
-         "w_3d", "w_depth", "mutual_transmitted_weight"}},
+        {"loss_config",
+         "list_losses",
+         "lambda_l1",
+         "lambda_normal",
+         "lambda_distortion",
+         "lambda_multiview_ncc",
+         "lambda_multiview_depth",
+         "multiview_neighbours",
+         "normal_depth_gradient",
+         "normal_edge_weight",
+         "normal_robust_scale",
+         "normal_one_sided",
+         "lambda_normal_mutual",
+         "depth_tv_warmup_2d",
+         "depth_tv_mutual_2d",
+         "tv_on_geometry",
+         "depth_tv_disparity",
+         "w_2d",
+         "w_3d",
+         "w_depth",
+         "mutual_transmitted_weight"}},
        {"Exposure compensation",
         {"exposure", "exposure_lr", "exposure_prior", "exposure_offset_prior",
          "exposure_mean_prior", "exposure_per_branch", "exposure_fit"}},
@@ -364,8 +387,9 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
                    "--lambda_multiview_ncc"},
         std::tuple{FLAGS_lambda_multiview_depth, &options.lambda_multiview_depth,
                    "--lambda_multiview_depth"},
-        std::tuple{FLAGS_normal_edge_weight, &options.normal_edge_weight,
-                   "--normal_edge_weight"}}) {
+        std::tuple{FLAGS_normal_edge_weight, &options.normal_edge_weight, "--normal_edge_weight"},
+        std::tuple{FLAGS_normal_robust_scale, &options.normal_robust_scale,
+                   "--normal_robust_scale"}}) {
     if (flag >= 0) {
       *value = flag;
     } else if (flag != -1) {
@@ -373,6 +397,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
     }
   }
   options.tv_on_geometry = FLAGS_tv_on_geometry;
+  options.normal_one_sided = FLAGS_normal_one_sided;
   ro.depth_tv_disparity = FLAGS_depth_tv_disparity;
   options.multiview_neighbours = FLAGS_multiview_neighbours;
   options.normal_depth_gradient = FLAGS_normal_depth_gradient;

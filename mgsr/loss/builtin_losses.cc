@@ -80,19 +80,33 @@ void RegisterBuiltinLosses(LossRegistry* r) {
     }
     return std::make_unique<EdgeAwareTvLoss>(b, g, c.value("on_geometry", false), disparity_scale);
   });
-  r->Register(
-      "normal_consistency", [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
-        if (c.contains("depth_gradient") && !c["depth_gradient"].is_boolean()) {
-          *s = Status::Error("'depth_gradient' must be true or false");
-          return nullptr;
-        }
-        const double edge = Number(c, "edge_weight", 0);
-        if (!(edge >= 0) || !std::isfinite(edge)) {
-          *s = Status::Error("'edge_weight' must be finite and >= 0");
-          return nullptr;
-        }
-        return std::make_unique<NormalConsistencyLoss>(c.value("depth_gradient", true), edge);
-      });
+  r->Register("normal_consistency",
+              [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
+                if (c.contains("depth_gradient") && !c["depth_gradient"].is_boolean()) {
+                  *s = Status::Error("'depth_gradient' must be true or false");
+                  return nullptr;
+                }
+                const double edge = Number(c, "edge_weight", 0);
+                if (!(edge >= 0) || !std::isfinite(edge)) {
+                  *s = Status::Error("'edge_weight' must be finite and >= 0");
+                  return nullptr;
+                }
+                const double robust = Number(c, "robust_scale", 0);
+                if (!(robust >= 0) || !std::isfinite(robust)) {
+                  *s = Status::Error("'robust_scale' must be finite and >= 0");
+                  return nullptr;
+                }
+                if (c.contains("one_sided") && !c["one_sided"].is_boolean()) {
+                  *s = Status::Error("'one_sided' must be true or false");
+                  return nullptr;
+                }
+                NormalConsistencyOptions o;
+                o.depth_gradient = c.value("depth_gradient", true);
+                o.edge_weight = edge;
+                o.robust_scale = robust;
+                o.one_sided = c.value("one_sided", false);
+                return std::make_unique<NormalConsistencyLoss>(o);
+              });
   r->Register("mutual_depth", [](const nlohmann::json& c, Status*) -> std::unique_ptr<LossTerm> {
     return std::make_unique<MutualDepthLoss>(c.contains("masked") && c["masked"].is_boolean() &&
                                              c["masked"].get<bool>());

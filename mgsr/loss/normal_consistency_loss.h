@@ -22,16 +22,32 @@ namespace mgsr {
 template <typename T>
 ImageT<T> DepthToNormal(const ImageT<T>& depth, const Camera& camera);
 
+// The variants of the depth-normal consistency (docs/geometry.md measures each).
+struct NormalConsistencyOptions {
+  // false: the depth's normal N_surf is a constant target too, so the term turns the rendered
+  // normals towards the surface without pulling the depth (whose finite differences round off
+  // creases and fill concavities).
+  bool depth_gradient = true;
+  // beta > 0: each pixel's term is weighted by exp(-beta g), g the photo's mean absolute central
+  // difference there (both axes, all channels): the prior relaxes where the photo shows an edge
+  // (a crease, a groove's rim) and holds where the photo is flat.
+  double edge_weight = 0;
+  // sigma > 0: each pixel's residual r enters as sigma r / (r + sigma), the same as r where the
+  // normals nearly agree but bounded by sigma, with a pull that fades as (sigma / (r + sigma))^2.
+  double robust_scale = 0;
+  // true: N_surf from one-sided differences, along each axis towards the neighbour whose depth is
+  // closer; a depth step (a tooth in front of a groove, the backdrop at a silhouette) then gives
+  // neither side the slanted normal of the step, which would pull its depths together.
+  bool one_sided = false;
+};
+
 class NormalConsistencyLoss : public LossTermImpl<NormalConsistencyLoss> {
  public:
-  // `depth_gradient` false: the depth's normal N_surf is a constant target too, so the term turns
-  // the rendered normals towards the surface without pulling the depth (whose finite differences
-  // round off creases and fill concavities).
-  // `edge_weight` beta > 0: each pixel's term is weighted by exp(-beta g), g the photo's mean
-  // absolute central difference there (both axes, all channels): the prior relaxes where the photo
-  // shows an edge (a crease, a groove's rim) and holds where the photo is flat.
-  explicit NormalConsistencyLoss(bool depth_gradient = true, double edge_weight = 0)
-      : depth_gradient_(depth_gradient), edge_weight_(edge_weight) {}
+  explicit NormalConsistencyLoss(const NormalConsistencyOptions& options = {})
+      : depth_gradient_(options.depth_gradient),
+        edge_weight_(options.edge_weight),
+        robust_scale_(options.robust_scale),
+        one_sided_(options.one_sided) {}
   std::string Name() const override { return "normal_consistency"; }
   std::vector<Buffer> Inputs() const override {
     if (!depth_gradient_) return {Buffer::kNormal};
@@ -52,6 +68,8 @@ class NormalConsistencyLoss : public LossTermImpl<NormalConsistencyLoss> {
  private:
   bool depth_gradient_ = true;
   double edge_weight_ = 0;
+  double robust_scale_ = 0;
+  bool one_sided_ = false;
 };
 
 // --- implementation ---------------------------------------------------------------------------
@@ -116,6 +134,8 @@ double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const Targets
   p.depth = D.data();
   p.alpha = A.data();
   p.mask = t.mask != nullptr ? t.mask->data() : nullptr;
+  p.robust_scale = static_cast<T>(robust_scale_);
+  p.one_sided = one_sided_;
   if (edge_weight_ > 0 && t.image != nullptr && t.image->width() == w && t.image->height() == h) {
     // gamma x exp(-beta g): a constant of the photo (and the mask), like the mask itself.
     static thread_local std::vector<T> weight;

@@ -17,32 +17,43 @@ struct RowView {
   const T *n0, *n1, *n2, *alpha, *gamma;  // this row
   T* d_depth;                             // whole plane (with gradients)
   T *dn0, *dn1, *dn2;                     // this row (with gradients)
-  T c0, c1, c2, gain;
+  T c0, c1, c2, gain, sigma;              // sigma: the robust scale (0: off)
   size_t row, up, down;  // offsets of this row and of the rows above and below (clamped)
   bool interior_row;
   int width;
   // Row-local: each pixel's term, its depth-gradient shares for its right (plus) and left
   // (minus) neighbours in this row, and whether it gives them (1) or not (0).
   T *term, *right, *left, *gives;
+  T* self;  // one-sided: the centre's own share (null when central)
+  bool one_sided;
 };
 
 // Pixel x of the row (its neighbours xl, xr: x -/+ 1, clamped at the row's ends, where the pixel
 // is not interior and nothing read through them is kept; kInterior: inside the image's border). The
 // operations and their order are the scalar loop's, with Eigen's 3-vector sums x + (y + z);
 // branches became selects.
-template <typename T, bool kGrad, bool kInterior>
+template <typename T, bool kGrad, bool kInterior, bool kOneSided>
 [[gnu::always_inline]] inline void PixelTerm(const RowView<T>& r, int x, int xl, int xr) {
   const size_t o = r.row;
   const T gamma = r.gamma[x];
   const T nr0 = r.n0[x], nr1 = r.n1[x], nr2 = r.n2[x];
-  // dy = P(x, y + 1) - P(x, y - 1), dx = P(x + 1, y) - P(x - 1, y); P = C + D ray.
-  const size_t u = r.up + x, d = r.down + x, l = o + xl, rr = o + xr;
-  const T dy0 = (r.c0 + r.depth[d] * r.ray0[d]) - (r.c0 + r.depth[u] * r.ray0[u]);
-  const T dy1 = (r.c1 + r.depth[d] * r.ray1[d]) - (r.c1 + r.depth[u] * r.ray1[u]);
-  const T dy2 = (r.c2 + r.depth[d] * r.ray2[d]) - (r.c2 + r.depth[u] * r.ray2[u]);
-  const T dx0 = (r.c0 + r.depth[rr] * r.ray0[rr]) - (r.c0 + r.depth[l] * r.ray0[l]);
-  const T dx1 = (r.c1 + r.depth[rr] * r.ray1[rr]) - (r.c1 + r.depth[l] * r.ray1[l]);
-  const T dx2 = (r.c2 + r.depth[rr] * r.ray2[rr]) - (r.c2 + r.depth[l] * r.ray2[l]);
+  // dy = P(x, y + 1) - P(x, y - 1), dx = P(x + 1, y) - P(x - 1, y); P = C + D ray. One-sided:
+  // along each axis the difference of the centre and the neighbour whose depth is closer (a step
+  // or the backdrop on one side then does not enter); hi/lo name the two ends.
+  const size_t u = r.up + x, d = r.down + x, l = o + xl, rr = o + xr, c = o + x;
+  constexpr bool one = kOneSided;
+  const bool fwd_x = std::abs(r.depth[rr] - r.depth[c]) <= std::abs(r.depth[c] - r.depth[l]);
+  const bool fwd_y = std::abs(r.depth[d] - r.depth[c]) <= std::abs(r.depth[c] - r.depth[u]);
+  const bool hi_x_out = !one || fwd_x, lo_x_out = !one || !fwd_x;  // else the centre
+  const bool hi_y_out = !one || fwd_y, lo_y_out = !one || !fwd_y;
+  const size_t hx = hi_x_out ? rr : c, lx = lo_x_out ? l : c;
+  const size_t hy = hi_y_out ? d : c, ly = lo_y_out ? u : c;
+  const T dy0 = (r.c0 + r.depth[hy] * r.ray0[hy]) - (r.c0 + r.depth[ly] * r.ray0[ly]);
+  const T dy1 = (r.c1 + r.depth[hy] * r.ray1[hy]) - (r.c1 + r.depth[ly] * r.ray1[ly]);
+  const T dy2 = (r.c2 + r.depth[hy] * r.ray2[hy]) - (r.c2 + r.depth[ly] * r.ray2[ly]);
+  const T dx0 = (r.c0 + r.depth[hx] * r.ray0[hx]) - (r.c0 + r.depth[lx] * r.ray0[lx]);
+  const T dx1 = (r.c1 + r.depth[hx] * r.ray1[hx]) - (r.c1 + r.depth[lx] * r.ray1[lx]);
+  const T dx2 = (r.c2 + r.depth[hx] * r.ray2[hx]) - (r.c2 + r.depth[lx] * r.ray2[lx]);
   // c = dy x dx, N_surf = c / |c| where defined.
   const T cx = dy1 * dx2 - dy2 * dx1;
   const T cy = dy2 * dx0 - dy0 * dx2;
@@ -53,10 +64,16 @@ template <typename T, bool kGrad, bool kInterior>
   const T ns1 = defined ? cy / len : T(0);
   const T ns2 = defined ? cz / len : T(0);
   const T a = r.alpha[x];
-  r.term[x] = gamma * (T(1) - (nr0 * ns0 + (nr1 * ns1 + nr2 * ns2)) * a);
+  const T res = T(1) - (nr0 * ns0 + (nr1 * ns1 + nr2 * ns2)) * a;
+  // Robust: rho(res) = sigma res / (res + sigma), rho' = (sigma / (res + sigma))^2. Off, the
+  // plain term and gradient (the selects keep their bits).
+  const bool robust = r.sigma > T(0);
+  const T denom = robust ? res + r.sigma : T(1);
+  const T ratio = r.sigma / denom;
+  r.term[x] = robust ? gamma * (res * ratio) : gamma * res;
   if constexpr (kGrad) {
     const bool contributes = gamma != T(0);
-    const T s = r.gain * gamma * a;
+    const T s = robust ? r.gain * gamma * a * (ratio * ratio) : r.gain * gamma * a;
     r.dn0[x] = contributes ? r.dn0[x] + s * ns0 : r.dn0[x];
     r.dn1[x] = contributes ? r.dn1[x] + s * ns1 : r.dn1[x];
     r.dn2[x] = contributes ? r.dn2[x] + s * ns2 : r.dn2[x];
@@ -76,37 +93,47 @@ template <typename T, bool kGrad, bool kInterior>
     const T ddx2 = dc0 * dy1 - dc1 * dy0;
     const T below = ddy0 * r.ray0[d] + (ddy1 * r.ray1[d] + ddy2 * r.ray2[d]);
     const T above = ddy0 * r.ray0[u] + (ddy1 * r.ray1[u] + ddy2 * r.ray2[u]);
-    r.d_depth[d] = flows ? r.d_depth[d] + below : r.d_depth[d];
-    r.d_depth[u] = flows ? r.d_depth[u] - above : r.d_depth[u];
-    r.right[x] = ddx0 * r.ray0[rr] + (ddx1 * r.ray1[rr] + ddx2 * r.ray2[rr]);
-    r.left[x] = ddx0 * r.ray0[l] + (ddx1 * r.ray1[l] + ddx2 * r.ray2[l]);
+    r.d_depth[d] = flows && hi_y_out ? r.d_depth[d] + below : r.d_depth[d];
+    r.d_depth[u] = flows && lo_y_out ? r.d_depth[u] - above : r.d_depth[u];
+    const T right = ddx0 * r.ray0[rr] + (ddx1 * r.ray1[rr] + ddx2 * r.ray2[rr]);
+    const T left = ddx0 * r.ray0[l] + (ddx1 * r.ray1[l] + ddx2 * r.ray2[l]);
+    r.right[x] = hi_x_out ? right : T(0);
+    r.left[x] = lo_x_out ? left : T(0);
     r.gives[x] = flows ? T(1) : T(0);
+    if constexpr (kOneSided) {
+      // One-sided: the centre is one end of each difference.
+      const T cx_share = ddx0 * r.ray0[c] + (ddx1 * r.ray1[c] + ddx2 * r.ray2[c]);
+      const T cy_share = ddy0 * r.ray0[c] + (ddy1 * r.ray1[c] + ddy2 * r.ray2[c]);
+      r.self[x] = (fwd_x ? -cx_share : cx_share) + (fwd_y ? -cy_share : cy_share);
+    }
   }
 }
 
-template <typename T, bool kGrad>
+template <typename T, bool kGrad, bool kOneSided>
 void RowTerms(const RowView<T>& view) {
   // A local copy: the loop's stores cannot reach it, so its pointers stay in registers and the
   // loop vectorises (through `view` every store might have changed them).
   const RowView<T> r = view;
   const int w = r.width;
-  PixelTerm<T, kGrad, false>(r, 0, 0, w > 1 ? 1 : 0);
+  PixelTerm<T, kGrad, false, kOneSided>(r, 0, 0, w > 1 ? 1 : 0);
   if (r.interior_row) {
 #pragma omp simd
-    for (int x = 1; x < w - 1; ++x) PixelTerm<T, kGrad, true>(r, x, x - 1, x + 1);
+    for (int x = 1; x < w - 1; ++x) PixelTerm<T, kGrad, true, kOneSided>(r, x, x - 1, x + 1);
   } else {
 #pragma omp simd
-    for (int x = 1; x < w - 1; ++x) PixelTerm<T, kGrad, false>(r, x, x - 1, x + 1);
+    for (int x = 1; x < w - 1; ++x) PixelTerm<T, kGrad, false, kOneSided>(r, x, x - 1, x + 1);
   }
-  if (w > 1) PixelTerm<T, kGrad, false>(r, w - 1, w - 2, w - 1);
+  if (w > 1) PixelTerm<T, kGrad, false, kOneSided>(r, w - 1, w - 2, w - 1);
   if constexpr (kGrad) {
-    // This row's depth gradient: at x, the left neighbour's share is added before the right
-    // neighbour's is taken away (the order in which the scalar loop reached them).
+    // This row's depth gradient: at x, the left neighbour's share is added, then (one-sided) the
+    // pixel's own, then the right neighbour's is taken away (the order in which the scalar loop
+    // reached them).
     T* g = r.d_depth + r.row;
 #pragma omp simd
     for (int x = 0; x < w; ++x) {
       T v = g[x];
       if (x > 0) v = r.gives[x - 1] != T(0) ? v + r.right[x - 1] : v;
+      if constexpr (kOneSided) v = r.gives[x] != T(0) ? v + r.self[x] : v;
       if (x + 1 < w) v = r.gives[x + 1] != T(0) ? v - r.left[x + 1] : v;
       g[x] = v;
     }
@@ -127,7 +154,7 @@ double NormalConsistencySumT(const NormalConsistencyPlanes<T>& p) {
     {
       // Per worker: the row-local arrays and a row of ones (gamma without a mask).
       static thread_local std::vector<T> scratch;
-      scratch.resize(5 * static_cast<size_t>(w));
+      scratch.resize(6 * static_cast<size_t>(w));
       RowView<T> r;
       r.term = scratch.data();
       r.right = r.term + w;
@@ -135,6 +162,8 @@ double NormalConsistencySumT(const NormalConsistencyPlanes<T>& p) {
       r.gives = r.left + w;
       T* ones = r.gives + w;
       for (int x = 0; x < w; ++x) ones[x] = T(1);
+      r.one_sided = p.one_sided;
+      r.self = p.one_sided ? ones + w : nullptr;
       r.depth = p.depth;
       r.ray0 = p.ray[0];
       r.ray1 = p.ray[1];
@@ -144,6 +173,7 @@ double NormalConsistencySumT(const NormalConsistencyPlanes<T>& p) {
       r.c1 = p.center[1];
       r.c2 = p.center[2];
       r.gain = p.gain;
+      r.sigma = p.robust_scale;
       r.width = w;
 #pragma omp for schedule(static)
       for (int y = phase; y < h; y += 3) {
@@ -161,9 +191,15 @@ double NormalConsistencySumT(const NormalConsistencyPlanes<T>& p) {
           r.dn0 = p.d_normal[0] + o;
           r.dn1 = p.d_normal[1] + o;
           r.dn2 = p.d_normal[2] + o;
-          RowTerms<T, true>(r);
+          if (r.one_sided) {
+            RowTerms<T, true, true>(r);
+          } else {
+            RowTerms<T, true, false>(r);
+          }
+        } else if (r.one_sided) {
+          RowTerms<T, false, true>(r);
         } else {
-          RowTerms<T, false>(r);
+          RowTerms<T, false, false>(r);
         }
         double total = 0;
         for (int x = 0; x < w; ++x) total += r.term[x];

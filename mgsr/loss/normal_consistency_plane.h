@@ -23,13 +23,20 @@ struct NormalConsistencyPlanes {
   const T* mask = nullptr;                           // foreground weight gamma; null: 1
   const T* ray[3] = {nullptr, nullptr, nullptr};     // world ray of each pixel (camera z = 1)
   T center[3] = {0, 0, 0};                           // camera centre
+  // sigma > 0: each pixel's residual r = 1 - <N_rend, alpha N_surf> enters as sigma r / (r + sigma)
+  // (linear near 0, bounded by sigma); 0: as r.
+  T robust_scale = 0;
+  // true: N_surf from one-sided differences, along each axis towards the neighbour whose depth is
+  // closer to the centre's; false: central differences.
+  bool one_sided = false;
   // When not null, gradients are added here: `gain` x d(sum of the per-pixel terms)/d input.
   T* d_normal[3] = {nullptr, nullptr, nullptr};
   T* d_depth = nullptr;
   T gain = 0;
 };
 
-// Returns the sum over pixels of gamma (1 - <N_rend, alpha N_surf>) (the mean is the caller's).
+// Returns the sum over pixels of gamma rho(1 - <N_rend, alpha N_surf>), rho the identity or the
+// bounded function of `robust_scale` (the mean is the caller's).
 double NormalConsistencySum(const NormalConsistencyPlanes<float>& p);
 double NormalConsistencySum(const NormalConsistencyPlanes<double>& p);
 

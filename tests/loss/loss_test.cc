@@ -116,6 +116,16 @@ void ExpectGradientMatchesNumeric(const LossTerm& term, uint64_t seed = 1) {
   EXPECT_GT(nonzero, 0) << "the term should depend on its inputs";
 }
 
+NormalConsistencyOptions NcOptions(bool depth_gradient, double edge_weight, double robust_scale,
+                                   bool one_sided) {
+  NormalConsistencyOptions o;
+  o.depth_gradient = depth_gradient;
+  o.edge_weight = edge_weight;
+  o.robust_scale = robust_scale;
+  o.one_sided = one_sided;
+  return o;
+}
+
 TEST(LossGradientTest, EveryTermMatchesNumericDifferentiation) {
   ExpectGradientMatchesNumeric(L1Loss(Buffer::kColor, TargetKind::kImage));
   ExpectGradientMatchesNumeric(L1Loss(Buffer::kTransmitted, TargetKind::kTransmitted));
@@ -123,8 +133,14 @@ TEST(LossGradientTest, EveryTermMatchesNumericDifferentiation) {
   ExpectGradientMatchesNumeric(RenderLoss(Buffer::kColor, TargetKind::kImage, 0.8));
   ExpectGradientMatchesNumeric(MutualRenderLoss());
   // The normal consistency relaxed at the photo's edges, and without its pull on the depth.
-  ExpectGradientMatchesNumeric(NormalConsistencyLoss(true, 5.0));
-  ExpectGradientMatchesNumeric(NormalConsistencyLoss(false, 0.0));
+  ExpectGradientMatchesNumeric(NormalConsistencyLoss(NcOptions(true, 5.0, 0, false)));
+  ExpectGradientMatchesNumeric(NormalConsistencyLoss(NcOptions(false, 0, 0, false)));
+  // Bounded residuals: at a small scale most pixels lie on the flat part of rho.
+  ExpectGradientMatchesNumeric(NormalConsistencyLoss(NcOptions(true, 0, 0.1, false)));
+  ExpectGradientMatchesNumeric(NormalConsistencyLoss(NcOptions(true, 5.0, 0.02, false)));
+  // One-sided differences (the fixture's depths are random, so both sides are taken).
+  ExpectGradientMatchesNumeric(NormalConsistencyLoss(NcOptions(true, 0, 0, true)));
+  ExpectGradientMatchesNumeric(NormalConsistencyLoss(NcOptions(true, 0, 0.1, true)), 5);
   ExpectGradientMatchesNumeric(MultiviewNccLoss([] {
     MultiviewNccConfig c;
     c.check_occlusion = false;
@@ -576,30 +592,58 @@ double ScalarNormalConsistency(const NormalConsistencyPlanes<float>& p) {
         const float gamma = p.mask != nullptr ? p.mask[i] : 1.0f;
         const V n_rend(p.normal[0][i], p.normal[1][i], p.normal[2][i]);
         const bool interior = x > 0 && y > 0 && x + 1 < w && y + 1 < h;
+        // The ends of each difference: central, or the centre and its closer neighbour.
+        int x_hi = x + 1, x_lo = x - 1, y_hi = y + 1, y_lo = y - 1;
+        if (p.one_sided && interior) {
+          const float d = at(p.depth, x, y);
+          if (std::abs(at(p.depth, x + 1, y) - d) <= std::abs(d - at(p.depth, x - 1, y))) {
+            x_lo = x;
+          } else {
+            x_hi = x;
+          }
+          if (std::abs(at(p.depth, x, y + 1) - d) <= std::abs(d - at(p.depth, x, y - 1))) {
+            y_lo = y;
+          } else {
+            y_hi = y;
+          }
+        }
         V dy = V::Zero(), dx = V::Zero(), c = V::Zero();
         float len = 0;
         if (interior) {
-          dy = P(x, y + 1) - P(x, y - 1);
-          dx = P(x + 1, y) - P(x - 1, y);
+          dy = P(x, y_hi) - P(x, y_lo);
+          dx = P(x_hi, y) - P(x_lo, y);
           c = dy.cross(dx);
           len = c.norm();
         }
         const bool defined = interior && len > 0.0f;
         const V n_surf = defined ? V(c / len) : V::Zero();
         const float a = p.alpha[i];
-        total += gamma * (1 - n_rend.dot(n_surf) * a);
+        const float res = 1 - n_rend.dot(n_surf) * a;
+        const bool robust = p.robust_scale > 0.0f;
+        const float ratio = robust ? p.robust_scale / (res + p.robust_scale) : 1.0f;
+        total += robust ? gamma * (res * ratio) : gamma * res;
         if (p.d_depth == nullptr || gamma == 0.0f) continue;
-        const float s = p.gain * gamma * a;
+        const float s = robust ? p.gain * gamma * a * (ratio * ratio) : p.gain * gamma * a;
         for (int k = 0; k < 3; ++k) p.d_normal[k][i] += s * n_surf[k];
         if (!defined) continue;
         const V dn = s * n_rend;
         const V dc = (dn - n_surf * n_surf.dot(dn)) / len;
         const V d_dy = dx.cross(dc);
         const V d_dx = dc.cross(dy);
-        p.d_depth[i + w] += d_dy.dot(ray(x, y + 1));
-        p.d_depth[i - w] -= d_dy.dot(ray(x, y - 1));
-        p.d_depth[i + 1] += d_dx.dot(ray(x + 1, y));
-        p.d_depth[i - 1] -= d_dx.dot(ray(x - 1, y));
+        if (!p.one_sided) {
+          p.d_depth[i + w] += d_dy.dot(ray(x, y + 1));
+          p.d_depth[i - w] -= d_dy.dot(ray(x, y - 1));
+          p.d_depth[i + 1] += d_dx.dot(ray(x + 1, y));
+          p.d_depth[i - 1] -= d_dx.dot(ray(x - 1, y));
+          continue;
+        }
+        // One-sided: the neighbours' shares, then the centre's (its x share before its y share).
+        if (y_hi != y) p.d_depth[i + w] += d_dy.dot(ray(x, y + 1));
+        if (y_lo != y) p.d_depth[i - w] -= d_dy.dot(ray(x, y - 1));
+        if (x_hi != x) p.d_depth[i + 1] += d_dx.dot(ray(x + 1, y));
+        const float cx_share = d_dx.dot(ray(x, y)), cy_share = d_dy.dot(ray(x, y));
+        p.d_depth[i] += (x_hi == x ? cx_share : -cx_share) + (y_hi == y ? cy_share : -cy_share);
+        if (x_lo != x) p.d_depth[i - 1] -= d_dx.dot(ray(x - 1, y));
       }
       row_total[y] = total;
     }
@@ -610,14 +654,20 @@ double ScalarNormalConsistency(const NormalConsistencyPlanes<float>& p) {
 }
 
 TEST(NormalConsistencyPlaneTest, MatchesTheScalarLoopToTheBitOnAnyThreadCount) {
-  for (const auto& [w, h, masked] : std::vector<std::tuple<int, int, bool>>{{256, 256, true},
-                                                                            {256, 256, false},
-                                                                            {37, 5, true},
-                                                                            {19, 1, false},
-                                                                            {1, 7, true},
-                                                                            {2, 2, false},
-                                                                            {300, 41, true}}) {
-    SCOPED_TRACE(std::to_string(w) + " x " + std::to_string(h) + (masked ? " masked" : ""));
+  for (const auto& [w, h, masked, robust, one_sided] :
+       std::vector<std::tuple<int, int, bool, float, bool>>{{256, 256, true, 0.0f, false},
+                                                            {256, 256, false, 0.0f, false},
+                                                            {256, 256, true, 0.1f, false},
+                                                            {256, 256, true, 0.0f, true},
+                                                            {37, 5, true, 0.0f, false},
+                                                            {37, 5, false, 0.2f, true},
+                                                            {19, 1, false, 0.0f, false},
+                                                            {1, 7, true, 0.05f, false},
+                                                            {2, 2, false, 0.0f, true},
+                                                            {300, 41, true, 0.0f, false},
+                                                            {300, 41, false, 0.3f, true}}) {
+    SCOPED_TRACE(std::to_string(w) + " x " + std::to_string(h) + (masked ? " masked" : "") +
+                 " robust " + std::to_string(robust) + (one_sided ? " one-sided" : ""));
     Rng rng(7 * w + h);
     const size_t n = static_cast<size_t>(w) * h;
     std::vector<float> depth(n), normal(3 * n), alpha(n), mask(n), rays(3 * n);
@@ -651,6 +701,8 @@ TEST(NormalConsistencyPlaneTest, MatchesTheScalarLoopToTheBitOnAnyThreadCount) {
     p.center[1] = -0.2f;
     p.center[2] = -3.0f;
     p.gain = -0.37f;
+    p.robust_scale = robust;
+    p.one_sided = one_sided;
     auto run = [&](bool reference, std::vector<float>* dn, std::vector<float>* dd) {
       // Start from non-zero gradients, as other terms have added theirs.
       dn->assign(3 * n, 0.25f);
@@ -724,6 +776,18 @@ TEST(LossRegistryTest, CreatesByNameAndReportsBadConfigs) {
   EXPECT_NE(s.message().find("unknown buffer 'colour'"), std::string::npos) << s.message();
   EXPECT_EQ(LossRegistry::Get().Create("render", {{"target", "gt"}}, &s), nullptr);
   EXPECT_NE(s.message().find("\"image\" or \"transmitted\""), std::string::npos) << s.message();
+  // The normal consistency's variants, and their bad values.
+  s = Status::Ok();
+  EXPECT_NE(LossRegistry::Get().Create("normal_consistency",
+                                       {{"robust_scale", 0.2}, {"one_sided", true}}, &s),
+            nullptr);
+  EXPECT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(LossRegistry::Get().Create("normal_consistency", {{"robust_scale", -1}}, &s), nullptr);
+  EXPECT_NE(s.message().find("'robust_scale' must be finite and >= 0"), std::string::npos)
+      << s.message();
+  EXPECT_EQ(LossRegistry::Get().Create("normal_consistency", {{"one_sided", 1}}, &s), nullptr);
+  EXPECT_NE(s.message().find("'one_sided' must be true or false"), std::string::npos)
+      << s.message();
 }
 
 TEST(ProblemTest, SumsWeightedTermsOfOneBranchAndSkipsZeroWeights) {
