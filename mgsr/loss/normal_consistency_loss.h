@@ -2,8 +2,10 @@
 //   L_n = mean_pixels gamma (1 - <N_rend, stopgrad(A) N_surf>)
 // N_rend is the alpha-weighted world normal; N_surf the unit normal of the surface the expected
 // depth describes: back-project pixel centres P = C + D r (r the world ray with camera z = 1),
-// N_surf = normalise((P(y+1) - P(y-1)) x (P(x+1) - P(x-1))), zero on the border. gamma is the
-// foreground mask (1 without one). Gradients reach the normals and, through N_surf, the depth.
+// N_surf = normalise((P(y+1) - P(y-1)) x (P(x+1) - P(x-1))), zero on the border; with one_sided,
+// each difference is P(x+1) - P(x) or P(x) - P(x-1), whichever neighbour's depth is closer. gamma
+// is the foreground mask (1 without one). Gradients reach the normals and, through N_surf, the
+// depth.
 #pragma once
 
 #include <Eigen/Core>
