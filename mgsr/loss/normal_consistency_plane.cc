@@ -38,14 +38,19 @@ template <typename T, bool kGrad, bool kInterior, bool kOneSided>
   const T gamma = r.gamma[x];
   const T nr0 = r.n0[x], nr1 = r.n1[x], nr2 = r.n2[x];
   // dy = P(x, y + 1) - P(x, y - 1), dx = P(x + 1, y) - P(x - 1, y); P = C + D ray. One-sided:
-  // along each axis the difference of the centre and the neighbour whose depth is closer (a step
-  // or the backdrop on one side then does not enter); hi/lo name the two ends.
+  // along an axis where one neighbour's depth jumps more than kNormalStepRatio times as far from
+  // the centre's as the other's (a step, or the backdrop's depth 0 at the outline), the difference
+  // of the centre and the closer neighbour. On a smooth surface the two jumps differ only by the
+  // curvature, so the central difference stays: always taking the smaller jump would bias every
+  // slanted pixel's normal towards the camera. hi/lo name the two ends.
   const size_t u = r.up + x, d = r.down + x, l = o + xl, rr = o + xr, c = o + x;
   constexpr bool one = kOneSided;
-  const bool fwd_x = std::abs(r.depth[rr] - r.depth[c]) <= std::abs(r.depth[c] - r.depth[l]);
-  const bool fwd_y = std::abs(r.depth[d] - r.depth[c]) <= std::abs(r.depth[c] - r.depth[u]);
-  const bool hi_x_out = !one || fwd_x, lo_x_out = !one || !fwd_x;  // else the centre
-  const bool hi_y_out = !one || fwd_y, lo_y_out = !one || !fwd_y;
+  const T jr = std::abs(r.depth[rr] - r.depth[c]), jl = std::abs(r.depth[c] - r.depth[l]);
+  const T jd = std::abs(r.depth[d] - r.depth[c]), ju = std::abs(r.depth[c] - r.depth[u]);
+  const bool step_x = one && (jr > T(kNormalStepRatio) * jl || jl > T(kNormalStepRatio) * jr);
+  const bool step_y = one && (jd > T(kNormalStepRatio) * ju || ju > T(kNormalStepRatio) * jd);
+  const bool hi_x_out = !step_x || jr < jl, lo_x_out = !step_x || jl < jr;  // else the centre
+  const bool hi_y_out = !step_y || jd < ju, lo_y_out = !step_y || ju < jd;
   const size_t hx = hi_x_out ? rr : c, lx = lo_x_out ? l : c;
   const size_t hy = hi_y_out ? d : c, ly = lo_y_out ? u : c;
   const T dy0 = (r.c0 + r.depth[hy] * r.ray0[hy]) - (r.c0 + r.depth[ly] * r.ray0[ly]);
@@ -104,7 +109,9 @@ template <typename T, bool kGrad, bool kInterior, bool kOneSided>
       // One-sided: the centre is one end of each difference.
       const T cx_share = ddx0 * r.ray0[c] + (ddx1 * r.ray1[c] + ddx2 * r.ray2[c]);
       const T cy_share = ddy0 * r.ray0[c] + (ddy1 * r.ray1[c] + ddy2 * r.ray2[c]);
-      r.self[x] = (fwd_x ? -cx_share : cx_share) + (fwd_y ? -cy_share : cy_share);
+      const T sx = hi_x_out ? (lo_x_out ? T(0) : -cx_share) : cx_share;
+      const T sy = hi_y_out ? (lo_y_out ? T(0) : -cy_share) : cy_share;
+      r.self[x] = sx + sy;
     }
   }
 }

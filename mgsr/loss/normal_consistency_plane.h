@@ -13,6 +13,10 @@
 
 namespace mgsr {
 
+// One-sided differences: an axis is taken one-sided where one neighbour's depth jump from the
+// centre exceeds the other's by this factor (docs/geometry.md, "Steps in the depth").
+constexpr float kNormalStepRatio = 3.0f;
+
 // The planes of one evaluation (w x h, row-major; each normal or ray plane is w x h).
 template <typename T>
 struct NormalConsistencyPlanes {
@@ -26,8 +30,9 @@ struct NormalConsistencyPlanes {
   // sigma > 0: each pixel's residual r = 1 - <N_rend, alpha N_surf> enters as sigma r / (r + sigma)
   // (linear near 0, bounded by sigma); 0: as r.
   T robust_scale = 0;
-  // true: N_surf from one-sided differences, along each axis towards the neighbour whose depth is
-  // closer to the centre's; false: central differences.
+  // true: along an axis whose two neighbours' depth jumps from the centre differ by more than
+  // kNormalStepRatio, N_surf takes the one-sided difference towards the closer neighbour (central
+  // elsewhere); false: central differences everywhere.
   bool one_sided = false;
   // When not null, gradients are added here: `gain` x d(sum of the per-pixel terms)/d input.
   T* d_normal[3] = {nullptr, nullptr, nullptr};

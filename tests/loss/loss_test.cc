@@ -595,17 +595,14 @@ double ScalarNormalConsistency(const NormalConsistencyPlanes<float>& p) {
         // The ends of each difference: central, or the centre and its closer neighbour.
         int x_hi = x + 1, x_lo = x - 1, y_hi = y + 1, y_lo = y - 1;
         if (p.one_sided && interior) {
-          const float d = at(p.depth, x, y);
-          if (std::abs(at(p.depth, x + 1, y) - d) <= std::abs(d - at(p.depth, x - 1, y))) {
-            x_lo = x;
-          } else {
-            x_hi = x;
-          }
-          if (std::abs(at(p.depth, x, y + 1) - d) <= std::abs(d - at(p.depth, x, y - 1))) {
-            y_lo = y;
-          } else {
-            y_hi = y;
-          }
+          // An axis with a step (one jump over kNormalStepRatio times the other) goes one-sided.
+          const float d = at(p.depth, x, y), k = kNormalStepRatio;
+          const float jr = std::abs(at(p.depth, x + 1, y) - d);
+          const float jl = std::abs(d - at(p.depth, x - 1, y));
+          const float jd = std::abs(at(p.depth, x, y + 1) - d);
+          const float ju = std::abs(d - at(p.depth, x, y - 1));
+          if (jr > k * jl || jl > k * jr) (jr < jl ? x_lo : x_hi) = x;
+          if (jd > k * ju || ju > k * jd) (jd < ju ? y_lo : y_hi) = y;
         }
         V dy = V::Zero(), dx = V::Zero(), c = V::Zero();
         float len = 0;
@@ -637,12 +634,15 @@ double ScalarNormalConsistency(const NormalConsistencyPlanes<float>& p) {
           p.d_depth[i - 1] -= d_dx.dot(ray(x - 1, y));
           continue;
         }
-        // One-sided: the neighbours' shares, then the centre's (its x share before its y share).
+        // One-sided: the neighbours' shares, then the centre's (its x share before its y share;
+        // zero along an axis that stayed central).
         if (y_hi != y) p.d_depth[i + w] += d_dy.dot(ray(x, y + 1));
         if (y_lo != y) p.d_depth[i - w] -= d_dy.dot(ray(x, y - 1));
         if (x_hi != x) p.d_depth[i + 1] += d_dx.dot(ray(x + 1, y));
         const float cx_share = d_dx.dot(ray(x, y)), cy_share = d_dy.dot(ray(x, y));
-        p.d_depth[i] += (x_hi == x ? cx_share : -cx_share) + (y_hi == y ? cy_share : -cy_share);
+        const float sx = x_hi == x ? cx_share : (x_lo == x ? -cx_share : 0.0f);
+        const float sy = y_hi == y ? cy_share : (y_lo == y ? -cy_share : 0.0f);
+        p.d_depth[i] += sx + sy;
         if (x_lo != x) p.d_depth[i - 1] -= d_dx.dot(ray(x - 1, y));
       }
       row_total[y] = total;
@@ -762,6 +762,49 @@ TEST(LossValueTest, DepthOfATiltedPlaneGivesItsNormal) {
   TargetsD t;
   t.mask = &mask;
   EXPECT_NEAR(NormalConsistencyLoss().Evaluate(in, t, 1, nullptr), 0.0, 1e-12);
+}
+
+// Two parallel tilted planes side by side (a step, as where a tooth stands in front of a groove),
+// and the planes' own normals rendered: central differences straddle the step and give both of
+// its columns a slanted normal; one-sided ones take each column's own plane; on the planes
+// themselves (no step) both agree.
+TEST(LossValueTest, OneSidedDifferencesDoNotSlantTheNormalsAtAStep) {
+  const int w = 20, h = 16;
+  const Camera cam = LookAtCamera({0.5, -3, 1}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), w, h, 24, 24);
+  const Eigen::Vector3d n = Eigen::Vector3d(0.3, -1, 0.4).normalized();
+  const Eigen::Vector3d facing = n.dot(cam.Center()) > 0 ? n : Eigen::Vector3d(-n);
+  ImageD depth(w, h, 1), normals(w, h, 3), alpha(w, h, 1, 1.0), mask(w, h, 1, 1.0);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const Eigen::Vector3d ray = cam.R.transpose() * cam.PixelToRay(x + 0.5, y + 0.5);
+      const double offset = x >= 10 ? 0.6 : 0.0;  // the right half lies further along n
+      depth.at(0, y, x) = (offset - n.dot(cam.Center())) / n.dot(ray);
+      for (int k = 0; k < 3; ++k) normals.at(k, y, x) = facing[k];
+    }
+  }
+  RenderBuffersD in;
+  in.camera = &cam;
+  in.Set(Buffer::kDepth, &depth);
+  in.Set(Buffer::kNormal, &normals);
+  in.Set(Buffer::kAlpha, &alpha);
+  TargetsD t;
+  t.mask = &mask;
+  NormalConsistencyOptions one_sided;
+  one_sided.one_sided = true;
+  // Per-column loss: only the two columns beside the step differ.
+  for (int step_column : {9, 10, 4}) {
+    mask.Fill(0.0);
+    for (int y = 1; y + 1 < h; ++y) mask.at(0, y, step_column) = 1.0;
+    const double central = NormalConsistencyLoss().Evaluate(in, t, 1, nullptr);
+    const double sided = NormalConsistencyLoss(one_sided).Evaluate(in, t, 1, nullptr);
+    SCOPED_TRACE("column " + std::to_string(step_column));
+    EXPECT_NEAR(sided, 0.0, 1e-12);
+    if (step_column == 4) {
+      EXPECT_NEAR(central, 0.0, 1e-12);
+    } else {
+      EXPECT_GT(central, 1e-3);
+    }
+  }
 }
 
 TEST(LossRegistryTest, CreatesByNameAndReportsBadConfigs) {
