@@ -729,6 +729,20 @@ TEST(NormalConsistencyPlaneTest, MatchesTheScalarLoopToTheBitOnAnyThreadCount) {
   }
 }
 
+// The depth-normal consistency of a depth and rendered normals at alpha 1, over the mask.
+double NormalConsistencyAtFullAlpha(const Camera& cam, const ImageD& depth, const ImageD& normals,
+                                    const ImageD& mask, const NormalConsistencyOptions& options) {
+  const ImageD alpha(depth.width(), depth.height(), 1, 1.0);
+  RenderBuffersD in;
+  in.camera = &cam;
+  in.Set(Buffer::kDepth, &depth);
+  in.Set(Buffer::kNormal, &normals);
+  in.Set(Buffer::kAlpha, &alpha);
+  TargetsD t;
+  t.mask = &mask;
+  return NormalConsistencyLoss(options).Evaluate(in, t, 1, nullptr);
+}
+
 TEST(LossValueTest, DepthOfATiltedPlaneGivesItsNormal) {
   const Camera cam =
       LookAtCamera({0.5, -3, 1}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 20, 16, 24, 24);
@@ -750,18 +764,11 @@ TEST(LossValueTest, DepthOfATiltedPlaneGivesItsNormal) {
   }
   EXPECT_EQ(normals.at(0, 0, 0), 0.0);  // border
   // And the consistency loss of matching normals with alpha 1 is 0 inside the border.
-  ImageD alpha(20, 16, 1, 1.0), mask(20, 16, 1, 0.0);
+  ImageD mask(20, 16, 1, 0.0);
   for (int y = 1; y < 15; ++y) {
     for (int x = 1; x < 19; ++x) mask.at(0, y, x) = 1.0;
   }
-  RenderBuffersD in;
-  in.camera = &cam;
-  in.Set(Buffer::kDepth, &depth);
-  in.Set(Buffer::kNormal, &normals);
-  in.Set(Buffer::kAlpha, &alpha);
-  TargetsD t;
-  t.mask = &mask;
-  EXPECT_NEAR(NormalConsistencyLoss().Evaluate(in, t, 1, nullptr), 0.0, 1e-12);
+  EXPECT_NEAR(NormalConsistencyAtFullAlpha(cam, depth, normals, mask, {}), 0.0, 1e-12);
 }
 
 // Two parallel tilted planes side by side (a step, as where a tooth stands in front of a groove),
@@ -773,7 +780,7 @@ TEST(LossValueTest, OneSidedDifferencesDoNotSlantTheNormalsAtAStep) {
   const Camera cam = LookAtCamera({0.5, -3, 1}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), w, h, 24, 24);
   const Eigen::Vector3d n = Eigen::Vector3d(0.3, -1, 0.4).normalized();
   const Eigen::Vector3d facing = n.dot(cam.Center()) > 0 ? n : Eigen::Vector3d(-n);
-  ImageD depth(w, h, 1), normals(w, h, 3), alpha(w, h, 1, 1.0), mask(w, h, 1, 1.0);
+  ImageD depth(w, h, 1), normals(w, h, 3), mask(w, h, 1, 1.0);
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       const Eigen::Vector3d ray = cam.R.transpose() * cam.PixelToRay(x + 0.5, y + 0.5);
@@ -782,21 +789,14 @@ TEST(LossValueTest, OneSidedDifferencesDoNotSlantTheNormalsAtAStep) {
       for (int k = 0; k < 3; ++k) normals.at(k, y, x) = facing[k];
     }
   }
-  RenderBuffersD in;
-  in.camera = &cam;
-  in.Set(Buffer::kDepth, &depth);
-  in.Set(Buffer::kNormal, &normals);
-  in.Set(Buffer::kAlpha, &alpha);
-  TargetsD t;
-  t.mask = &mask;
   NormalConsistencyOptions one_sided;
   one_sided.one_sided = true;
   // Per-column loss: only the two columns beside the step differ.
   for (int step_column : {9, 10, 4}) {
     mask.Fill(0.0);
     for (int y = 1; y + 1 < h; ++y) mask.at(0, y, step_column) = 1.0;
-    const double central = NormalConsistencyLoss().Evaluate(in, t, 1, nullptr);
-    const double sided = NormalConsistencyLoss(one_sided).Evaluate(in, t, 1, nullptr);
+    const double central = NormalConsistencyAtFullAlpha(cam, depth, normals, mask, {});
+    const double sided = NormalConsistencyAtFullAlpha(cam, depth, normals, mask, one_sided);
     SCOPED_TRACE("column " + std::to_string(step_column));
     EXPECT_NEAR(sided, 0.0, 1e-12);
     if (step_column == 4) {
