@@ -153,9 +153,10 @@ DEFINE_double(normal_robust_scale, -1,
               "The normal consistency's residual r enters as s r / (r + s): pixels whose depth "
               "normal disagrees strongly (creases, steps) stop smoothing the depth (0: off; -1: "
               "the default of SolverOptions).");
-DEFINE_bool(normal_one_sided, false,
-            "The normal consistency takes the depth's normal from one-sided differences, towards "
-            "the neighbour whose depth is closer (a depth step gives neither side its slant).");
+DEFINE_bool(
+    normal_one_sided, false,
+    "At depth steps (one neighbour's jump over 3x the other's) the normal consistency takes "
+    "the depth's normal from the one-sided difference towards the closer neighbour.");
 DEFINE_int32(multiview_neighbours, 2, "Neighbouring views per view for the multi-view terms.");
 DEFINE_double(
     mutual_transmitted_weight, 0.2,

@@ -3,9 +3,9 @@
 // N_rend is the alpha-weighted world normal; N_surf the unit normal of the surface the expected
 // depth describes: back-project pixel centres P = C + D r (r the world ray with camera z = 1),
 // N_surf = normalise((P(y+1) - P(y-1)) x (P(x+1) - P(x-1))), zero on the border; with one_sided,
-// each difference is P(x+1) - P(x) or P(x) - P(x-1), whichever neighbour's depth is closer. gamma
-// is the foreground mask (1 without one). Gradients reach the normals and, through N_surf, the
-// depth.
+// along an axis with a depth step the difference is P(x+1) - P(x) or P(x) - P(x-1), towards the
+// closer neighbour. gamma is the foreground mask (1 without one). Gradients reach the normals
+// and, through N_surf, the depth.
 #pragma once
 
 #include <Eigen/Core>
@@ -37,9 +37,10 @@ struct NormalConsistencyOptions {
   // sigma > 0: each pixel's residual r enters as sigma r / (r + sigma), the same as r where the
   // normals nearly agree but bounded by sigma, with a pull that fades as (sigma / (r + sigma))^2.
   double robust_scale = 0;
-  // true: N_surf from one-sided differences, along each axis towards the neighbour whose depth is
-  // closer; a depth step (a tooth in front of a groove, the backdrop at a silhouette) then gives
-  // neither side the slanted normal of the step, which would pull its depths together.
+  // true: along an axis where one neighbour's depth jump from the centre exceeds the other's by
+  // kNormalStepRatio (a tooth in front of a groove, the backdrop at the outline), N_surf takes the
+  // one-sided difference towards the closer neighbour, so neither side of the step gets its
+  // slanted normal, which would pull their depths together; central differences elsewhere.
   bool one_sided = false;
 };
 
