@@ -32,6 +32,25 @@ double Number(const nlohmann::json& c, const char* key, double fallback) {
   return c.contains(key) && c[key].is_number() ? c[key].get<double>() : fallback;
 }
 
+// An optional boolean: *out keeps its default when `key` is absent.
+Status ParseFlag(const nlohmann::json& c, const char* key, bool* out) {
+  if (!c.contains(key)) return Status::Ok();
+  if (!c[key].is_boolean())
+    return Status::Error(std::string("'") + key + "' must be true or false");
+  *out = c[key].get<bool>();
+  return Status::Ok();
+}
+
+// An optional finite weight >= 0: *out keeps its default when `key` is absent.
+Status ParseWeight(const nlohmann::json& c, const char* key, double* out) {
+  const double v = Number(c, key, *out);
+  if (!(v >= 0) || !std::isfinite(v)) {
+    return Status::Error(std::string("'") + key + "' must be finite and >= 0");
+  }
+  *out = v;
+  return Status::Ok();
+}
+
 // Factory for the (buffer, target) photometric terms.
 template <typename Term>
 LossRegistry::Factory Photometric(Buffer default_buffer) {
@@ -68,43 +87,24 @@ void RegisterBuiltinLosses(LossRegistry* r) {
     TargetKind g;
     *s = ParseBuffer(c, "buffer", Buffer::kDepth, &b);
     if (s->ok()) *s = ParseTarget(c, "guide", &g);
+    bool on_geometry = false;
+    if (s->ok()) *s = ParseFlag(c, "on_geometry", &on_geometry);
     if (!s->ok()) return nullptr;
-    if (c.contains("on_geometry") && !c["on_geometry"].is_boolean()) {
-      *s = Status::Error("'on_geometry' must be true or false");
-      return nullptr;
-    }
     const double disparity_scale = Number(c, "disparity_scale", 0);
     if (!(disparity_scale >= 0)) {
       *s = Status::Error("'disparity_scale' must be >= 0");
       return nullptr;
     }
-    return std::make_unique<EdgeAwareTvLoss>(b, g, c.value("on_geometry", false), disparity_scale);
+    return std::make_unique<EdgeAwareTvLoss>(b, g, on_geometry, disparity_scale);
   });
   r->Register("normal_consistency",
               [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
-                if (c.contains("depth_gradient") && !c["depth_gradient"].is_boolean()) {
-                  *s = Status::Error("'depth_gradient' must be true or false");
-                  return nullptr;
-                }
-                const double edge = Number(c, "edge_weight", 0);
-                if (!(edge >= 0) || !std::isfinite(edge)) {
-                  *s = Status::Error("'edge_weight' must be finite and >= 0");
-                  return nullptr;
-                }
-                const double robust = Number(c, "robust_scale", 0);
-                if (!(robust >= 0) || !std::isfinite(robust)) {
-                  *s = Status::Error("'robust_scale' must be finite and >= 0");
-                  return nullptr;
-                }
-                if (c.contains("one_sided") && !c["one_sided"].is_boolean()) {
-                  *s = Status::Error("'one_sided' must be true or false");
-                  return nullptr;
-                }
                 NormalConsistencyOptions o;
-                o.depth_gradient = c.value("depth_gradient", true);
-                o.edge_weight = edge;
-                o.robust_scale = robust;
-                o.one_sided = c.value("one_sided", false);
+                *s = ParseFlag(c, "depth_gradient", &o.depth_gradient);
+                if (s->ok()) *s = ParseWeight(c, "edge_weight", &o.edge_weight);
+                if (s->ok()) *s = ParseWeight(c, "robust_scale", &o.robust_scale);
+                if (s->ok()) *s = ParseFlag(c, "one_sided", &o.one_sided);
+                if (!s->ok()) return nullptr;
                 return std::make_unique<NormalConsistencyLoss>(o);
               });
   r->Register("mutual_depth", [](const nlohmann::json& c, Status*) -> std::unique_ptr<LossTerm> {

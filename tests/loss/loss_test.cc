@@ -831,6 +831,9 @@ TEST(LossRegistryTest, CreatesByNameAndReportsBadConfigs) {
   EXPECT_EQ(LossRegistry::Get().Create("normal_consistency", {{"one_sided", 1}}, &s), nullptr);
   EXPECT_NE(s.message().find("'one_sided' must be true or false"), std::string::npos)
       << s.message();
+  EXPECT_EQ(LossRegistry::Get().Create("tv", {{"on_geometry", "yes"}}, &s), nullptr);
+  EXPECT_NE(s.message().find("'on_geometry' must be true or false"), std::string::npos)
+      << s.message();
 }
 
 TEST(ProblemTest, SumsWeightedTermsOfOneBranchAndSkipsZeroWeights) {
