@@ -102,7 +102,7 @@ Status SolverOptions::Validate() const {
     return Status::Error("--surfel_filter_sigma must be in [0.01, 2] pixels");
   for (double w : {w_2d, w_3d, w_depth, lambda_normal, lambda_distortion, depth_tv_warmup_2d,
                    depth_tv_mutual_2d, transmitted_tv_3d, depth_tv_3d, lambda_multiview_ncc,
-                   lambda_multiview_depth}) {
+                   lambda_multiview_depth, lambda_mask}) {
     if (!(w >= 0) || !std::isfinite(w))
       return Status::Error("loss weights must be finite and >= 0");
   }
@@ -172,6 +172,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"normal_one_sided", Text(normal_one_sided)},
           {"lambda_distortion", Text(lambda_distortion)},
           {"distortion_from_iteration", Text(distortion_from_iteration)},
+          {"lambda_mask", Text(lambda_mask)},
           {"lambda_multiview_ncc", Text(lambda_multiview_ncc)},
           {"lambda_multiview_depth", Text(lambda_multiview_depth)},
           {"multiview_from_iteration", Text(multiview_from_iteration)},

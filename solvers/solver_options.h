@@ -70,6 +70,9 @@ struct SolverOptions {
   // rendered plane and the forward-backward depth reprojection, against `multiview_neighbours`
   // neighbouring views each (chosen once from the points' co-visibility). Warm-up: from
   // multiview_from_iteration; mutual stage: throughout, times w_2d.
+  // Silhouette: the 2DGS alpha against the foreground mask (MaskLoss), warm-up and mutual stage
+  // (times w_2d); 0 without masks whatever the weight.
+  double lambda_mask = 0.0;
   double lambda_multiview_ncc = 0.0;
   double lambda_multiview_depth = 0.0;
   int multiview_from_iteration = 7000;

@@ -134,6 +134,10 @@ DEFINE_bool(list_losses, false,
             "Print the registered loss terms and the loss table these options give, then exit.");
 DEFINE_double(lambda_distortion, -1,
               "Weight of the 2DGS depth-distortion term (-1: the default of SolverOptions).");
+DEFINE_double(lambda_mask, -1,
+              "Weight of the 2DGS silhouette term: binary cross-entropy of the rendered alpha "
+              "against the foreground mask (no effect without masks; -1: the default of "
+              "SolverOptions).");
 DEFINE_double(lambda_multiview_ncc, -1,
               "Weight of the 2DGS multi-view patch NCC through the rendered plane (-1: the "
               "default of SolverOptions).");
@@ -288,6 +292,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
          "lambda_l1",
          "lambda_normal",
          "lambda_distortion",
+         "lambda_mask",
          "lambda_multiview_ncc",
          "lambda_multiview_depth",
          "multiview_neighbours",
@@ -384,6 +389,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
        {std::tuple{FLAGS_depth_tv_warmup_2d, &options.depth_tv_warmup_2d, "--depth_tv_warmup_2d"},
         std::tuple{FLAGS_depth_tv_mutual_2d, &options.depth_tv_mutual_2d, "--depth_tv_mutual_2d"},
         std::tuple{FLAGS_lambda_distortion, &options.lambda_distortion, "--lambda_distortion"},
+        std::tuple{FLAGS_lambda_mask, &options.lambda_mask, "--lambda_mask"},
         std::tuple{FLAGS_lambda_multiview_ncc, &options.lambda_multiview_ncc,
                    "--lambda_multiview_ncc"},
         std::tuple{FLAGS_lambda_multiview_depth, &options.lambda_multiview_depth,

@@ -6,6 +6,7 @@
 #include "mgsr/loss/exposure_compensation.h"
 #include "mgsr/loss/l1_loss.h"
 #include "mgsr/loss/loss_registry.h"
+#include "mgsr/loss/mask_loss.h"
 #include "mgsr/loss/multiview_depth_loss.h"
 #include "mgsr/loss/multiview_ncc_loss.h"
 #include "mgsr/loss/mutual_depth_loss.h"
@@ -136,6 +137,9 @@ void RegisterBuiltinLosses(LossRegistry* r) {
                                          Number(c, "lambda", 0.8)),
             p);
       });
+  r->Register("mask", [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {
+    return std::make_unique<MaskLoss>();
+  });
   r->Register("distortion", [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {
     return std::make_unique<DistortionLoss>();
   });

@@ -18,6 +18,7 @@
 #include "mgsr/loss/exposure_compensation.h"
 #include "mgsr/loss/l1_loss.h"
 #include "mgsr/loss/loss_registry.h"
+#include "mgsr/loss/mask_loss.h"
 #include "mgsr/loss/multiview_ncc_loss.h"
 #include "mgsr/loss/mutual_depth_loss.h"
 #include "mgsr/loss/normal_consistency_loss.h"
@@ -160,6 +161,7 @@ TEST(LossGradientTest, EveryTermMatchesNumericDifferentiation) {
   ExpectGradientMatchesNumeric(MutualDepthLoss(false));
   ExpectGradientMatchesNumeric(MutualDepthLoss(true));
   ExpectGradientMatchesNumeric(DistortionLoss());
+  ExpectGradientMatchesNumeric(MaskLoss());
   ExpectGradientMatchesNumeric(ExposureCompensatedLoss(
       std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, 0.8),
       {1.3, 0.1, -0.05, 0.02, 0.8, 0.1, -0.1, 0.05, 1.1, 0.03, -0.02, 0.05}));
@@ -427,6 +429,35 @@ TEST(LossValueTest, HandComputedCases) {
   f.in.Set(Buffer::kDepth, &base);
   f.targets.other_depth = &twice;
   EXPECT_NEAR(MutualDepthLoss().Evaluate(f.in, f.targets, 1, nullptr), 0.0, 1e-15);
+}
+
+// The silhouette term: hand-computed cross-entropy, nothing without a mask, and no push on a pixel
+// already clamped at full or no opacity.
+TEST(LossValueTest, MaskLossIsTheCrossEntropyOfAlphaAgainstTheMask) {
+  Fixture f(3);
+  ImageD alpha(2, 1, 1), mask(2, 1, 1);
+  alpha.data()[0] = 0.8;  // foreground, mostly covered
+  alpha.data()[1] = 0.3;  // background with a disk in front
+  mask.data()[0] = 1;
+  mask.data()[1] = 0;
+  f.in.Set(Buffer::kAlpha, &alpha);
+  f.targets.mask = &mask;
+  RenderGradientsD g;
+  EXPECT_NEAR(MaskLoss().Evaluate(f.in, f.targets, 2.0, &g), -(std::log(0.8) + std::log(0.7)) / 2,
+              1e-12);
+  EXPECT_NEAR(g.Get(Buffer::kAlpha).data()[0], 2.0 / 2 * (0.8 - 1) / (0.8 * 0.2), 1e-12);
+  EXPECT_NEAR(g.Get(Buffer::kAlpha).data()[1], 2.0 / 2 * 0.3 / (0.3 * 0.7), 1e-12);
+  // An empty background pixel and an opaque foreground one: value ~0, no gradient.
+  alpha.data()[0] = 1.0;
+  alpha.data()[1] = 0.0;
+  RenderGradientsD clamped;
+  EXPECT_NEAR(MaskLoss().Evaluate(f.in, f.targets, 1.0, &clamped), -std::log(1 - MaskLoss::kEps),
+              1e-12);
+  EXPECT_EQ(clamped.Get(Buffer::kAlpha).data()[0], 0.0);
+  EXPECT_EQ(clamped.Get(Buffer::kAlpha).data()[1], 0.0);
+  f.targets.mask = nullptr;
+  EXPECT_FALSE(MaskLoss().Check(RenderBuffers(), Targets()).ok());  // no alpha to read
+  EXPECT_EQ(MaskLoss().Evaluate(f.in, f.targets, 1.0, nullptr), 0.0);
 }
 
 // The fused SSIM kernel behind DssimLoss: its value against the direct window sum, its gradient

@@ -22,9 +22,12 @@ TEST(LossTableTest, ThePaperTableFollowsTheOptions) {
   o.lambda_normal = 0.7;
   o.w_2d = 0.25;
   o.normal_from_iteration = 300;
+  o.lambda_mask = 0.3;
   const std::vector<LossSpec> t = PaperLossTable(o);
   ASSERT_TRUE(CheckLossTable(t).ok());
-  EXPECT_EQ(t.size(), 20u);
+  EXPECT_EQ(t.size(), 22u);
+  EXPECT_EQ(Find(t, Branch::kSurfels2D, Stage::kWarmup, "mask")->weight, 0.3);
+  EXPECT_EQ(Find(t, Branch::kSurfels2D, Stage::kMutual, "mask")->weight, 0.25 * 0.3);
   const LossSpec* nc = Find(t, Branch::kSurfels2D, Stage::kWarmup, "normal_consistency");
   ASSERT_NE(nc, nullptr);
   EXPECT_EQ(nc->weight, 0.7);

@@ -38,5 +38,30 @@ TEST(SurfaceOffsetTest, ShortRunLiesWithinHalfAFootprintOfTheTruth) {
   EXPECT_LT(std::abs(ceiling_px), 0.25) << r.output;
 }
 
+// The silhouette term (MaskLoss, --lambda_mask) on a gear whose tooth gaps every view sees as
+// background: without it the gaps web over (the photo loss cannot tell an empty pixel from a disk
+// in the background's colour). Measured at 600 iterations, synth seeds 5 / 6 / 7: NC x100
+// 77.7 / 77.0 / 77.7 without, 81.1 / 81.2 / 81.0 with weight 1; CD x1000 25.6 / 27.2 / 26.5
+// against 21.6 / 21.8 / 22.1.
+TEST(SurfaceOffsetTest, TheMaskTermEmptiesTheGapsBetweenAGearsTeeth) {
+  const std::string dir = testing::ScratchDir();
+  const std::string synth =
+      "--width 64 --height 64 --num_views 24 --seed 5 --mirror 0.3 --shape gear";
+  double nc[2], cd[2];
+  for (int with = 0; with < 2; ++with) {
+    testing::CommandResult r;
+    const std::string out = with ? "mask" : "plain";
+    ASSERT_NO_FATAL_FAILURE(
+        testing::ShortSurfelRun(dir, synth, &r, with ? "--lambda_mask 1" : "--lambda_mask 0", out));
+    std::string text;
+    ASSERT_TRUE(ReadFileToString(dir + "/" + out + "/metrics.json", &text).ok());
+    const nlohmann::json m = nlohmann::json::parse(text);
+    nc[with] = m["mesh"]["nc"].get<double>();
+    cd[with] = m["mesh"]["cd"].get<double>();
+  }
+  EXPECT_GT(nc[1], nc[0] + 0.015);
+  EXPECT_LT(cd[1], cd[0] * 0.92);
+}
+
 }  // namespace
 }  // namespace mgsr

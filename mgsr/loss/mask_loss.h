@@ -1,0 +1,55 @@
+// Silhouette loss: the branch's accumulated opacity against the view's foreground mask, as binary
+// cross-entropy,
+//   L = mean -(m log a + (1 - m) log(1 - a)),   a = alpha clamped to [eps, 1 - eps],
+// d L / d a = (a - m) / (a (1 - a)) / n inside the clamp and 0 outside it.
+// The photometric terms cannot tell an empty pixel from a surface painted in the background's
+// colour, so without it a hole or a gap that every view sees as background can fill with disks
+// that the smoothness prior pulls across it (the torus's hole, the gaps between a gear's teeth).
+// The mask is what all views agree on about where the object is not. Without a mask the term is
+// 0: it only adds what the capture knows.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+
+#include "mgsr/loss/loss_term.h"
+#include "mgsr/loss/loss_util.h"
+
+namespace mgsr {
+
+class MaskLoss : public LossTermImpl<MaskLoss> {
+ public:
+  // Keeps log() finite and the gradient bounded (1 / eps) where a pixel is fully opaque or empty.
+  static constexpr double kEps = 1e-3;
+
+  std::string Name() const override { return "mask"; }
+  std::vector<Buffer> Inputs() const override { return {Buffer::kAlpha}; }
+  Status Check(const RenderBuffers& in, const Targets& t) const override {
+    MGSR_RETURN_IF_ERROR(RequireImage(Name(), "alpha", in.Get(Buffer::kAlpha),
+                                      static_cast<const Image*>(nullptr), 1));
+    if (t.mask == nullptr) return Status::Ok();
+    return RequireImage(Name(), "mask", t.mask, in.Get(Buffer::kAlpha), 1);
+  }
+
+  template <typename T>
+  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+                 RenderGradientsT<T>* grad) const {
+    if (t.mask == nullptr) return 0.0;
+    const ImageT<T>& A = *in.Get(Buffer::kAlpha);
+    const T* m = t.mask->data();
+    const double inv_n = 1.0 / static_cast<double>(A.size());
+    T* g = grad ? grad->Get(Buffer::kAlpha, A).data() : nullptr;
+    double total = 0;
+    for (size_t i = 0; i < A.size(); ++i) {
+      const double raw = static_cast<double>(A.data()[i]);
+      const double a = std::clamp(raw, kEps, 1.0 - kEps);
+      const double mi = std::clamp(static_cast<double>(m[i]), 0.0, 1.0);
+      total -= mi * std::log(a) + (1.0 - mi) * std::log(1.0 - a);
+      if (g && raw > kEps && raw < 1.0 - kEps)
+        g[i] += static_cast<T>(scale * inv_n * (a - mi) / (a * (1.0 - a)));
+    }
+    return total * inv_n;
+  }
+};
+
+}  // namespace mgsr
