@@ -58,6 +58,14 @@ struct ReconstructionOptions {
   // and a strong normal term then grows them into a sheet in front of the object (harness
   // no_masks scene: NC 65.6 at 2.0, 94.3 at 0.05). Off: solver.lambda_normal as given.
   bool normal_weight_from_scene = false;
+  // Where every training view has a mask or alpha: the silhouette term at kMaskWeightWithForeground
+  // (solver.lambda_mask; mask_from_scene) and one-sided differences at depth steps in the normal
+  // consistency (solver.normal_one_sided; one_sided_from_scene). The masks say where every view
+  // agrees there is no object: without the term holes and gaps web over (docs/geometry.md,
+  // "Silhouettes"). Without masks both stay as given (the term has nothing to read, and one-sided
+  // differences alone raised CD on the scene-level captures).
+  bool mask_from_scene = false;
+  bool one_sided_from_scene = false;
   // Sets the depth TVs (both branches') from the scene: off where the background is learnt (a
   // scene in the world: no masks, photos whose borders vary), the reference's weights (solver's
   // depth_tv_* as given) otherwise. In a scene-level capture every silhouette, horizon and

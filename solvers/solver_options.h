@@ -25,6 +25,8 @@ struct BranchSchedule {
 // whose pixels are known (masks or alpha; docs/geometry.md, state D).
 constexpr double kReferenceNormalWeight = 0.05;
 constexpr double kNormalWeightWithForeground = 2.0;
+// The silhouette term's weight where the views have masks or alpha (docs/geometry.md).
+constexpr double kMaskWeightWithForeground = 3.0;
 
 struct SolverOptions {
   // Warm-up: each branch steps until its loss window flattens (after a minimum iteration) or a cap.

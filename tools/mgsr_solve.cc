@@ -136,8 +136,8 @@ DEFINE_double(lambda_distortion, -1,
               "Weight of the 2DGS depth-distortion term (-1: the default of SolverOptions).");
 DEFINE_double(lambda_mask, -1,
               "Weight of the 2DGS silhouette term: binary cross-entropy of the rendered alpha "
-              "against the foreground mask (no effect without masks; -1: the default of "
-              "SolverOptions).");
+              "against the foreground mask (no effect without masks; -1: 3 where every training "
+              "view has a mask or alpha).");
 DEFINE_double(lambda_multiview_ncc, -1,
               "Weight of the 2DGS multi-view patch NCC through the rendered plane (-1: the "
               "default of SolverOptions).");
@@ -160,7 +160,8 @@ DEFINE_double(normal_robust_scale, -1,
 DEFINE_bool(
     normal_one_sided, false,
     "At depth steps (one neighbour's jump over 3x the other's) the normal consistency takes "
-    "the depth's normal from the one-sided difference towards the closer neighbour.");
+    "the depth's normal from the one-sided difference towards the closer neighbour (not given: "
+    "on where every training view has a mask or alpha).");
 DEFINE_int32(multiview_neighbours, 2, "Neighbouring views per view for the multi-view terms.");
 DEFINE_double(
     mutual_transmitted_weight, 0.2,
@@ -383,6 +384,8 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   } else if (FLAGS_lambda_normal != -1) {
     return Fail("--lambda_normal must be >= 0 (or -1 for the default)");
   }
+  ro.mask_from_scene = FLAGS_lambda_mask == -1;
+  ro.one_sided_from_scene = gflags::GetCommandLineFlagInfoOrDie("normal_one_sided").is_default;
   ro.depth_tv_from_scene = FLAGS_depth_tv_warmup_2d == -1 && FLAGS_depth_tv_mutual_2d == -1;
   // Weights whose -1 means "the default" (some chosen from the scene by the pipeline).
   for (auto [flag, value, name] :

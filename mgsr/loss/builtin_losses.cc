@@ -137,8 +137,11 @@ void RegisterBuiltinLosses(LossRegistry* r) {
                                          Number(c, "lambda", 0.8)),
             p);
       });
-  r->Register("mask", [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {
-    return std::make_unique<MaskLoss>();
+  r->Register("mask", [](const nlohmann::json& c, Status* s) -> std::unique_ptr<LossTerm> {
+    bool foreground = true;
+    *s = ParseFlag(c, "foreground", &foreground);
+    if (!s->ok()) return nullptr;
+    return std::make_unique<MaskLoss>(foreground);
   });
   r->Register("distortion", [](const nlohmann::json&, Status*) -> std::unique_ptr<LossTerm> {
     return std::make_unique<DistortionLoss>();

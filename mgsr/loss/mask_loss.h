@@ -6,7 +6,8 @@
 // colour, so without it a hole or a gap that every view sees as background can fill with disks
 // that the smoothness prior pulls across it (the torus's hole, the gaps between a gear's teeth).
 // The mask is what all views agree on about where the object is not. Without a mask the term is
-// 0: it only adds what the capture knows.
+// 0: it only adds what the capture knows. With `foreground` false only the background half
+// remains (-log(1 - a) where the mask is empty: space carving; the rim is left to the photo).
 #pragma once
 
 #include <algorithm>
@@ -22,7 +23,8 @@ class MaskLoss : public LossTermImpl<MaskLoss> {
   // Keeps log() finite and the gradient bounded (1 / eps) where a pixel is fully opaque or empty.
   static constexpr double kEps = 1e-3;
 
-  std::string Name() const override { return "mask"; }
+  explicit MaskLoss(bool foreground = true) : foreground_(foreground) {}
+  std::string Name() const override { return foreground_ ? "mask" : "mask(background)"; }
   std::vector<Buffer> Inputs() const override { return {Buffer::kAlpha}; }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
     MGSR_RETURN_IF_ERROR(RequireImage(Name(), "alpha", in.Get(Buffer::kAlpha),
@@ -43,13 +45,20 @@ class MaskLoss : public LossTermImpl<MaskLoss> {
     for (size_t i = 0; i < A.size(); ++i) {
       const double raw = static_cast<double>(A.data()[i]);
       const double a = std::clamp(raw, kEps, 1.0 - kEps);
-      const double mi = std::clamp(static_cast<double>(m[i]), 0.0, 1.0);
+      double mi = std::clamp(static_cast<double>(m[i]), 0.0, 1.0);
+      if (!foreground_) {
+        if (mi >= 0.5) continue;
+        mi = 0;
+      }
       total -= mi * std::log(a) + (1.0 - mi) * std::log(1.0 - a);
       if (g && raw > kEps && raw < 1.0 - kEps)
         g[i] += static_cast<T>(scale * inv_n * (a - mi) / (a * (1.0 - a)));
     }
     return total * inv_n;
   }
+
+ private:
+  bool foreground_;
 };
 
 }  // namespace mgsr

@@ -162,6 +162,7 @@ TEST(LossGradientTest, EveryTermMatchesNumericDifferentiation) {
   ExpectGradientMatchesNumeric(MutualDepthLoss(true));
   ExpectGradientMatchesNumeric(DistortionLoss());
   ExpectGradientMatchesNumeric(MaskLoss());
+  ExpectGradientMatchesNumeric(MaskLoss(false));
   ExpectGradientMatchesNumeric(ExposureCompensatedLoss(
       std::make_unique<RenderLoss>(Buffer::kColor, TargetKind::kImage, 0.8),
       {1.3, 0.1, -0.05, 0.02, 0.8, 0.1, -0.1, 0.05, 1.1, 0.03, -0.02, 0.05}));

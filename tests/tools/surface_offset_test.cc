@@ -51,8 +51,10 @@ TEST(SurfaceOffsetTest, TheMaskTermEmptiesTheGapsBetweenAGearsTeeth) {
   for (int with = 0; with < 2; ++with) {
     testing::CommandResult r;
     const std::string out = with ? "mask" : "plain";
-    ASSERT_NO_FATAL_FAILURE(
-        testing::ShortSurfelRun(dir, synth, &r, with ? "--lambda_mask 1" : "--lambda_mask 0", out));
+    ASSERT_NO_FATAL_FAILURE(testing::ShortSurfelRun(
+        dir, synth, &r,
+        std::string(with ? "--lambda_mask 1" : "--lambda_mask 0") + " --normal_one_sided=false",
+        out));
     std::string text;
     ASSERT_TRUE(ReadFileToString(dir + "/" + out + "/metrics.json", &text).ok());
     const nlohmann::json m = nlohmann::json::parse(text);
