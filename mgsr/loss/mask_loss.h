@@ -41,18 +41,32 @@ class MaskLoss : public LossTermImpl<MaskLoss> {
     const T* m = t.mask->data();
     const double inv_n = 1.0 / static_cast<double>(A.size());
     T* g = grad ? grad->Get(Buffer::kAlpha, A).data() : nullptr;
+    // Most pixels sit at the clamp (the empty background, the opaque inside), where both
+    // logarithms are constants; and a binary mask needs only one of them. Same values, bit for bit.
+    const double lo = kEps, hi = 1.0 - kEps;
+    const double log_lo = std::log(lo), log_1m_lo = std::log(1.0 - lo);
+    const double log_hi = std::log(hi), log_1m_hi = std::log(1.0 - hi);
     double total = 0;
     for (size_t i = 0; i < A.size(); ++i) {
       const double raw = static_cast<double>(A.data()[i]);
-      const double a = std::clamp(raw, kEps, 1.0 - kEps);
       double mi = std::clamp(static_cast<double>(m[i]), 0.0, 1.0);
       if (!foreground_) {
         if (mi >= 0.5) continue;
         mi = 0;
       }
-      total -= mi * std::log(a) + (1.0 - mi) * std::log(1.0 - a);
-      if (g && raw > kEps && raw < 1.0 - kEps)
-        g[i] += static_cast<T>(scale * inv_n * (a - mi) / (a * (1.0 - a)));
+      double log_a, log_1m_a;
+      if (raw <= lo) {
+        log_a = log_lo;
+        log_1m_a = log_1m_lo;
+      } else if (raw >= hi) {
+        log_a = log_hi;
+        log_1m_a = log_1m_hi;
+      } else {
+        log_a = mi > 0 ? std::log(raw) : 0.0;
+        log_1m_a = mi < 1 ? std::log(1.0 - raw) : 0.0;
+        if (g) g[i] += static_cast<T>(scale * inv_n * (raw - mi) / (raw * (1.0 - raw)));
+      }
+      total -= mi * log_a + (1.0 - mi) * log_1m_a;
     }
     return total * inv_n;
   }
