@@ -529,6 +529,7 @@ class PrimitiveTrainer : public BranchTrainer {
     o.sh_degree = sh_degree_;
     if constexpr (HasLearntBackground<P>::value) {
       if (environment_ != nullptr) {
+        ProfileScope scope("environment");
         environment_->Render(camera, background);
         o.background_image = background;
       }

@@ -4,8 +4,12 @@
 #include "mgsr/model/environment_map.h"
 
 #include <gtest/gtest.h>
+#include <omp.h>
 
+#include <algorithm>
 #include <cmath>
+#include <map>
+#include <set>
 
 #include "mgsr/core/rng.h"
 #include "solvers/environment_background.h"
@@ -47,6 +51,62 @@ TEST(EnvironmentMapTest, TapsWrapInLongitudeClampAtThePolesAndInterpolate) {
   for (int k = 0; k < 4; ++k) EXPECT_LT(up.texel[k], 8);
 }
 
+// The colour the renderer's taps of pixel i give, from `values` (any scalar type).
+template <typename T>
+void LookupThroughRendererTaps(const EnvironmentMap& map, const EnvironmentRenderer::PixelTaps& t,
+                               const std::vector<T>& values, T rgb[3]) {
+  const int texel[4] = {t.y0 * map.width + t.x0, t.y0 * map.width + t.x1, t.y1 * map.width + t.x0,
+                        t.y1 * map.width + t.x1};
+  const T ax = t.ax, ay = t.ay;
+  const T weight[4] = {(1 - ax) * (1 - ay), ax * (1 - ay), (1 - ax) * ay, ax * ay};
+  for (int c = 0; c < 3; ++c) {
+    rgb[c] = 0;
+    for (int k = 0; k < 4; ++k) rgb[c] += weight[k] * values[3 * texel[k] + c];
+  }
+}
+
+TEST(EnvironmentMapTest, RendererTapsAgreeWithTheDefinition) {
+  // The renderer computes its taps in float with a polynomial arctangent: each texel's weight
+  // within 2e-4 of the double definition's, for a view of the sky and one across the map's
+  // longitude seam (looking along -x).
+  EnvironmentMap map;
+  map.Reset(64, 32, 0.0f);
+  const Camera cameras[2] = {SkyCamera(), LookAtCamera({0, 0, 0}, {-1, 0.05, -0.2},
+                                                       Eigen::Vector3d::UnitZ(), 40, 30, 20, 20)};
+  for (const Camera& cam : cameras) {
+    EnvironmentRenderer renderer;
+    const std::vector<EnvironmentRenderer::PixelTaps>& taps = renderer.TapsFor(map, cam);
+    ASSERT_EQ(taps.size(), static_cast<size_t>(cam.width) * cam.height);
+    double worst = 0;
+    std::set<int> columns;
+    for (int y = 0; y < cam.height; ++y) {
+      for (int x = 0; x < cam.width; ++x) {
+        const Eigen::Vector3d d =
+            (cam.R.transpose() * cam.PixelToRay(x + 0.5, y + 0.5)).normalized();
+        const EnvironmentTaps expected = map.Taps(d);
+        const EnvironmentRenderer::PixelTaps& t = taps[static_cast<size_t>(y) * cam.width + x];
+        // Both as one weight per texel.
+        std::map<int, double> a, b;
+        for (int k = 0; k < 4; ++k) a[expected.texel[k]] += expected.weight[k];
+        const int texel[4] = {t.y0 * 64 + t.x0, t.y0 * 64 + t.x1, t.y1 * 64 + t.x0,
+                              t.y1 * 64 + t.x1};
+        const double weight[4] = {(1.0 - t.ax) * (1 - t.ay), t.ax * (1.0 - t.ay),
+                                  (1.0 - t.ax) * t.ay, double{t.ax} * t.ay};
+        for (int k = 0; k < 4; ++k) b[texel[k]] += weight[k];
+        for (const auto& [texel_index, w] : a)
+          worst = std::max(worst, std::abs(w - b[texel_index]));
+        for (const auto& [texel_index, w] : b)
+          worst = std::max(worst, std::abs(w - a[texel_index]));
+        columns.insert(t.x0);
+      }
+    }
+    EXPECT_LT(worst, 2e-4);
+    if (&cam == &cameras[1]) {
+      EXPECT_TRUE(columns.count(0) && columns.count(63));  // the seam
+    }
+  }
+}
+
 TEST(EnvironmentMapTest, GradientMatchesNumericDifferentiationInDoublePrecision) {
   EnvironmentMap map;
   map.Reset(16, 8, 0.0f);
@@ -62,18 +122,15 @@ TEST(EnvironmentMapTest, GradientMatchesNumericDifferentiationInDoublePrecision)
   std::vector<float> analytic;
   renderer.Backward(map, cam, upstream, &analytic);
   ASSERT_EQ(analytic.size(), map.texels.size());
-  // The loss sum(upstream * render) from the definition, in double: each pixel centre's direction,
-  // its taps, the texels' weighted sum.
-  const size_t np = static_cast<size_t>(cam.width) * cam.height;
+  // The loss sum(upstream * render) in double: each pixel's taps, the texels' weighted sum.
+  const std::vector<EnvironmentRenderer::PixelTaps> taps = renderer.TapsFor(map, cam);
   std::vector<double> values(map.texels.begin(), map.texels.end());
   auto loss = [&](const std::vector<double>& v) {
     double l = 0;
     for (int y = 0; y < cam.height; ++y) {
       for (int x = 0; x < cam.width; ++x) {
-        const Eigen::Vector3d d =
-            (cam.R.transpose() * cam.PixelToRay(x + 0.5, y + 0.5)).normalized();
         double rgb[3];
-        map.Lookup(map.Taps(d), v, rgb);
+        LookupThroughRendererTaps(map, taps[static_cast<size_t>(y) * cam.width + x], v, rgb);
         for (int c = 0; c < 3; ++c) l += upstream.at(c, y, x) * rgb[c];
       }
     }
@@ -81,9 +138,8 @@ TEST(EnvironmentMapTest, GradientMatchesNumericDifferentiationInDoublePrecision)
   };
   // The render is the same lookup in float.
   {
-    const Eigen::Vector3d d = (cam.R.transpose() * cam.PixelToRay(5.5, 7.5)).normalized();
     double rgb[3];
-    map.Lookup(map.Taps(d), values, rgb);
+    LookupThroughRendererTaps(map, taps[7 * cam.width + 5], values, rgb);
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(rendered.at(c, 7, 5), rgb[c], 1e-6);
   }
   int seen = 0;
@@ -94,7 +150,32 @@ TEST(EnvironmentMapTest, GradientMatchesNumericDifferentiationInDoublePrecision)
   }
   EXPECT_GT(seen, 10);
   EXPECT_LT(seen, static_cast<int>(values.size()));  // the camera sees part of the sphere
-  (void)np;
+}
+
+TEST(EnvironmentMapTest, GradientIsTheSameOnOneAndTwoThreads) {
+  // The row bands' sums are added in band order, whatever the number of threads.
+  EnvironmentMap map;
+  map.Reset(64, 32, 0.0f);
+  Rng rng(5);
+  for (float& v : map.texels) v = static_cast<float>(rng.Uniform(0, 1));
+  const Camera cam =
+      LookAtCamera({0, 0, 0}, {1, 0.3, 0.4}, Eigen::Vector3d::UnitZ(), 301, 203, 150, 150);
+  Image upstream(cam.width, cam.height, 3);
+  for (size_t i = 0; i < upstream.size(); ++i)
+    upstream.data()[i] = static_cast<float>(rng.Uniform(-1, 1));
+  std::vector<float> grads[2];
+  Image renders[2];
+  const int saved = omp_get_max_threads();
+  for (int threads = 1; threads <= 2; ++threads) {
+    omp_set_num_threads(threads);
+    EnvironmentRenderer renderer;
+    renderer.Render(map, cam, &renders[threads - 1]);
+    renderer.Backward(map, cam, upstream, &grads[threads - 1]);
+  }
+  omp_set_num_threads(saved);
+  EXPECT_EQ(grads[0], grads[1]);
+  EXPECT_TRUE(
+      std::equal(renders[0].data(), renders[0].data() + renders[0].size(), renders[1].data()));
 }
 
 TEST(EnvironmentBackgroundTest, LearnsASkyAndResumesExactly) {
