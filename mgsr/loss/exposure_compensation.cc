@@ -1,6 +1,8 @@
 #include "mgsr/loss/exposure_compensation.h"
 
+#include <algorithm>
 #include <cstdint>
+#include <vector>
 
 #include "mgsr/loss/loss_util.h"
 #include "mgsr/loss/parallel_pixels.h"
@@ -76,25 +78,6 @@ void ApplyColorTransform(const ColorTransform& p, const ImageT<T>& in, const Ima
 
 namespace {
 
-// sum_i g_i w_i c_i and sum_i g_i w_i (w = the mask, or 1), accumulated in double.
-template <typename T>
-double WeightedDot(const T* g, const T* m, const T* c, size_t n) {
-  double s = 0;
-#pragma omp simd reduction(+ : s)
-  for (size_t i = 0; i < n; ++i) {
-    const T w = m != nullptr ? m[i] : T(1);
-    s += static_cast<double>(g[i] * w * c[i]);
-  }
-  return s;
-}
-template <typename T>
-double WeightedSum(const T* g, const T* m, size_t n) {
-  double s = 0;
-#pragma omp simd reduction(+ : s)
-  for (size_t i = 0; i < n; ++i) s += static_cast<double>(m != nullptr ? g[i] * m[i] : g[i]);
-  return s;
-}
-
 // Channel k of pixel i adds o = 0, 1, 2 in turn: g_o (w A_ok + [o == k] (1 - w)), A = a (row o).
 template <typename T>
 inline void ColorTransformPixelBackward(const T* a, const T* g0, const T* g1, const T* g2, T w,
@@ -108,47 +91,79 @@ inline void ColorTransformPixelBackward(const T* a, const T* g0, const T* g1, co
            g2[i] * (w * a[8] + keep);
 }
 
+// Pixels per chunk of the backward pass: each chunk takes its twelve parameter sums in one read
+// of its pixels, and the chunks' sums are added in chunk order, so they do not depend on the
+// number of threads.
+constexpr int64_t kTransformChunk = 32768;
+
+// Pixels [begin, end): the colour's gradient and the twelve parameter sums, accumulated in double:
+// sums[4 o + k] = sum_i g_o w c_k (k < 3) and sum_i g_o w (k = 3), w = the mask or 1.
+template <typename T, bool kMasked>
+void ColorTransformChunkBackward(const T* a, const T* const* c, const T* m, const T* const* g,
+                                 T* const* dc, int64_t begin, int64_t end, double sums[12]) {
+  const T *c0 = c[0], *c1 = c[1], *c2 = c[2], *g0 = g[0], *g1 = g[1], *g2 = g[2];
+  T *dc0 = dc[0], *dc1 = dc[1], *dc2 = dc[2];
+  double s00 = 0, s01 = 0, s02 = 0, s03 = 0, s10 = 0, s11 = 0, s12 = 0, s13 = 0, s20 = 0, s21 = 0,
+         s22 = 0, s23 = 0;
+#pragma omp simd reduction(+ : s00, s01, s02, s03, s10, s11, s12, s13, s20, s21, s22, s23)
+  for (int64_t i = begin; i < end; ++i) {
+    const T w = kMasked ? m[i] : T(1);
+    ColorTransformPixelBackward(a, g0, g1, g2, w, i, dc0, dc1, dc2);
+    const T gw0 = g0[i] * w, gw1 = g1[i] * w, gw2 = g2[i] * w;
+    s00 += static_cast<double>(gw0 * c0[i]);
+    s01 += static_cast<double>(gw0 * c1[i]);
+    s02 += static_cast<double>(gw0 * c2[i]);
+    s03 += static_cast<double>(gw0);
+    s10 += static_cast<double>(gw1 * c0[i]);
+    s11 += static_cast<double>(gw1 * c1[i]);
+    s12 += static_cast<double>(gw1 * c2[i]);
+    s13 += static_cast<double>(gw1);
+    s20 += static_cast<double>(gw2 * c0[i]);
+    s21 += static_cast<double>(gw2 * c1[i]);
+    s22 += static_cast<double>(gw2 * c2[i]);
+    s23 += static_cast<double>(gw2);
+  }
+  const double all[12] = {s00, s01, s02, s03, s10, s11, s12, s13, s20, s21, s22, s23};
+  for (int j = 0; j < 12; ++j) sums[j] = all[j];
+}
+
 }  // namespace
 
 template <typename T>
 void ColorTransformBackward(const ColorTransform& p, const ImageT<T>& in, const ImageT<T>* mask,
                             const ImageT<T>& d_out, ImageT<T>* d_in, ColorTransform* d_params) {
-  const size_t n = in.plane_size();
   const T* m = mask != nullptr ? mask->plane(0) : nullptr;
-  ColorTransform dp{};
   // d out_o / d c_k = m A_ok + (1 - m) [o == k];  d out_o / d A_ok = m c_k;  d out_o / d b_o = m.
-  // The colour's gradient, pixel by pixel, on all threads: each pixel adds o = 0, 1, 2 in turn to
-  // each of its three channels, in one pass over the planes (nine passes before, the same sums).
-  const int64_t count = static_cast<int64_t>(n);
-  const T *g0 = d_out.plane(0), *g1 = d_out.plane(1), *g2 = d_out.plane(2);
-  T *dc0 = d_in->plane(0), *dc1 = d_in->plane(1), *dc2 = d_in->plane(2);
+  // One pass over the planes: each chunk of pixels adds its colour gradient and its parameter
+  // sums (which had taken twelve passes).
+  const int64_t count = static_cast<int64_t>(in.plane_size());
+  const int64_t chunks = (count + kTransformChunk - 1) / kTransformChunk;
+  const T* c[3] = {in.plane(0), in.plane(1), in.plane(2)};
+  const T* g[3] = {d_out.plane(0), d_out.plane(1), d_out.plane(2)};
+  T* dc[3] = {d_in->plane(0), d_in->plane(1), d_in->plane(2)};
   T a[9];
   for (int j = 0; j < 9; ++j) a[j] = static_cast<T>(p[j]);
-  // Two loops, so neither loads the mask under a condition.
-  if (m != nullptr) {
-#pragma omp parallel for simd schedule(static) if (count >= kParallelPixels)
-    for (int64_t i = 0; i < count; ++i)
-      ColorTransformPixelBackward(a, g0, g1, g2, m[i], i, dc0, dc1, dc2);
-  } else {
-#pragma omp parallel for simd schedule(static) if (count >= kParallelPixels)
-    for (int64_t i = 0; i < count; ++i)
-      ColorTransformPixelBackward(a, g0, g1, g2, T(1), i, dc0, dc1, dc2);
+  // resize() keeps the capacity: nothing is allocated once a size has been seen.
+  static thread_local std::vector<double> chunk_sums;
+  chunk_sums.resize(12 * static_cast<size_t>(chunks));
+  double* sums = chunk_sums.data();  // a pointer, not the thread_local, into the region
+#pragma omp parallel for schedule(dynamic) if (count >= kParallelPixels)
+  for (int64_t k = 0; k < chunks; ++k) {
+    const int64_t begin = k * kTransformChunk, end = std::min(count, begin + kTransformChunk);
+    if (m != nullptr) {
+      ColorTransformChunkBackward<T, true>(a, c, m, g, dc, begin, end, sums + 12 * k);
+    } else {
+      ColorTransformChunkBackward<T, false>(a, c, m, g, dc, begin, end, sums + 12 * k);
+    }
   }
-  // The twelve parameter sums: each a serial reduction whose order fixes its bits, so they run
-  // side by side on the threads rather than split (on one thread they were ~1% of a training run,
-  // the other thread waiting).
-  const T* g[3] = {g0, g1, g2};
-  double sums[3][4];
-#pragma omp parallel for schedule(dynamic, 1) if (count >= kParallelPixels)
-  for (int j = 0; j < 12; ++j) {
-    const int o = j / 4, k = j % 4;
-    sums[o][k] = k < 3 ? WeightedDot(g[o], m, in.plane(k), n) : WeightedSum(g[o], m, n);
+  double total[12] = {};
+  for (int64_t k = 0; k < chunks; ++k) {
+    for (int j = 0; j < 12; ++j) total[j] += sums[12 * k + j];
   }
   for (int o = 0; o < 3; ++o) {
-    for (int k = 0; k < 3; ++k) dp[3 * o + k] = sums[o][k];
-    dp[9 + o] = sums[o][3];
+    for (int k = 0; k < 3; ++k) (*d_params)[3 * o + k] += total[4 * o + k];
+    (*d_params)[9 + o] += total[4 * o + 3];
   }
-  for (int i = 0; i < kColorTransformSize; ++i) (*d_params)[i] += dp[i];
 }
 
 Status ExposureCompensatedLoss::Check(const RenderBuffers& in, const Targets& t) const {
