@@ -7,13 +7,17 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include "mgsr/core/camera.h"
 #include "mgsr/core/profiler.h"
 #include "mgsr/core/rng.h"
 #include "mgsr/model/gaussian_model.h"
 #include "mgsr/model/surfel_model.h"
+#include "mgsr/render/rasterize_gaussians.h"
+#include "mgsr/render/rasterize_surfels.h"
 
 namespace mgsr::bench {
 
@@ -125,6 +129,14 @@ class StageCounters {
   }
 };
 
+inline uint64_t SumOf(const std::vector<uint32_t>& v) {
+  uint64_t s = 0;
+  for (uint32_t x : v) s += x;
+  return s;
+}
+inline uint64_t PairsWalked(const GaussianRender& r) { return SumOf(r.last_t) + SumOf(r.last_r); }
+inline uint64_t PairsWalked(const SurfelRender& r) { return SumOf(r.last); }
+
 // The body of a *Stages benchmark: one untimed forward+backward (it grows the buffers), then the
 // timed loop with StageCounters. `Fixture` has model, options and grad (the upstream gradient).
 template <class Renderer, class Render, class Gradients, class Fixture>
@@ -141,6 +153,9 @@ void RunStages(benchmark::State& state, const Fixture& f) {
     benchmark::DoNotOptimize(grads.params.means.data());
   }
   stages.Report(state);
+  // The pixel-primitive pairs the forward walked (per pixel, the tile-list entries up to its last
+  // blended one, in each chain), in millions: the work the raster times are spent on.
+  state.counters["pairs_M"] = static_cast<double>(PairsWalked(out)) * 1e-6;
 }
 
 }  // namespace mgsr::bench
