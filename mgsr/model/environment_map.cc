@@ -56,6 +56,8 @@ inline float PolynomialAtan2(float y, float x) {
 constexpr int kChunk = 256;
 // Backward's row bands: a fixed number, so that the sum's order does not depend on the threads.
 constexpr int kBands = 16;
+// Views of fewer pixels run on one thread (a team costs more than it saves), as the loss kernels.
+constexpr int64_t kParallelPixels = 16384;
 
 }  // namespace
 
@@ -76,7 +78,7 @@ const std::vector<EnvironmentRenderer::PixelTaps>& EnvironmentRenderer::TapsFor(
     const Eigen::Vector3d step = Rt * Eigen::Vector3d(1.0 / camera.fx, 0, 0);
     const float u_scale = static_cast<float>(w / (2 * M_PI)),
                 v_scale = static_cast<float>(h / M_PI);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (static_cast <int64_t>(n) >= kParallelPixels)
     for (int y = 0; y < camera.height; ++y) {
       const Eigen::Vector3d row = Rt * camera.PixelToRay(0.5, y + 0.5);
       float u[kChunk], v[kChunk];
@@ -126,7 +128,8 @@ void EnvironmentRenderer::Render(const EnvironmentMap& map, const Camera& camera
   const float* texels = map.texels.data();
   const int w = map.width;
   float* planes[3] = {out->plane(0), out->plane(1), out->plane(2)};
-#pragma omp parallel for schedule(static)
+  const int64_t pixels = static_cast<int64_t>(taps.size());
+#pragma omp parallel for schedule(static) if (pixels >= kParallelPixels)
   for (int y = 0; y < camera.height; ++y) {
     const size_t begin = static_cast<size_t>(y) * camera.width;
     for (size_t i = begin; i < begin + camera.width; ++i) {
@@ -151,7 +154,8 @@ void EnvironmentRenderer::Backward(const EnvironmentMap& map, const Camera& came
   band_sums_.resize(kBands * texel_floats);
   const int w = map.width;
   const float* g[3] = {grad.plane(0), grad.plane(1), grad.plane(2)};
-#pragma omp parallel for schedule(dynamic)
+  const int64_t pixels = static_cast<int64_t>(taps.size());
+#pragma omp parallel for schedule(dynamic) if (pixels >= kParallelPixels)
   for (int band = 0; band < kBands; ++band) {
     float* sum = band_sums_.data() + band * texel_floats;
     std::fill(sum, sum + texel_floats, 0.0f);
@@ -191,6 +195,7 @@ Image EnvironmentMap::ToImage() const {
 
 bool EnvironmentMap::FromImage(const Image& image) {
   if (image.channels() != 3 || image.width() < 2 || image.height() < 2) return false;
+  if (image.width() > 65535 || image.height() > 65535) return false;  // the renderer's taps
   Reset(image.width(), image.height(), 0.0f);
   for (int y = 0; y < height; ++y)
     for (int x = 0; x < width; ++x)

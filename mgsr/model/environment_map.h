@@ -41,7 +41,7 @@ struct EnvironmentMap {
   std::vector<ParamBlock> Blocks() { return {{"environment", &texels, 3}}; }
 
   // As an image (width x height, 3 planes; row 0 at the +z pole), e.g. environment_3d.pfm of a
-  // run, and back (false if the image is not a 3-channel map).
+  // run, and back (false if the image is not a 3-channel map of 2 to 65,535 texels a side).
   Image ToImage() const;
   bool FromImage(const Image& image);
 };
@@ -66,8 +66,8 @@ class EnvironmentRenderer {
   void Backward(const EnvironmentMap& map, const Camera& camera, const Image& grad,
                 std::vector<float>* d_texels);
 
-  // One pixel's taps: the map columns x0, x1 and rows y0, y1 it reads and its bilinear fractions
-  // (the weights of x1 and y1).
+  // One pixel's taps (maps up to 65,535 texels a side, as FromImage accepts): the map columns x0,
+  // x1 and rows y0, y1 it reads and its bilinear fractions (the weights of x1 and y1).
   struct PixelTaps {
     uint16_t x0, x1, y0, y1;
     float ax, ay;
