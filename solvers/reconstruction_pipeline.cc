@@ -617,15 +617,15 @@ Status ReconstructionPipeline::ChooseSceneSettings(RunState* st) {
   SolverOptions& options = st->options;
   st->background_note = ChooseBackground(o.background, st->background_level, st->scene, &options);
   std::printf("background: %s\n", st->background_note.c_str());
+  const bool foreground = ForegroundKnown(st->scene);
   if (o.normal_weight_from_scene) {
-    const bool foreground = ForegroundKnown(st->scene);
     options.lambda_normal = foreground ? kNormalWeightWithForeground : kReferenceNormalWeight;
     std::printf("normal weight: %g (%s)\n", options.lambda_normal,
                 foreground ? "the views have masks or alpha"
                            : "the reference's: no masks or alpha to tell the object from its "
                              "backdrop");
   }
-  if (ForegroundKnown(st->scene) && (o.mask_from_scene || o.one_sided_from_scene)) {
+  if (foreground && (o.mask_from_scene || o.one_sided_from_scene)) {
     if (o.mask_from_scene) options.lambda_mask = kMaskWeightWithForeground;
     if (o.one_sided_from_scene) options.normal_one_sided = true;
     std::printf(

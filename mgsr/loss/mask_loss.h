@@ -43,9 +43,9 @@ class MaskLoss : public LossTermImpl<MaskLoss> {
     T* g = grad ? grad->Get(Buffer::kAlpha, A).data() : nullptr;
     // Most pixels sit at the clamp (the empty background, the opaque inside), where both
     // logarithms are constants; and a binary mask needs only one of them. Same values, bit for bit.
+    // log(hi) is log(1 - lo); log(1 - hi) differs from log(lo) in its last bits (1 - (1 - lo)).
     const double lo = kEps, hi = 1.0 - kEps;
-    const double log_lo = std::log(lo), log_1m_lo = std::log(1.0 - lo);
-    const double log_hi = std::log(hi), log_1m_hi = std::log(1.0 - hi);
+    const double log_lo = std::log(lo), log_hi = std::log(hi), log_1m_hi = std::log(1.0 - hi);
     double total = 0;
     for (size_t i = 0; i < A.size(); ++i) {
       const double raw = static_cast<double>(A.data()[i]);
@@ -57,7 +57,7 @@ class MaskLoss : public LossTermImpl<MaskLoss> {
       double log_a, log_1m_a;
       if (raw <= lo) {
         log_a = log_lo;
-        log_1m_a = log_1m_lo;
+        log_1m_a = log_hi;
       } else if (raw >= hi) {
         log_a = log_hi;
         log_1m_a = log_1m_hi;
