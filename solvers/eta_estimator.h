@@ -1,10 +1,10 @@
 // The time a training run has left, for its progress lines. A step's cost grows with the model
-// (projection, binning and blending scale with the primitives), and the model grows while the
-// density strategy adds primitives: the seconds per step measured so far understate what the
-// rest costs. The estimator fits seconds per step = a + b * primitives over the latest progress
-// windows and prices the remaining steps at the size the model is heading for (its budget while
-// it still grows, its present size once it stops), so the estimate falls as the run goes instead
-// of climbing with the model.
+// (projection, binning and blending scale with the primitives, and more of them cover more of
+// the views), and the model grows while the density strategy adds primitives: the seconds per
+// step measured so far understate what the rest costs. The estimator fits seconds per step =
+// c * primitives^k over the latest progress windows and prices the remaining steps at the size
+// the model is heading for (its budget while it still grows, its present size once it stops), so
+// the estimate falls as the run goes instead of climbing with the model.
 #pragma once
 
 #include <cstddef>
@@ -20,7 +20,7 @@ class EtaEstimator {
   // Seconds left for `remaining_steps`, the model heading for `final_primitives`. Falls back on
   // the plain mean when no window is known.
   double SecondsLeft(double remaining_steps, double final_primitives) const;
-  // a + b * primitives as fitted (seconds per step).
+  // c * primitives^k as fitted (seconds per step).
   double SecondsPerStep(double primitives) const;
 
  private:
