@@ -20,16 +20,15 @@ double EtaEstimator::SecondsPerStep(double primitives) const {
   // scene the cost rises faster than it will later. A line through the windows, extrapolated to
   // the budget, had priced a 1600 px capture at 8 times what was left at its first progress line
   // and nearly twice at the next two.
-  double w = 0, ln = 0, lt = 0, mt = 0;
+  double w = 0, ln = 0, lt = 0, mt = 0, steps = 0;
   for (const Window& x : windows_) {
+    steps += x.steps;
     mt += x.steps * x.seconds_per_step;
     if (!(x.primitives > 0) || !(x.seconds_per_step > 0)) continue;
     w += x.steps;
     ln += x.steps * std::log(x.primitives);
     lt += x.steps * std::log(x.seconds_per_step);
   }
-  double steps = 0;
-  for (const Window& x : windows_) steps += x.steps;
   if (!(w > 0) || !(primitives > 0)) return mt / steps;  // no sizes: the mean rate
   ln /= w;
   lt /= w;

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "mgsr/loss/parallel_pixels.h"  // views under kParallelPixels run on one thread
+
 namespace mgsr {
 
 void EnvironmentMap::Reset(int w, int h, float value) {
@@ -56,8 +58,6 @@ inline float PolynomialAtan2(float y, float x) {
 constexpr int kChunk = 256;
 // Backward's row bands: a fixed number, so that the sum's order does not depend on the threads.
 constexpr int kBands = 16;
-// Views of fewer pixels run on one thread (a team costs more than it saves), as the loss kernels.
-constexpr int64_t kParallelPixels = 16384;
 
 }  // namespace
 
