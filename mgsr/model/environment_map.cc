@@ -133,14 +133,13 @@ void EnvironmentRenderer::Render(const EnvironmentMap& map, const Camera& camera
   for (int y = 0; y < camera.height; ++y) {
     const size_t begin = static_cast<size_t>(y) * camera.width;
     for (size_t i = begin; i < begin + camera.width; ++i) {
-      const PixelTaps& t = taps[i];
-      const float* a = texels + 3 * (t.y0 * w + t.x0);
-      const float* b = texels + 3 * (t.y0 * w + t.x1);
-      const float* c = texels + 3 * (t.y1 * w + t.x0);
-      const float* d = texels + 3 * (t.y1 * w + t.x1);
-      const float w00 = (1 - t.ax) * (1 - t.ay), w01 = t.ax * (1 - t.ay);
-      const float w10 = (1 - t.ax) * t.ay, w11 = t.ax * t.ay;
-      for (int k = 0; k < 3; ++k) planes[k][i] = w00 * a[k] + w01 * b[k] + w10 * c[k] + w11 * d[k];
+      int texel[4];
+      float weight[4];
+      taps[i].Expand(w, texel, weight);
+      const float *a = texels + 3 * texel[0], *b = texels + 3 * texel[1],
+                  *c = texels + 3 * texel[2], *d = texels + 3 * texel[3];
+      for (int k = 0; k < 3; ++k)
+        planes[k][i] = weight[0] * a[k] + weight[1] * b[k] + weight[2] * c[k] + weight[3] * d[k];
     }
   }
 }
@@ -165,15 +164,14 @@ void EnvironmentRenderer::Backward(const EnvironmentMap& map, const Camera& came
     for (size_t i = static_cast<size_t>(y_begin) * camera.width; i < end; ++i) {
       const float g0 = g[0][i], g1 = g[1][i], g2 = g[2][i];
       if (g0 == 0 && g1 == 0 && g2 == 0) continue;
-      const PixelTaps& t = taps[i];
-      const float weights[4] = {(1 - t.ax) * (1 - t.ay), t.ax * (1 - t.ay), (1 - t.ax) * t.ay,
-                                t.ax * t.ay};
-      const int texel[4] = {t.y0 * w + t.x0, t.y0 * w + t.x1, t.y1 * w + t.x0, t.y1 * w + t.x1};
+      int texel[4];
+      float weight[4];
+      taps[i].Expand(w, texel, weight);
       for (int k = 0; k < 4; ++k) {
         float* s = sum + 3 * texel[k];
-        s[0] += weights[k] * g0;
-        s[1] += weights[k] * g1;
-        s[2] += weights[k] * g2;
+        s[0] += weight[k] * g0;
+        s[1] += weight[k] * g1;
+        s[2] += weight[k] * g2;
       }
     }
   }

@@ -71,6 +71,17 @@ class EnvironmentRenderer {
   struct PixelTaps {
     uint16_t x0, x1, y0, y1;
     float ax, ay;
+    // The four texels read (indices of RGB triples in a map `map_width` wide) and their weights.
+    void Expand(int map_width, int texel[4], float weight[4]) const {
+      texel[0] = y0 * map_width + x0;
+      texel[1] = y0 * map_width + x1;
+      texel[2] = y1 * map_width + x0;
+      texel[3] = y1 * map_width + x1;
+      weight[0] = (1 - ax) * (1 - ay);
+      weight[1] = ax * (1 - ay);
+      weight[2] = (1 - ax) * ay;
+      weight[3] = ax * ay;
+    }
   };
   // The taps of every pixel (row-major), as the passes use them.
   const std::vector<PixelTaps>& TapsFor(const EnvironmentMap& map, const Camera& camera);

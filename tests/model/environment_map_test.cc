@@ -55,10 +55,9 @@ TEST(EnvironmentMapTest, TapsWrapInLongitudeClampAtThePolesAndInterpolate) {
 template <typename T>
 void LookupThroughRendererTaps(const EnvironmentMap& map, const EnvironmentRenderer::PixelTaps& t,
                                const std::vector<T>& values, T rgb[3]) {
-  const int texel[4] = {t.y0 * map.width + t.x0, t.y0 * map.width + t.x1, t.y1 * map.width + t.x0,
-                        t.y1 * map.width + t.x1};
-  const T ax = t.ax, ay = t.ay;
-  const T weight[4] = {(1 - ax) * (1 - ay), ax * (1 - ay), (1 - ax) * ay, ax * ay};
+  int texel[4];
+  float weight[4];
+  t.Expand(map.width, texel, weight);
   for (int c = 0; c < 3; ++c) {
     rgb[c] = 0;
     for (int k = 0; k < 4; ++k) rgb[c] += weight[k] * values[3 * texel[k] + c];
@@ -88,10 +87,9 @@ TEST(EnvironmentMapTest, RendererTapsAgreeWithTheDefinition) {
         // Both as one weight per texel.
         std::map<int, double> a, b;
         for (int k = 0; k < 4; ++k) a[expected.texel[k]] += expected.weight[k];
-        const int texel[4] = {t.y0 * 64 + t.x0, t.y0 * 64 + t.x1, t.y1 * 64 + t.x0,
-                              t.y1 * 64 + t.x1};
-        const double weight[4] = {(1.0 - t.ax) * (1 - t.ay), t.ax * (1.0 - t.ay),
-                                  (1.0 - t.ax) * t.ay, double{t.ax} * t.ay};
+        int texel[4];
+        float weight[4];
+        t.Expand(64, texel, weight);
         for (int k = 0; k < 4; ++k) b[texel[k]] += weight[k];
         for (const auto& [texel_index, w] : a)
           worst = std::max(worst, std::abs(w - b[texel_index]));
