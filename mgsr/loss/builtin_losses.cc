@@ -153,6 +153,7 @@ void RegisterBuiltinLosses(LossRegistry* r) {
     m.min_variance = Number(c, "min_variance", m.min_variance);
     m.min_alpha = Number(c, "min_alpha", m.min_alpha);
     m.max_reprojection_px = Number(c, "max_reprojection_px", m.max_reprojection_px);
+    m.max_plane_offset_px = Number(c, "max_plane_offset_px", m.max_plane_offset_px);
     if (c.contains("check_occlusion")) {
       if (!c["check_occlusion"].is_boolean()) {
         *s = Status::Error("'check_occlusion' must be true or false");

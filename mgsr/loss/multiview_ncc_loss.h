@@ -15,8 +15,11 @@
 // M is the number of sampled foreground pixels (alpha and mask at least 0.5, both constants)
 // times the number of neighbours. A pair does not count where the patch leaves the neighbour's
 // frame, the plane is seen edge-on, the view's patch has no texture (its variance below
-// `min_variance`), or, when the neighbours' rendered depth is given, the centre is occluded there
-// (forward-backward reprojection error above `max_reprojection_px`).
+// `min_variance`), the patch does not lie on the centre's plane in the view's own render (a pixel
+// of it uncovered, or its rendered depth more than `max_plane_offset_px` pixel footprints off the
+// plane: at an outline, a step, or a surface curved within the patch, where one homography maps
+// the patch onto the wrong pixels), or, when the neighbours' rendered depth is given, the centre is
+// occluded there (forward-backward reprojection error above `max_reprojection_px`).
 #pragma once
 
 #include <Eigen/Core>
@@ -39,7 +42,10 @@ struct MultiviewNccConfig {
   double min_variance = 1e-4;        // grey variance below which a patch has no texture
   double min_alpha = 0.5;            // centres where the render covers the pixel
   double max_reprojection_px = 1.0;  // occlusion test (with the neighbours' depth)
-  bool check_occlusion = true;       // read the neighbours' rendered depth for it
+  // The patch must lie on the centre's plane: every pixel covered (alpha and mask at least
+  // min_alpha) and within this many pixel footprints of the plane (<= 0: no test).
+  double max_plane_offset_px = 1.0;
+  bool check_occlusion = true;  // read the neighbours' rendered depth for it
 };
 
 class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
@@ -67,6 +73,15 @@ class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
   const MultiviewNccConfig& config() const { return c_; }
 
  private:
+  // Whether the (2r + 1)^2 patch around (x, y) lies on the plane of the centre (camera-frame unit
+  // normal `nc`, z-depth `depth`) in the view's own render: every pixel covered and its rendered
+  // point within `tolerance` (scene units) of the plane. A selection, not a weight: the buffers it
+  // reads are not differentiated through it.
+  template <typename T>
+  bool PatchOnPlane(const ImageT<T>& D, const ImageT<T>& A, const ImageT<T>* mask, int x, int y,
+                    int r, double depth, const Eigen::Vector3d& nc,
+                    const std::vector<Eigen::Vector3d>& rays, double tolerance) const;
+
   MultiviewNccConfig c_;
 };
 
@@ -150,6 +165,10 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
         }
       }
       mean_a /= m;
+      // The tolerance in scene units: a pixel at z-depth z spans z / fx.
+      if (c_.max_plane_offset_px > 0 && !PatchOnPlane(D, A, t.mask, x, y, r, depth, nc, rays,
+                                                      c_.max_plane_offset_px * depth / cam.fx))
+        continue;
       double var_a = 0;
       for (int k = 0; k < m; ++k) {
         a[k] -= mean_a;
@@ -230,6 +249,24 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
   double total = 0;
   for (double s : row_sums) total += s;
   return total * inv_count;
+}
+
+template <typename T>
+bool MultiviewNccLoss::PatchOnPlane(const ImageT<T>& D, const ImageT<T>& A, const ImageT<T>* mask,
+                                    int x, int y, int r, double depth, const Eigen::Vector3d& nc,
+                                    const std::vector<Eigen::Vector3d>& rays,
+                                    double tolerance) const {
+  const int w = D.width(), side = 2 * r + 1;
+  const double plane = depth * nc.dot(rays[side * side / 2]);  // nc . X for X on the plane
+  for (int dy = -r, k = 0; dy <= r; ++dy) {
+    for (int dx = -r; dx <= r; ++dx, ++k) {
+      const size_t q = static_cast<size_t>(y + dy) * w + (x + dx);
+      if (!multiview::SampledPixel(A, mask, q, c_.min_alpha)) return false;
+      if (!(std::fabs(static_cast<double>(D.data()[q]) * nc.dot(rays[k]) - plane) <= tolerance))
+        return false;
+    }
+  }
+  return true;
 }
 
 }  // namespace mgsr

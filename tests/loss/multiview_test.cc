@@ -7,6 +7,7 @@
 #include <cmath>
 #include <set>
 
+#include "mgsr/core/rng.h"
 #include "mgsr/io/view_neighbours.h"
 #include "mgsr/loss/multiview_depth_loss.h"
 #include "mgsr/loss/multiview_geometry.h"
@@ -131,6 +132,76 @@ TEST(MultiviewNccTest, ExactPlaneAgreesAndAWrongDepthDoesNot) {
     stepped.data()[i] -= 0.01 * gd.data()[i] / std::sqrt(norm2);
   s.in.Set(Buffer::kDepth, &stepped);
   EXPECT_LT(no_occlusion.Evaluate(s.in, s.targets, 1.0, nullptr), wrong);
+}
+
+// The patch test: a patch counts only where the view's own render puts it on the centre's plane.
+// On a plane whose rendered depth is a little noisy every patch passes (the value is the one
+// without the test) and the gradient matches central differences with the test on; across a
+// depth step, or next to an uncovered pixel, the patches that reach over it are skipped.
+TEST(MultiviewNccTest, OnlyPatchesOnTheCentresPlaneCount) {
+  TwoViewScene s;
+  MultiviewNccConfig on;
+  on.check_occlusion = false;  // isolate the patch test
+  MultiviewNccConfig off = on;
+  off.max_plane_offset_px = 0;
+  const MultiviewNccLoss with_test(on), without_test(off);
+  // Depth noise of 5% of a pixel footprint (z / fx) on a slightly wrong plane (so the gradient
+  // is not at a minimum).
+  ImageD noisy = RenderPlane(s.ref, s.origin, s.n, 1.02).depth;
+  Rng rng(4);
+  for (size_t i = 0; i < noisy.size(); ++i)
+    noisy.data()[i] *= 1.0 + 0.05 * rng.Uniform(-1, 1) / s.ref.fx;
+  s.in.Set(Buffer::kDepth, &noisy);
+  const double value = with_test.Evaluate(s.in, s.targets, 1.0, nullptr);
+  EXPECT_GT(value, 0.0);
+  EXPECT_EQ(value, without_test.Evaluate(s.in, s.targets, 1.0, nullptr));
+  RenderGradientsD g;
+  with_test.Evaluate(s.in, s.targets, 1.0, &g);
+  const ImageD& gd = g.Get(Buffer::kDepth);
+  int nonzero = 0;
+  for (size_t i = 0; i < noisy.size(); i += 7) {
+    const double keep = noisy.data()[i], h = 1e-6;
+    noisy.data()[i] = keep + h;
+    const double vp = with_test.Evaluate(s.in, s.targets, 1.0, nullptr);
+    noisy.data()[i] = keep - h;
+    const double vm = with_test.Evaluate(s.in, s.targets, 1.0, nullptr);
+    noisy.data()[i] = keep;
+    const double numeric = (vp - vm) / (2 * h);
+    EXPECT_NEAR(gd.data()[i], numeric, 1e-6 + 1e-5 * std::abs(numeric)) << "depth[" << i << "]";
+    nonzero += std::abs(numeric) > 1e-9;
+  }
+  EXPECT_GT(nonzero, 10);
+
+  // A step: columns from 33 on 10% farther (a plane too: scaled from the camera centre). Centres
+  // are on a grid of 3 with a radius of 3, so the centres at columns 30 and 33 reach over the step
+  // and their pairs are skipped; 27 and 36 lie on one side each and count.
+  ImageD step = RenderPlane(s.ref, s.origin, s.n).depth;
+  for (int y = 0; y < step.height(); ++y)
+    for (int x = 33; x < step.width(); ++x) step.at(0, y, x) *= 1.1;
+  s.in.Set(Buffer::kDepth, &step);
+  RenderGradientsD g_on, g_off;
+  const double v_on = with_test.Evaluate(s.in, s.targets, 1.0, &g_on);
+  const double v_off = without_test.Evaluate(s.in, s.targets, 1.0, &g_off);
+  EXPECT_LT(v_on, v_off);
+  const int y = 21;  // a row of centres
+  for (int x : {30, 33}) {
+    EXPECT_EQ(g_on.Get(Buffer::kDepth).at(0, y, x), 0.0) << x;
+    EXPECT_NE(g_off.Get(Buffer::kDepth).at(0, y, x), 0.0) << x;
+  }
+  EXPECT_NE(g_on.Get(Buffer::kDepth).at(0, y, 36), 0.0);
+  EXPECT_NE(g_on.Get(Buffer::kDepth).at(0, y, 27), 0.0);
+
+  // An uncovered pixel: the patches that contain it are skipped, the rest are not.
+  ImageD wrong = RenderPlane(s.ref, s.origin, s.n, 1.05).depth;
+  s.in.Set(Buffer::kDepth, &wrong);
+  ImageD alpha = s.view.alpha;
+  alpha.at(0, 21, 22) = 0.2;
+  s.in.Set(Buffer::kAlpha, &alpha);
+  RenderGradientsD g_hole;
+  with_test.Evaluate(s.in, s.targets, 1.0, &g_hole);
+  for (int x : {21, 24}) EXPECT_EQ(g_hole.Get(Buffer::kDepth).at(0, 21, x), 0.0) << x;
+  EXPECT_NE(g_hole.Get(Buffer::kDepth).at(0, 21, 27), 0.0);
+  EXPECT_NE(g_hole.Get(Buffer::kDepth).at(0, 21, 18), 0.0);
 }
 
 TEST(MultiviewDepthTest, ExactPlaneReprojectsOntoItselfAndTheDerivativeIsExact) {
