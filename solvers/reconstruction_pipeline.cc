@@ -479,6 +479,7 @@ struct ReconstructionPipeline::RunState {
   Scene scene;
   double load_seconds = 0;
   std::string background_note, budget_mode, budget_why, region_note;
+  SeenThroughStats free_space;  // what the mesh's free-space test removed
   SurfaceOptions surface;
   std::unique_ptr<MutualBoostedSolver> solver;
   std::unique_ptr<ProgressLog> log;
@@ -974,7 +975,14 @@ Status ReconstructionPipeline::ExtractMesh(RunState* st) {
   });
   Status s = ExtractSurface(
       st->solver.get(), st->options, st->scene, st->surface, &st->mesh,
-      [&](int done, int total) { mesh_progress.Update(done, total); }, options_.group);
+      [&](int done, int total) { mesh_progress.Update(done, total); }, options_.group,
+      &st->free_space);
+  if (s.ok() && st->surface.free_space) {
+    std::printf(
+        "mesh free space: %zu of %zu vertices removed (more views see through them than "
+        "hold them)\n",
+        st->free_space.removed_vertices, st->free_space.vertices);
+  }
   st->mesh_path = st->out.Path("mesh.ply");
   if (s.ok() && st->mesh.triangles.empty()) {
     s = Status::Error(st->mesh_path +
@@ -1048,6 +1056,10 @@ nlohmann::json ReconstructionPipeline::MetricsJson(const RunState& st) const {
         {"resolution_scale", st.surface.resolution_scale},
         {"voxel_size", SurfaceTsdfOptions(st.scene, st.surface).voxel_size},
         {"region", st.region_note},
+        {"free_space",
+         {{"on", st.surface.free_space},
+          {"vertices_removed", st.free_space.removed_vertices},
+          {"triangles_removed", st.free_space.removed_triangles}}},
         {"pixel_footprint", TrainingFootprint(st.scene)}}}};
   if (!st.colmap_metrics.is_null()) metrics["colmap"] = st.colmap_metrics;
   if (o.profile) metrics["profile"] = ProfileToJson(summary.profile);

@@ -71,6 +71,7 @@ TsdfOptions SurfaceTsdfOptions(const Scene& scene, const SurfaceOptions& options
   // keep it in training footprints.
   t.truncation_voxels = options.truncation_voxels * footprint / t.voxel_size;
   t.keep_largest_component = options.keep_largest_component;
+  t.carve_seen_through = options.free_space;
   t.region = options.region;
   t.min_component_share = options.min_component_share;
   return t;
@@ -147,7 +148,8 @@ Status ReceiveFrame(ViewGroup* group, int from, const Camera& camera, DepthFrame
 
 Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_options,
                       const Scene& scene, const SurfaceOptions& options, TriangleMesh* mesh,
-                      const std::function<void(int, int)>& progress, ViewGroup* group) {
+                      const std::function<void(int, int)>& progress, ViewGroup* group,
+                      SeenThroughStats* free_space) {
   if (options.resolution_scale < 1) return Status::Error("mesh resolution scale must be >= 1");
   const std::vector<int> train = scene.TrainIndices();
   const std::vector<Camera> cameras = FusionCameras(scene, options.resolution_scale);
@@ -179,7 +181,9 @@ Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_o
     MGSR_RETURN_IF_ERROR(integrator.Integrate(f));
     if (progress) progress(static_cast<int>(i + 1), static_cast<int>(train.size()));
   }
-  return integrator.Extract(mesh);
+  MGSR_RETURN_IF_ERROR(integrator.Extract(mesh));
+  if (free_space != nullptr) *free_space = integrator.seen_through();
+  return Status::Ok();
 }
 
 Status ExactDepthCeiling(ExactDepthViews* training_depth, const Scene& scene,

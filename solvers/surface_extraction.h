@@ -28,6 +28,8 @@ struct SurfaceOptions {
   double voxel_size = 0;         // 0: the pixel footprint at the object / resolution_scale
   double truncation_voxels = 4;  // at resolution_scale 1; kept in scene units at finer scales
   bool keep_largest_component = true;
+  // Remove what more views see through than hold (mgsr/mesh/seen_through.h).
+  bool free_space = true;
   // What is meshed (fusion_region.h): empty for everything the depth reaches. With it, the
   // clean-up keeps components of at least min_component_share of the largest (see TsdfOptions).
   Eigen::AlignedBox3d region;
@@ -61,10 +63,11 @@ std::vector<Camera> FusionCameras(const Scene& scene, int resolution_scale);
 // each view with (views fused, views in all). With a `group` of several processes (all holding
 // the same trained models, all calling this) the views are rendered round robin and process 0
 // fuses them in order, so its mesh is the one a single process makes; the others return no mesh.
+// `free_space`, when given, receives what the free-space test removed.
 Status ExtractSurface(MutualBoostedSolver* solver, const SolverOptions& solver_options,
                       const Scene& scene, const SurfaceOptions& options, TriangleMesh* mesh,
                       const std::function<void(int, int)>& progress = {},
-                      ViewGroup* group = nullptr);
+                      ViewGroup* group = nullptr, SeenThroughStats* free_space = nullptr);
 
 // The same fusion of the ground truth's exact depth: what this fusion can achieve at best.
 // `training_depth` holds the ground truth's exact depth for TrainingCameras(scene); at a finer

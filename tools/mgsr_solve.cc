@@ -214,6 +214,10 @@ DEFINE_string(mesh_region, "auto",
               "far background and sky stay out), none (everything the depth reaches), a box "
               "x0,y0,z0,x1,y1,z1, or a JSON file with \"min\" and \"max\" (mgsr_synth's "
               "gt/region.json).");
+DEFINE_bool(mesh_free_space, true,
+            "Remove the parts of the fused mesh that more training views see through (render "
+            "nothing at, or see well behind) than hold at their depth (docs/geometry.md, \"Free "
+            "space\").");
 DEFINE_int32(checkpoint_every, 500,
              "Write OUTPUT/checkpoints/latest.ckpt every N iterations (0: only on Ctrl-C).");
 DEFINE_bool(resume, false,
@@ -319,7 +323,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
        {"Models", {"export"}},
        {"Mesh",
         {"mesh_depth", "mesh_color", "voxel_size", "mesh_resolution_scale", "tsdf_truncation",
-         "mesh_region"}}},
+         "mesh_region", "mesh_free_space"}}},
       &argc, &argv);
   const bool listing = FLAGS_list_losses;  // needs no scene
   mgsr::ReconstructionOptions ro;
@@ -441,6 +445,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   ro.surface.voxel_size = FLAGS_voxel_size;
   ro.surface.truncation_voxels = FLAGS_tsdf_truncation;
   ro.mesh_region = FLAGS_mesh_region;
+  ro.surface.free_space = FLAGS_mesh_free_space;
   ro.checkpoint_every = FLAGS_checkpoint_every;
   ro.log_every = FLAGS_log_every;
   ro.eval_every = FLAGS_eval_every;

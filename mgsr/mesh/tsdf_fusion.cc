@@ -85,12 +85,17 @@ Status TsdfIntegrator::Integrate(const DepthFrame& f) {
     reach.min() -= Eigen::Vector3d::Constant(band);
     reach.max() += Eigen::Vector3d::Constant(band);
   }
+  // The free-space votes take the depth before the region's clip: what a view sees beyond the
+  // region is still behind whatever it sees through.
+  std::vector<float> seen;
+  if (options_.carve_seen_through) seen.resize(static_cast<size_t>(w) * h);
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       float z = f.depth.at(0, y, x);
       if (!std::isfinite(z) || z <= 0 ||
           (has_weight && f.weight.at(0, y, x) < options_.weight_threshold))
         z = 0;
+      if (!seen.empty()) seen[static_cast<size_t>(y) * w + x] = z;
       if (z > 0 && clip &&
           !reach.contains(f.camera.CameraToWorld(f.camera.PixelToRay(x + 0.5, y + 0.5) * z)))
         z = 0;
@@ -103,6 +108,7 @@ Status TsdfIntegrator::Integrate(const DepthFrame& f) {
       }
     }
   }
+  if (!seen.empty()) votes_.AddView(f.camera, seen.data());
   if (frame_max <= 0) return Status::Ok();  // nothing to fuse from this view
   any_depth_ = true;
   const double depth_max = options_.depth_max > 0 ? options_.depth_max : frame_max * 1.01;
@@ -175,6 +181,13 @@ Status TsdfIntegrator::Extract(TriangleMesh* mesh) {
   omp_set_num_threads(1);
   auto result = volume_->tsdf.ExtractTriangleMesh();
   omp_set_num_threads(threads);
+  seen_through_ = SeenThroughStats();
+  if (options_.carve_seen_through && !result->triangles_.empty()) {
+    result->RemoveTrianglesByMask(votes_.TrianglesSeenThrough(
+        result->vertices_, result->triangles_, options_.truncation_voxels * options_.voxel_size,
+        &seen_through_));
+    result->RemoveUnreferencedVertices();
+  }
   if (!options_.region.isEmpty()) {
     result->RemoveTrianglesByMask(
         TrianglesOutside(options_.region, result->vertices_, result->triangles_));

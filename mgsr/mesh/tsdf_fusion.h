@@ -10,6 +10,7 @@
 #include "mgsr/core/image.h"
 #include "mgsr/core/status.h"
 #include "mgsr/core/triangle_mesh.h"
+#include "mgsr/mesh/seen_through.h"
 
 namespace mgsr {
 
@@ -31,6 +32,10 @@ struct TsdfOptions {
   // With keep_largest_component: also keep every other component of at least this share of the
   // largest one's triangles (1: the largest alone). A scene's object need not touch its ground.
   double min_component_share = 1.0;
+  // Remove the vertices that more views see through than hold (seen_through.h): what a view
+  // renders nothing at, or sees well behind, is free space. Keeps each view's depth (4 bytes a
+  // pixel) until the mesh is extracted.
+  bool carve_seen_through = true;
   // When not empty, what is meshed (fusion_region.h): depth whose point lies outside this box
   // grown by the truncation band is not fused, and triangles with a vertex outside the box are
   // removed before the clean-up (so the largest component is one inside it).
@@ -55,12 +60,16 @@ class TsdfIntegrator {
   Status Integrate(const DepthFrame& frame);
   // The mesh of everything integrated so far; an error when no depth was integrated.
   Status Extract(TriangleMesh* mesh);
+  // What the free-space test removed in the last Extract.
+  const SeenThroughStats& seen_through() const { return seen_through_; }
 
  private:
   struct Volume;
   TsdfOptions options_;
   std::unique_ptr<Volume> volume_;
   bool any_depth_ = false;
+  SeenThroughVotes votes_;
+  SeenThroughStats seen_through_;
 };
 
 // All frames at once. With options.voxel_size 0 the voxel is AutoVoxelSize around the centre of
