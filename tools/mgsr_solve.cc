@@ -37,10 +37,10 @@
 #include "solvers/trained_views.h"
 #include "solvers/view_group.h"
 #include "tools/colmap_flags.h"
+#include "tools/openmp_wait.h"
 #include "tools/tool_flags.h"
 #ifdef MGSR_WITH_MPI
 #include "solvers/mpi_view_group.h"
-#include "tools/openmp_wait.h"
 #endif
 
 DEFINE_string(workspace, "",
