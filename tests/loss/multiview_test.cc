@@ -160,13 +160,8 @@ TEST(MultiviewNccTest, OnlyPatchesOnTheCentresPlaneCount) {
   const ImageD& gd = g.Get(Buffer::kDepth);
   int nonzero = 0;
   for (size_t i = 0; i < noisy.size(); i += 7) {
-    const double keep = noisy.data()[i], h = 1e-6;
-    noisy.data()[i] = keep + h;
-    const double vp = with_test.Evaluate(s.in, s.targets, 1.0, nullptr);
-    noisy.data()[i] = keep - h;
-    const double vm = with_test.Evaluate(s.in, s.targets, 1.0, nullptr);
-    noisy.data()[i] = keep;
-    const double numeric = (vp - vm) / (2 * h);
+    const double numeric = testing::CentralDifference(
+        [&] { return with_test.Evaluate(s.in, s.targets, 1.0, nullptr); }, &noisy.data()[i]);
     EXPECT_NEAR(gd.data()[i], numeric, 1e-6 + 1e-5 * std::abs(numeric)) << "depth[" << i << "]";
     nonzero += std::abs(numeric) > 1e-9;
   }
