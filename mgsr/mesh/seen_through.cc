@@ -2,13 +2,15 @@
 
 #include <cmath>
 #include <cstdint>
+#include <utility>
 
 namespace mgsr {
 
-void SeenThroughVotes::AddView(const Camera& camera, const float* depth) {
+void SeenThroughVotes::AddView(const Camera& camera, std::vector<float> depth) {
   View v;
   v.camera = camera;
-  v.depth.assign(depth, depth + static_cast<size_t>(camera.width) * camera.height);
+  v.depth = std::move(depth);
+  v.depth.resize(static_cast<size_t>(camera.width) * camera.height, 0.0f);
   for (float& z : v.depth)
     if (!std::isfinite(z) || z < 0) z = 0;
   views_.push_back(std::move(v));

@@ -32,8 +32,7 @@ class SeenThroughVotes {
   // Keeps one view's depth (camera-space z per pixel, row-major, camera.width x camera.height;
   // 0 or non-finite: nothing there). Four bytes a pixel per view are held until the votes are
   // counted.
-  void AddView(const Camera& camera, const float* depth);
-  size_t views() const { return views_.size(); }
+  void AddView(const Camera& camera, std::vector<float> depth);
 
   // The triangles to remove: those with a vertex that more views see through than hold, with
   // `band` the support band in scene units.

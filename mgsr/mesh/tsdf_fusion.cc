@@ -108,7 +108,7 @@ Status TsdfIntegrator::Integrate(const DepthFrame& f) {
       }
     }
   }
-  if (!seen.empty()) votes_.AddView(f.camera, seen.data());
+  if (!seen.empty()) votes_.AddView(f.camera, std::move(seen));
   if (frame_max <= 0) return Status::Ok();  // nothing to fuse from this view
   any_depth_ = true;
   const double depth_max = options_.depth_max > 0 ? options_.depth_max : frame_max * 1.01;

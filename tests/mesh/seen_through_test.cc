@@ -39,10 +39,14 @@ Image PlaneDepth(const Camera& cam, double half = 0.6) {
   return d;
 }
 
+std::vector<float> Depths(const Image& depth) {
+  return std::vector<float>(depth.data(), depth.data() + depth.size());
+}
+
 TEST(SeenThroughVotesTest, AVertexGoesWhenMoreViewsSeeThroughItThanHoldIt) {
   const std::vector<Camera> cams = Cameras(5);
   SeenThroughVotes votes;
-  for (const Camera& c : cams) votes.AddView(c, PlaneDepth(c).data());
+  for (const Camera& c : cams) votes.AddView(c, Depths(PlaneDepth(c)));
   const double band = 0.05;
   const std::vector<Eigen::Vector3d> vertices = {
       {0.1, 0.0, 0.05},    // on the plane: every view holds it
@@ -62,9 +66,9 @@ TEST(SeenThroughVotesTest, AVertexGoesWhenMoreViewsSeeThroughItThanHoldIt) {
   // Views that render nothing see through everything in their frame: with three of them against
   // the five that hold the plane, the plane stays; with six, it goes.
   const Image nothing(48, 48, 1, 0.0f);
-  for (int k = 0; k < 3; ++k) votes.AddView(Cameras(3)[k], nothing.data());
+  for (int k = 0; k < 3; ++k) votes.AddView(Cameras(3)[k], Depths(nothing));
   EXPECT_FALSE(votes.TrianglesSeenThrough(vertices, triangles, band)[0]);
-  for (int k = 0; k < 3; ++k) votes.AddView(Cameras(3)[k], nothing.data());
+  for (int k = 0; k < 3; ++k) votes.AddView(Cameras(3)[k], Depths(nothing));
   EXPECT_TRUE(votes.TrianglesSeenThrough(vertices, triangles, band)[0]);
 
   // One pixel of slack: an empty pixel next to one with depth at the vertex does not see through
@@ -74,16 +78,15 @@ TEST(SeenThroughVotesTest, AVertexGoesWhenMoreViewsSeeThroughItThanHoldIt) {
   Image d = PlaneDepth(c);
   const Eigen::Vector3d on_plane(0.1, 0.0, 0.05);
   const Eigen::Vector2d p = c.WorldToPixel(on_plane);
-  const int px = static_cast<int>(p.x()), py = static_cast<int>(p.y());
+  const int px = static_cast<int>(p.x());
   for (int y = 0; y < d.height(); ++y)
     for (int x = px; x < d.width(); ++x) d.at(0, y, x) = 0;  // empty from the vertex's column on
-  edge.AddView(c, d.data());
+  edge.AddView(c, Depths(d));
   EXPECT_FALSE(edge.TrianglesSeenThrough({on_plane}, {{0, 0, 0}}, band)[0]);
   for (int y = 0; y < d.height(); ++y) d.at(0, y, px - 1) = 0;  // and the column before it
   SeenThroughVotes gap;
-  gap.AddView(c, d.data());
+  gap.AddView(c, Depths(d));
   EXPECT_TRUE(gap.TrianglesSeenThrough({on_plane}, {{0, 0, 0}}, band)[0]);
-  (void)py;
 }
 
 // Five views of a plane; one of them also shows a small sheet in front of it (what a few
