@@ -71,7 +71,7 @@ TsdfOptions SurfaceTsdfOptions(const Scene& scene, const SurfaceOptions& options
   // keep it in training footprints.
   t.truncation_voxels = options.truncation_voxels * footprint / t.voxel_size;
   t.keep_largest_component = options.keep_largest_component;
-  t.carve_seen_through = options.free_space;
+  t.free_space = options.free_space;
   t.region = options.region;
   t.min_component_share = options.min_component_share;
   return t;

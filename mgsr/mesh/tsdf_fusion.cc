@@ -88,7 +88,7 @@ Status TsdfIntegrator::Integrate(const DepthFrame& f) {
   // The free-space votes take the depth before the region's clip: what a view sees beyond the
   // region is still behind whatever it sees through.
   std::vector<float> seen;
-  if (options_.carve_seen_through) seen.resize(static_cast<size_t>(w) * h);
+  if (options_.free_space) seen.resize(static_cast<size_t>(w) * h);
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       float z = f.depth.at(0, y, x);
@@ -182,7 +182,7 @@ Status TsdfIntegrator::Extract(TriangleMesh* mesh) {
   auto result = volume_->tsdf.ExtractTriangleMesh();
   omp_set_num_threads(threads);
   seen_through_ = SeenThroughStats();
-  if (options_.carve_seen_through && !result->triangles_.empty()) {
+  if (options_.free_space && !result->triangles_.empty()) {
     result->RemoveTrianglesByMask(votes_.TrianglesSeenThrough(
         result->vertices_, result->triangles_, options_.truncation_voxels * options_.voxel_size,
         &seen_through_));

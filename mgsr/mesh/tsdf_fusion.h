@@ -35,7 +35,7 @@ struct TsdfOptions {
   // Remove the vertices that more views see through than hold (seen_through.h): what a view
   // renders nothing at, or sees well behind, is free space. Keeps each view's depth (4 bytes a
   // pixel) until the mesh is extracted.
-  bool carve_seen_through = true;
+  bool free_space = true;
   // When not empty, what is meshed (fusion_region.h): depth whose point lies outside this box
   // grown by the truncation band is not fused, and triangles with a vertex outside the box are
   // removed before the clean-up (so the largest component is one inside it).

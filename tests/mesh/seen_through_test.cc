@@ -117,9 +117,9 @@ TEST(SeenThroughVotesTest, TheFusionDropsASheetOneViewShowsAndTheOthersSeeThroug
     return n;
   };
   TriangleMesh kept, carved;
-  options.carve_seen_through = false;
+  options.free_space = false;
   ASSERT_TRUE(FuseDepthMaps(frames, options, &kept).ok());
-  options.carve_seen_through = true;
+  options.free_space = true;
   TsdfIntegrator integrator(options);
   for (const DepthFrame& f : frames) ASSERT_TRUE(integrator.Integrate(f).ok());
   ASSERT_TRUE(integrator.Extract(&carved).ok());
