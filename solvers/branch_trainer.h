@@ -51,7 +51,7 @@ namespace mgsr {
 
 // "2DGS" / "3DGS", and the branch's index in per-branch arrays (2DGS 0, 3DGS 1).
 const char* BranchLabel(Branch branch);
-inline int BranchIndex(Branch branch) { return branch == Branch::kSurfels2D ? 0 : 1; }
+constexpr int BranchIndex(Branch branch) { return branch == Branch::kSurfels2D ? 0 : 1; }
 
 // What a branch's training reports (SolveSummary holds one per branch).
 struct BranchSummary {

@@ -121,6 +121,8 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
   }
   for (const auto& [name, value] : options_.Settings()) {
     const auto it = recorded.find(name);
+    // Options added after a checkpoint was written, with the value runs had before them.
+    if (it == recorded.end() && name == "coarse" && value == "none") continue;
     if (it == recorded.end()) {
       return Status::Error(path + ": the checkpoint does not record option " + name +
                            " (written by another version); start again with --overwrite");
@@ -135,6 +137,8 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
             "--max_size, --max_width, --budget or the photos change?)";
       else if (name == "lambda_normal")
         hint = " (derived from whether the views have masks, unless --lambda_normal is given)";
+      else if (name == "coarse")
+        hint = " (derived from --coarse_max_size and the photos' size, with --coarse_fraction)";
       else if (name == "background_2d" || name == "background_3d" || name == "environment")
         hint = " (derived from --background and the photos' borders)";
       return Status::Error(

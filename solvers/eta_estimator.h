@@ -22,6 +22,7 @@ class EtaEstimator {
   double SecondsLeft(double remaining_steps, double final_primitives) const;
   // c * primitives^k as fitted (seconds per step).
   double SecondsPerStep(double primitives) const;
+  bool has_windows() const { return !windows_.empty(); }
 
  private:
   struct Window {

@@ -127,12 +127,11 @@ std::string SolveSummary::BriefReport() const {
 MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Scene& scene)
     : options_(options), scene_(scene), rng_(options.seed) {
   train_ = scene.TrainIndices();
-  for (const View& v : scene.views) {
-    std::array<Image, 2> photos;
-    photos[BranchIndex(Branch::kSurfels2D)] = CompositeOnBackground(v, options.background_2d);
-    photos[BranchIndex(Branch::kGaussians3D)] = CompositeOnBackground(v, options.background_3d);
-    photos_.push_back(std::move(photos));
-  }
+  static_assert(BranchIndex(Branch::kSurfels2D) == 0 && BranchIndex(Branch::kGaussians3D) == 1,
+                "ViewLevel keeps the 2DGS branch's photos first");
+  levels_[0] = ViewLevel::FullSize(scene, options.background_2d, options.background_3d);
+  if (options.coarse_factor > 1)
+    levels_[1] = ViewLevel::Downscaled(levels_[0], options.coarse_factor);
   // Initial points: a seeded subset when there are more than the options allow.
   std::vector<Eigen::Vector3f> points = scene.points, colors = scene.point_colors;
   if (points.size() > options.max_init_points) {
@@ -227,14 +226,14 @@ void MutualBoostedSolver::FitExposures() {
   fo.mode = options_.exposure;
   fo.offset_prior = options_.exposure_offset_prior;
   for (int view : train_) {
-    const View& v = scene_.views[view];
-    const Image* mask = v.mask.empty() ? nullptr : &v.mask;
+    const Image* mask = views().mask(view);
     for (Branch b : {Branch::kGaussians3D, Branch::kSurfels2D}) {
       // A branch fits the transforms it owns (a shared model is the 3DGS branch's).
       BranchTrainer& t = trainer(b);
       if (&t.exposure() != &exposures_[BranchIndex(b)]) continue;
       ColorTransform p;
-      if (FitColorTransform(t.RenderColor(v.camera), photos_[view][BranchIndex(b)], mask, fo, &p)
+      if (FitColorTransform(t.RenderColor(views().camera(view)),
+                            views().photo(view, BranchIndex(b)), mask, fo, &p)
               .ok())
         exposures_[BranchIndex(b)].SetTransform(view, p);
     }
@@ -245,7 +244,7 @@ void MutualBoostedSolver::NextBatch() {
   batch_.resize(static_cast<size_t>(std::max(1, options_.batch_views)));
   for (BatchView& b : batch_) {
     b.view = NextView();
-    b.camera = &scene_.views[b.view].camera;
+    b.camera = &views().camera(b.view);
   }
 }
 
@@ -288,36 +287,27 @@ void MutualBoostedSolver::NotifyIterationEnd(Stage stage, int iteration) {
 }
 
 void MutualBoostedSolver::PrepareNeighbours(Branch branch) {
-  const int b = BranchIndex(branch);
-  if (!grays_[b].empty()) return;
   if (neighbours_.empty()) {
     NeighbourOptions no;
     no.count = std::min(options_.multiview_neighbours, kMaxNeighbours);
     neighbours_ = SelectNeighbours(scene_, no);
   }
-  grays_[b].resize(scene_.views.size());
-  for (size_t v = 0; v < scene_.views.size(); ++v) {
-    const Image& rgb = photos_[v][b];
-    Image& g = grays_[b][v];
-    g = Image(rgb.width(), rgb.height(), 1);
-    for (size_t i = 0; i < g.size(); ++i)
-      g.data()[i] = 0.299f * rgb.plane(0)[i] + 0.587f * rgb.plane(1)[i] + 0.114f * rgb.plane(2)[i];
-  }
+  for (ViewLevel& level : levels_) level.MakeGrays(BranchIndex(branch));
 }
 
 Targets MutualBoostedSolver::LossTargets(Branch branch, int view, const Image* other) const {
-  const View& v = scene_.views[view];
+  const ViewLevel& level = views();
+  const int b = BranchIndex(branch);
   Targets t;
-  t.mask = v.mask.empty() ? nullptr : &v.mask;
-  t.image = &photos_[view][BranchIndex(branch)];
-  const std::vector<Image>& grays = grays_[BranchIndex(branch)];
-  if (!grays.empty()) {
-    t.gray = &grays[view];
+  t.mask = level.mask(view);
+  t.image = &level.photo(view, b);
+  if (level.has_grays(b)) {
+    t.gray = &level.gray(view, b);
     for (int u : neighbours_[view]) {
       if (t.num_neighbours == kMaxNeighbours) break;
       NeighbourView& n = t.neighbours[t.num_neighbours++];
-      n.camera = &scene_.views[u].camera;
-      n.gray = &grays[u];
+      n.camera = &level.camera(u);
+      n.gray = &level.gray(u, b);
     }
   }
   if (branch == Branch::kSurfels2D) {
@@ -339,7 +329,8 @@ Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* te
     BranchTrainer* teacher;
     Targets For(int position) override {
       const int view = solver->batch_[position].view;
-      const View& v = solver->scene_.views[view];
+      const ViewLevel& level = solver->views();
+      const Image* mask = level.mask(view);
       const MutualSupervision sup = SupervisionFor(learner->branch());
       const float background = learner->branch() == Branch::kSurfels2D
                                    ? solver->options_.background_2d
@@ -350,10 +341,11 @@ Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* te
         ProfileContext solver_context("");
         ProfileScope scope("mutual targets");
         const Image* kept = teacher->StepBuffer(position, view);
-        target = kept != nullptr ? *kept
-                                 : *teacher->Hold(v.camera, BufferBit(sup.buffer)).Get(sup.buffer);
-        if (sup.background_outside_mask && !v.mask.empty())
-          FillOutsideMask(v.mask, background, &target);
+        target = kept != nullptr
+                     ? *kept
+                     : *teacher->Hold(level.camera(view), BufferBit(sup.buffer)).Get(sup.buffer);
+        if (sup.background_outside_mask && mask != nullptr)
+          FillOutsideMask(*mask, background, &target);
       }
       return solver->LossTargets(learner->branch(), view, &target);
     }
@@ -372,9 +364,10 @@ Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* te
   }
   // Bidirectional (one view per step, one process: SolverOptions::Validate): the learner's render
   // the loss compares, before its step.
-  const View& v = scene_.views[batch_[0].view];
+  const Camera& camera = views().camera(batch_[0].view);
+  const Image* mask = views().mask(batch_[0].view);
   const MutualSupervision sup = SupervisionFor(learner->branch());
-  const RenderBuffers before = learner->Hold(v.camera);
+  const RenderBuffers before = learner->Hold(camera);
   sum.final_loss =
       learner->StepBatch(Stage::kMutual, batch_.data(), 1, &targets, schedule_it, group_);
   MGSR_RETURN_IF_ERROR(CheckFinite(*learner, it, sum.final_loss));
@@ -387,7 +380,7 @@ Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* te
   Image g =
       std::move(sup.target == OtherBranchTarget::kTransmitted ? d.transmitted : d.other_depth);
   if (!g.empty()) {
-    if (sup.background_outside_mask && !v.mask.empty()) FillOutsideMask(v.mask, 0.0f, &g);
+    if (sup.background_outside_mask && mask != nullptr) FillOutsideMask(*mask, 0.0f, &g);
     RenderGradients into;
     into.images[static_cast<int>(sup.buffer)] = std::move(g);
     MGSR_RETURN_IF_ERROR(teacher->BackpropHeld(&into, it));
@@ -530,6 +523,8 @@ Status MutualBoostedSolver::Run() {
     if (done[0] && done[1]) {
       PruneByContribution();
       CloseStageProfile(Stage::kWarmup);
+      // The mutual stage's first round's size, for the fit too.
+      UseCoarse(o.CoarseAt(Stage::kMutual, 1));
       if (o.exposure != ExposureMode::kOff && o.exposure_fit_at_mutual && o.train_2d &&
           o.train_3d) {
         Timer fit;
@@ -544,6 +539,8 @@ Status MutualBoostedSolver::Run() {
     }
     const int it = next_iteration_;
     SetShDegree(std::min(o.sh_degree, it / o.sh_interval));
+    const bool coarse = o.CoarseAt(Stage::kWarmup, it);
+    UseCoarse(coarse);
     NextBatch();
     for (BranchTrainer* t : trainers_) {
       if (done[BranchIndex(t->branch())]) continue;
@@ -563,7 +560,8 @@ Status MutualBoostedSolver::Run() {
       MGSR_RETURN_IF_ERROR(CheckFinite(*t, it, b.final_loss));
       b.warmup_iterations = it;
       Notify(Stage::kWarmup, it, *t, b.final_loss);
-      b.auto_stopped = o.auto_stop && t->UpdateAutoStop(it, b.final_loss);
+      // A coarse step's loss is not the full-size loss the auto-stop waits to flatten.
+      b.auto_stopped = o.auto_stop && !coarse && t->UpdateAutoStop(it, b.final_loss);
     }
     ++next_iteration_;
     sum.warmup_seconds = warmup_before + warmup.ElapsedSeconds();
@@ -584,6 +582,7 @@ Status MutualBoostedSolver::Run() {
   while (both && next_iteration_ <= o.mutual_iterations) {
     const int it = next_iteration_;
     const bool joint = o.mutual_mode == "joint";
+    UseCoarse(o.CoarseAt(Stage::kMutual, it));
     NextBatch();
     // In alternate mode a round (the 2DGS step, then the 3DGS step) takes one batch, as the
     // reference's iteration takes one view for both branches: the views go back on the stack for

@@ -26,6 +26,7 @@
 #include "solvers/exposure_model.h"
 #include "solvers/primitive_types.h"
 #include "solvers/solver_options.h"
+#include "solvers/view_levels.h"
 
 namespace mgsr {
 
@@ -216,12 +217,16 @@ class MutualBoostedSolver {
   SolverOptions options_;
   const Scene& scene_;
   std::vector<int> train_;
-  // Per view, the photo composited on each branch's background (indexed by BranchIndex).
-  std::vector<std::array<Image, 2>> photos_;
-  // Multi-view terms (PrepareNeighbours): each view's neighbours, and every photo in grey for the
-  // branches whose loss table reads neighbours (empty for the others).
+  // The views as the steps read them: [0] at the scene's size, [1] the coarse level when
+  // options_.coarse_factor > 1; level_ is the one the current iteration trains on
+  // (SolverOptions::CoarseAt). Multi-view terms (PrepareNeighbours) add the photos in grey.
+  std::array<ViewLevel, 2> levels_;
+  int level_ = 0;
+  const ViewLevel& views() const { return levels_[level_]; }
+  // Trains the following steps on the coarse level or at full size.
+  void UseCoarse(bool coarse) { level_ = coarse && levels_[1].size() > 0 ? 1 : 0; }
+  // Multi-view terms: each view's neighbours (chosen once, on the scene's cameras).
   std::vector<std::vector<int>> neighbours_;
-  std::array<std::vector<Image>, 2> grays_;
   Rng rng_;
   // Per-view colour transforms, indexed by BranchIndex; without exposure_per_branch the 2DGS
   // branch uses the 3DGS branch's.

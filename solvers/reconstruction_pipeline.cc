@@ -39,6 +39,7 @@
 #include "solvers/profile_report.h"
 #include "solvers/trained_views.h"
 #include "solvers/view_group.h"
+#include "solvers/view_levels.h"
 
 namespace mgsr {
 namespace {
@@ -226,17 +227,24 @@ class ProgressLog : public IterationCallback {
   // branch when it trains alone); an untrained branch shows as "-".
   // For the time left: a density strategy that fills its budgets (MCMC) prices the rest of the
   // run at the budgets (0: none); one they only bound, at the model's present size.
-  ProgressLog(const std::string& csv_path, int every, int expected_total, bool append,
-              bool train_2d, bool train_3d, size_t max_surfels, size_t max_gaussians,
-              bool fills_budget)
+  // With a coarse start (SolverOptions::coarse_factor) the steps at either size are priced from
+  // the windows at that size; before the first full-size window, a full-size step is priced at a
+  // coarse one times the ratio of pixels (at photo size, where a coarse start is used, most of a
+  // step is per pixel).
+  ProgressLog(const std::string& csv_path, int every, const SolverOptions& options, bool append)
       : path_(csv_path),
         every_(every),
-        expected_(expected_total),
-        train_2d_(train_2d),
-        train_3d_(train_3d),
-        max_surfels_(max_surfels),
-        max_gaussians_(max_gaussians),
-        fills_budget_(fills_budget) {
+        options_(options),
+        train_2d_(options.train_2d),
+        train_3d_(options.train_3d),
+        max_surfels_(options.max_surfels),
+        max_gaussians_(options.max_gaussians),
+        fills_budget_(options.density == "mcmc") {
+    const int trained_branches = (train_2d_ ? 1 : 0) + (train_3d_ ? 1 : 0);
+    branches_ = trained_branches;
+    mutual_steps_ = options.mutual_mode == "joint" ? 2 : 1;
+    expected_ = trained_branches * options.warmup_max_iterations +
+                mutual_steps_ * (trained_branches == 2 ? options.mutual_iterations : 0);
     // A resumed run continues the log; a missing or empty one (peek fails alike) starts with its
     // header.
     const bool header =
@@ -268,18 +276,21 @@ class ProgressLog : public IterationCallback {
     const double surfels = train_2d_ ? i.num_surfels : 0,
                  gaussians = train_3d_ ? i.num_gaussians : 0;
     const double primitives = surfels + gaussians;
-    if (steps_ == 1) window_ = {steps_, i.seconds, primitives};
+    const bool coarse = options_.CoarseAt(i.stage, i.iteration);
+    if (steps_ == 1) window_ = {steps_, i.seconds, primitives, coarse};
     if (i.iteration % every_ == 0 && is2d != train_3d_) {
-      eta_.AddWindow(steps_ - window_.steps, i.seconds - window_.seconds,
-                     0.5 * (primitives + window_.primitives));
+      // A window that spans the switch to full size prices neither size.
+      if (window_.coarse == coarse)
+        eta_[coarse ? 1 : 0].AddWindow(steps_ - window_.steps, i.seconds - window_.seconds,
+                                       0.5 * (primitives + window_.primitives));
       const auto heading_for = [&](bool trained, double count, size_t budget) {
         if (!trained) return 0.0;
         return fills_budget_ && budget > 0 ? std::max<double>(count, budget) : count;
       };
       const double heading = heading_for(train_2d_, surfels, max_surfels_) +
                              heading_for(train_3d_, gaussians, max_gaussians_);
-      window_ = {steps_, i.seconds, primitives};
-      const double eta = eta_.SecondsLeft(std::max(0, expected_ - steps_), heading);
+      window_ = {steps_, i.seconds, primitives, coarse};
+      const double eta = SecondsLeft(i.stage, i.iteration, heading);
       const std::string loss_2d = train_2d_ ? Format("%.4f", loss_2d_) : "-";
       const std::string loss_3d = train_3d_ ? Format("%.4f", loss_3d_) : "-";
       const std::string surfels = train_2d_ ? std::to_string(i.num_surfels) : "-";
@@ -302,16 +313,42 @@ class ProgressLog : public IterationCallback {
     return buffer;
   }
 
-  int every_, expected_, steps_ = 0;
+  // The time left after `iteration` of `stage`: the remaining coarse and full-size steps, each
+  // priced by the windows of their size.
+  double SecondsLeft(Stage stage, int iteration, double heading) const {
+    const int coarse_warmup = options_.CoarseWarmupIterations();
+    const int coarse_mutual = options_.CoarseMutualIterations();
+    int coarse_left = branches_ == 2 ? mutual_steps_ * coarse_mutual : 0;
+    if (stage == Stage::kWarmup) {
+      coarse_left += branches_ * std::max(0, coarse_warmup - iteration);
+    } else {
+      coarse_left = mutual_steps_ * std::max(0, coarse_mutual - iteration);
+    }
+    const int all_left = std::max(0, expected_ - steps_);
+    coarse_left = std::min(coarse_left, all_left);
+    const int full_left = all_left - coarse_left;
+    const EtaEstimator &full = eta_[0], &coarse = eta_[1];
+    const double pixels = static_cast<double>(options_.coarse_factor) * options_.coarse_factor;
+    const double full_step =
+        full.has_windows() ? full.SecondsPerStep(heading) : coarse.SecondsPerStep(heading) * pixels;
+    const double coarse_step = coarse.has_windows() ? coarse.SecondsPerStep(heading)
+                                                    : full.SecondsPerStep(heading) / pixels;
+    return full_left * full_step + (coarse_left > 0 ? coarse_left * coarse_step : 0.0);
+  }
+
+  int every_;
+  SolverOptions options_;
+  int expected_ = 0, steps_ = 0, branches_ = 0, mutual_steps_ = 1;
   bool train_2d_, train_3d_;
   size_t max_surfels_, max_gaussians_;
   bool fills_budget_;
-  // Where the latest progress window started: steps, seconds, primitives.
+  // Where the latest progress window started: steps, seconds, primitives, size.
   struct {
     int steps;
     double seconds, primitives;
-  } window_ = {0, 0, 0};
-  EtaEstimator eta_;
+    bool coarse;
+  } window_ = {0, 0, 0, false};
+  std::array<EtaEstimator, 2> eta_;  // full size, coarse
   double loss_2d_ = 0, loss_3d_ = 0;
 };
 
@@ -516,6 +553,7 @@ Status ReconstructionPipeline::RunStages(RunState* st) {
            &ReconstructionPipeline::LoadInput,            // the scene
            &ReconstructionPipeline::ChooseSceneSettings,  // backgrounds and weights
            &ReconstructionPipeline::ChooseBudget,         // primitives per branch
+           &ReconstructionPipeline::ChooseCoarseLevel,    // the coarse start's size
            &ReconstructionPipeline::ChooseMeshRegion,     // where the mesh may be
            &ReconstructionPipeline::ChooseBatches,        // views per step; options final
            &ReconstructionPipeline::CreateSolver,         // models, group, checkpoint
@@ -686,6 +724,22 @@ Status ReconstructionPipeline::ChooseBudget(RunState* st) {
   return Status::Ok();
 }
 
+Status ReconstructionPipeline::ChooseCoarseLevel(RunState* st) {
+  if (options_.coarse_max_size < 0) return Status::Error("--coarse_max_size must be >= 0");
+  SolverOptions& options = st->options;
+  options.coarse_factor = CoarseFactor(st->scene, options_.coarse_max_size);
+  if (options.coarse_factor <= 1 || options.coarse_fraction <= 0) return Status::Ok();
+  const Camera& c = st->scene.views[st->scene.TrainIndices().front()].camera;
+  const int w = std::max(1, static_cast<int>(std::lround(1.0 * c.width / options.coarse_factor)));
+  const int h = std::max(1, static_cast<int>(std::lround(1.0 * c.height / options.coarse_factor)));
+  std::printf(
+      "coarse start: the first %.0f%% of each stage at 1/%d size (%dx%d), then %dx%d "
+      "(--coarse_max_size %d, --coarse_fraction %g)\n",
+      100 * options.coarse_fraction, options.coarse_factor, w, h, c.width, c.height,
+      options_.coarse_max_size, options.coarse_fraction);
+  return Status::Ok();
+}
+
 Status ReconstructionPipeline::ChooseMeshRegion(RunState* st) {
   // The mesh's region, from the cameras unless given.
   st->surface = options_.surface;
@@ -763,13 +817,7 @@ Status ReconstructionPipeline::PrepareOutputs(RunState* st) {
   MGSR_RETURN_IF_ERROR(st->out.Prepare());
   MGSR_RETURN_IF_ERROR(MakeDirectories(st->out.Path("renders")));
   MGSR_RETURN_IF_ERROR(MakeDirectories(st->ckpt_dir));
-  const int trained_branches = (options.train_2d ? 1 : 0) + (options.train_3d ? 1 : 0);
-  st->log = std::make_unique<ProgressLog>(
-      st->out.Path("log.csv"), o.log_every,
-      trained_branches * options.warmup_max_iterations +
-          (options.mutual_mode == "joint" ? 2 : 1) * options.mutual_iterations,
-      o.resume, options.train_2d, options.train_3d, options.max_surfels, options.max_gaussians,
-      options.density == "mcmc");
+  st->log = std::make_unique<ProgressLog>(st->out.Path("log.csv"), o.log_every, options, o.resume);
   MGSR_RETURN_IF_ERROR(st->log->Flush());
   solver.AddCallback(st->log.get());
   st->evaluation =

@@ -84,6 +84,10 @@ struct ReconstructionOptions {
   bool depth_tv_disparity = false;
   std::string budget;
   int64_t max_gaussians = -1, max_surfels = -1;
+  // The coarse start (SolverOptions::coarse_factor): training views longer than this many px
+  // train the first part of each stage (solver.coarse_fraction) divided by the smallest integer
+  // that brings them within it. 0: always at full size.
+  int coarse_max_size = 800;
 
   // The mesh. `mesh_region` resolves surface.region once the scene is read (ResolveMeshRegion):
   // "auto", "none", a box "x0,y0,z0,x1,y1,z1" or a region file.
@@ -146,6 +150,7 @@ class ReconstructionPipeline {
   Status LoadInput(RunState* st);            // reads the scene and checks it can be trained
   Status ChooseSceneSettings(RunState* st);  // backgrounds, weights, the loss configuration
   Status ChooseBudget(RunState* st);         // the primitive budget of each branch
+  Status ChooseCoarseLevel(RunState* st);    // the size the first part of each stage trains at
   Status ChooseMeshRegion(RunState* st);     // the region the mesh is fused in
   Status ChooseBatches(RunState* st);        // views per step; checks the final options
   Status CreateSolver(RunState* st);         // the models; a group's agreement; --resume

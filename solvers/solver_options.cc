@@ -77,6 +77,19 @@ bool SolverOptions::ApplyMethod(const std::string& method, SolverOptions* o) {
   return true;
 }
 
+int SolverOptions::CoarseWarmupIterations() const {
+  if (coarse_factor <= 1) return 0;
+  return static_cast<int>(std::floor(coarse_fraction * warmup_max_iterations));
+}
+
+int SolverOptions::CoarseMutualIterations() const {
+  if (coarse_factor <= 1) return 0;
+  const int n = static_cast<int>(std::floor(coarse_fraction * mutual_iterations));
+  // An alternate round (a 2DGS step on an odd iteration, the 3DGS step after it) reuses renders
+  // within the round: it starts and ends at one size.
+  return mutual_mode == "joint" ? n : n - n % 2;
+}
+
 Status SolverOptions::Validate() const {
   if (!train_2d && !train_3d) return Status::Error("at least one branch must train");
   if (warmup_max_iterations < 1) return Status::Error("--warmup_max_iterations must be >= 1");
@@ -130,6 +143,9 @@ Status SolverOptions::Validate() const {
   if (!(background_2d >= 0 && background_2d <= 1) || !(background_3d >= 0 && background_3d <= 1))
     return Status::Error("background levels must be in [0, 1]");
   if (batch_views < 1) return Status::Error("--batch_views must be >= 1");
+  if (coarse_factor < 1) return Status::Error("the coarse level's factor must be >= 1");
+  if (!(coarse_fraction >= 0 && coarse_fraction <= 1))
+    return Status::Error("--coarse_fraction must be in [0, 1]");
   if (batch_views > 1 && bidirectional)
     return Status::Error("--bidirectional steps one view at a time: use --batch_views 1 with it");
   return Status::Ok();
@@ -223,7 +239,9 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"losses", LossTableToJson(LossTable()).dump()},
           {"seed", std::to_string(seed)},
           {"batch_views", Text(batch_views)},
-          {"batch_sqrt_lr", Text(batch_sqrt_lr)}};
+          {"batch_sqrt_lr", Text(batch_sqrt_lr)},
+          {"coarse", coarse_factor > 1 ? Text(coarse_factor) + " " + Text(coarse_fraction)
+                                       : std::string("none")}};
 }
 
 }  // namespace mgsr

@@ -161,6 +161,19 @@ struct SolverOptions {
   // fewer, better-informed steps take longer strides).
   int batch_views = 1;
   bool batch_sqrt_lr = true;
+  // Coarse start (solvers/view_levels.h): the first `coarse_fraction` of each stage's iterations
+  // (of the warm-up cap, of the mutual stage) train on every view divided by `coarse_factor`, the
+  // rest at full size. 1: none (the pipeline derives it from --coarse_max_size and the photos).
+  // The warm-up's auto-stop reads only full-size losses; the mutual stage switches between rounds.
+  int coarse_factor = 1;
+  double coarse_fraction = 0.75;
+  // The last coarse iteration of each stage (0: none).
+  int CoarseWarmupIterations() const;
+  int CoarseMutualIterations() const;
+  bool CoarseAt(Stage stage, int iteration) const {
+    return iteration <=
+           (stage == Stage::kWarmup ? CoarseWarmupIterations() : CoarseMutualIterations());
+  }
   // Divides every iteration count (stage lengths, auto-stop window, density and SH schedules,
   // the position rate's decay, loss rows' first iterations) by `views`, so that a run with
   // batches of that many views sees as many views as a run without.

@@ -78,6 +78,13 @@ DEFINE_string(surfel_init, "neighbours",
 DEFINE_int32(warmup_max_iterations, -1, "Cap of warm-up iterations per branch (-1: preset).");
 DEFINE_int32(warmup_min_iterations, -1, "Auto-stop only after this iteration (-1: preset).");
 DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");
+DEFINE_int32(coarse_max_size, 800,
+             "Coarse start: views longer than this train the first part of each stage "
+             "(--coarse_fraction) downscaled by the smallest integer that fits them (0: always "
+             "full size).");
+DEFINE_double(coarse_fraction, 0.75,
+              "Coarse start: the share of each stage's iterations (of the warm-up cap, of the "
+              "mutual stage) on the downscaled views.");
 DEFINE_bool(auto_stop, true, "Stop each warm-up when its loss window flattens.");
 DEFINE_bool(bidirectional, false,
             "Ablation K: the supervising branch also learns from the supervision.");
@@ -289,7 +296,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
        {"Method and schedule",
         {"preset", "method", "mutual_mode", "warmup_max_iterations", "warmup_min_iterations",
          "mutual_iterations", "auto_stop", "auto_stop_window", "auto_stop_range", "bidirectional",
-         "seed"}},
+         "coarse_max_size", "coarse_fraction", "seed"}},
        {"Batches and MPI", {"batch_views", "batch_sqrt_lr", "batch_keep_iterations"}},
        {"Losses",
         {"loss_config",
@@ -483,6 +490,8 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   }
   options.batch_views = FLAGS_batch_views;
   options.batch_sqrt_lr = FLAGS_batch_sqrt_lr;
+  options.coarse_fraction = FLAGS_coarse_fraction;
+  ro.coarse_max_size = FLAGS_coarse_max_size;
   ro.batch_scale_iterations = !FLAGS_batch_keep_iterations;
   ro.group = group;
   const mgsr::Status valid = ro.Validate();
