@@ -7,12 +7,15 @@
 // compute the same renders to the bit.
 //
 //   mgsr_trained_render_bench --run RUN_DIR --workspace SCENE [--rounds 3] [--threads 2]
+//                             [--long_side N]
 //
 // RUN_DIR is a finished `mgsr_solve` output folder (point_cloud_3d.ply, point_cloud_2d.ply,
 // metrics.json); SCENE its workspace.
 #include <gflags/gflags.h>
 #include <omp.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -30,6 +33,9 @@ DEFINE_string(run, "", "A finished mgsr_solve output folder (its models and metr
 DEFINE_string(workspace, "", "The run's scene (COLMAP workspace or Blender folder).");
 DEFINE_int32(rounds, 3, "Timed passes over the training views (after one untimed pass).");
 DEFINE_int32(threads, 2, "OpenMP threads.");
+DEFINE_int32(long_side, 0,
+             "Render every view resized so that its long side is this many px, as training at "
+             "that size (or a coarse start's level) renders it; 0: the cameras' own size.");
 
 namespace {
 
@@ -82,6 +88,15 @@ int main(int argc, char** argv) {
     return Fail(s.message());
   const std::vector<int> views = scene.TrainIndices();
   if (views.empty()) return Fail(FLAGS_workspace + ": no training views");
+  if (FLAGS_long_side < 0) return Fail("--long_side must be >= 0");
+  if (FLAGS_long_side > 0) {
+    for (mgsr::View& v : scene.views) {
+      mgsr::Camera& c = v.camera;
+      const double scale = static_cast<double>(FLAGS_long_side) / std::max(c.width, c.height);
+      c = c.Resized(std::max(1, static_cast<int>(std::lround(c.width * scale))),
+                    std::max(1, static_cast<int>(std::lround(c.height * scale))));
+    }
+  }
 
   mgsr::GaussianRenderOptions gaussian_options;
   gaussian_options.sh_degree = 3;
