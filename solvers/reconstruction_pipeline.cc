@@ -331,8 +331,9 @@ class ProgressLog : public IterationCallback {
     // and a primitive's rows at half size cost more per pixel: a full-size step took 2.5 (512 px
     // synthetic object) and 2.75 (1600 px capture) coarse steps at factor 2, 4^0.66 and 4^0.73.
     constexpr double kFullSizeCostExponent = 0.7;
-    const double pixels = std::pow(
-        static_cast<double>(options_.coarse_factor) * options_.coarse_factor, kFullSizeCostExponent);
+    const double pixels =
+        std::pow(static_cast<double>(options_.coarse_factor) * options_.coarse_factor,
+                 kFullSizeCostExponent);
     const double full_step =
         full.has_windows() ? full.SecondsPerStep(heading) : coarse.SecondsPerStep(heading) * pixels;
     const double coarse_step = coarse.has_windows() ? coarse.SecondsPerStep(heading)
