@@ -327,17 +327,19 @@ class ProgressLog : public IterationCallback {
     coarse_left = std::min(coarse_left, all_left);
     const int full_left = all_left - coarse_left;
     const EtaEstimator &full = eta_[0], &coarse = eta_[1];
-    // Part of a step does not shrink with the views (projection, binning, Adam: per primitive),
-    // and a primitive's rows at half size cost more per pixel: a full-size step took 2.5 (512 px
-    // synthetic object) and 2.75 (1600 px capture) coarse steps at factor 2, 4^0.66 and 4^0.73.
+    // A full-size step costs less than the ratio of pixels times a coarse one: the per-primitive
+    // passes do not shrink with the views and the raster passes shrink to about a third at half
+    // size (docs/performance.md, "Coarse start"). A full-size step took 2.5 (512 px synthetic
+    // object) and 2.75 (1600 px capture) coarse steps at factor 2: 4^0.66 and 4^0.73.
     constexpr double kFullSizeCostExponent = 0.7;
-    const double pixels =
+    const double full_over_coarse =
         std::pow(static_cast<double>(options_.coarse_factor) * options_.coarse_factor,
                  kFullSizeCostExponent);
-    const double full_step =
-        full.has_windows() ? full.SecondsPerStep(heading) : coarse.SecondsPerStep(heading) * pixels;
-    const double coarse_step = coarse.has_windows() ? coarse.SecondsPerStep(heading)
-                                                    : full.SecondsPerStep(heading) / pixels;
+    const double full_step = full.has_windows() ? full.SecondsPerStep(heading)
+                                                : coarse.SecondsPerStep(heading) * full_over_coarse;
+    const double coarse_step = coarse.has_windows()
+                                   ? coarse.SecondsPerStep(heading)
+                                   : full.SecondsPerStep(heading) / full_over_coarse;
     return full_left * full_step + (coarse_left > 0 ? coarse_left * coarse_step : 0.0);
   }
 
