@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "same_models.h"
+#include "short_run.h"
 #include "solvers/density_strategy.h"
 #include "solvers/mutual_boosted_solver.h"
 #include "solvers/surface_extraction.h"
@@ -186,12 +187,7 @@ class ThreadViewGroup : public ViewGroup {
 };
 
 SolverOptions BatchOptions(int batch) {
-  SolverOptions o;
-  SolverOptions::FromPreset("fast", &o);
-  o.warmup_min_iterations = 0;
-  o.warmup_max_iterations = 40;
-  o.mutual_iterations = 12;
-  o.auto_stop = false;
+  SolverOptions o = testing::ShortFastOptions(40, 12);
   // Densification, opacity resets and SH growth inside the run: the density statistics and the
   // row operations after a summed step are part of what must agree.
   o.schedule_2d = {8, 30, 8, 20, 0.05f};

@@ -7,6 +7,7 @@
 #include "mgsr/loss/loss_registry.h"
 #include "mgsr/loss/loss_util.h"
 #include "same_models.h"
+#include "short_run.h"
 #include "solvers/loss_table.h"
 #include "solvers/mutual_boosted_solver.h"
 #include "solvers/view_levels.h"
@@ -157,12 +158,7 @@ struct Iterations : IterationCallback {
 };
 
 SolverOptions ShortRun() {
-  SolverOptions o;
-  SolverOptions::FromPreset("fast", &o);
-  o.warmup_min_iterations = 0;
-  o.warmup_max_iterations = 40;
-  o.mutual_iterations = 12;
-  o.auto_stop = false;
+  SolverOptions o = testing::ShortFastOptions(40, 12);
   o.schedule_2d = {10, 30, 10, 1000, 0.05f};
   o.schedule_3d = {10, 30, 5, 1000, 0.005f};
   o.sh_interval = 20;

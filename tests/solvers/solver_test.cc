@@ -15,6 +15,7 @@
 #include "mgsr/loss/loss_util.h"
 #include "mgsr/model/activations.h"
 #include "same_models.h"
+#include "short_run.h"
 #include "solvers/adam.h"
 #include "solvers/auto_stop.h"
 #include "solvers/checkpoint_callback.h"
@@ -163,12 +164,7 @@ class Recorder : public IterationCallback {
 };
 
 SolverOptions TinyOptions() {
-  SolverOptions o;
-  SolverOptions::FromPreset("fast", &o);
-  o.warmup_min_iterations = 0;
-  o.warmup_max_iterations = 120;
-  o.mutual_iterations = 20;
-  o.auto_stop = false;
+  SolverOptions o = testing::ShortFastOptions(120, 20);
   o.schedule_2d = {20, 100, 20, 1000, 0.05f};
   o.schedule_3d = {20, 100, 10, 1000, 0.005f};
   o.sh_interval = 40;
