@@ -1124,6 +1124,12 @@ nlohmann::json ReconstructionPipeline::MetricsJson(const RunState& st) const {
                        {"why", st.budget_why},
                        {"density", options.density},
                        {"density_config", options.density_config}};
+  // The coarse start (factor 1: none): the last coarse iteration of each stage.
+  metrics["coarse"] = {{"factor", options.coarse_factor},
+                       {"max_size", o.coarse_max_size},
+                       {"fraction", options.coarse_fraction},
+                       {"warmup_iterations", options.CoarseWarmupIterations()},
+                       {"mutual_iterations", options.CoarseMutualIterations()}};
   metrics["background"] = {
       {"2d", options.background_2d}, {"3d", options.background_3d}, {"choice", st.background_note}};
   for (const Branch b : {Branch::kSurfels2D, Branch::kGaussians3D}) {

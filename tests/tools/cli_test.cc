@@ -122,6 +122,35 @@ TEST_F(CliTest, RgbPhotosWithMasksAreScoredOnTheObject) {
   EXPECT_TRUE(m["test"].contains("psnr_foreground")) << m["test"].dump();
 }
 
+// Views longer than --coarse_max_size train the first part of each stage downscaled: the log
+// says so and metrics.json records where each stage switched; a negative size is refused.
+TEST_F(CliTest, SolveWithACoarseStartSaysSoAndRecordsIt) {
+  const std::string out = Copy() + "/out";
+  const auto r =
+      testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + out +
+                          " --warmup_max_iterations 20 --warmup_min_iterations 0 "
+                          "--mutual_iterations 6 --coarse_max_size 16");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("coarse start: the first 75% of each stage at 1/2 size (16x16), then "
+                          "32x32"),
+            std::string::npos)
+      << r.output;
+  std::string text;
+  ASSERT_TRUE(ReadFileToString(out + "/metrics.json", &text).ok());
+  const nlohmann::json m = nlohmann::json::parse(text);
+  EXPECT_EQ(m["coarse"]["factor"], 2);
+  EXPECT_EQ(m["coarse"]["warmup_iterations"], 15);
+  EXPECT_EQ(m["coarse"]["mutual_iterations"], 4);
+  const auto full = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " +
+                                        out + "_full --check");
+  ASSERT_EQ(full.exit_code, 0) << full.output;
+  EXPECT_EQ(full.output.find("coarse start"), std::string::npos) << full.output;
+  const auto bad = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " +
+                                       out + "_bad --coarse_max_size -1");
+  EXPECT_EQ(bad.exit_code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("--coarse_max_size must be >= 0"), std::string::npos) << bad.output;
+}
+
 TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
   const std::string out = Copy() + "/out";
   const auto r =
