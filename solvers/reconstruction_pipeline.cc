@@ -737,13 +737,12 @@ Status ReconstructionPipeline::ChooseCoarseLevel(RunState* st) {
   options.coarse_factor = CoarseFactor(st->scene, options_.coarse_max_size);
   if (options.coarse_factor <= 1 || options.coarse_fraction <= 0) return Status::Ok();
   const Camera& c = st->scene.views[st->scene.TrainIndices().front()].camera;
-  const int w = std::max(1, static_cast<int>(std::lround(1.0 * c.width / options.coarse_factor)));
-  const int h = std::max(1, static_cast<int>(std::lround(1.0 * c.height / options.coarse_factor)));
+  const Camera coarse = CoarseCamera(c, options.coarse_factor);
   std::printf(
       "coarse start: the first %.0f%% of each stage at 1/%d size (%dx%d), then %dx%d "
       "(--coarse_max_size %d, --coarse_fraction %g)\n",
-      100 * options.coarse_fraction, options.coarse_factor, w, h, c.width, c.height,
-      options_.coarse_max_size, options.coarse_fraction);
+      100 * options.coarse_fraction, options.coarse_factor, coarse.width, coarse.height, c.width,
+      c.height, options_.coarse_max_size, options.coarse_fraction);
   return Status::Ok();
 }
 

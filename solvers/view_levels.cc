@@ -24,11 +24,8 @@ ViewLevel ViewLevel::Downscaled(const ViewLevel& full, int factor) {
   const size_t n = full.size();
   l.own_masks_.resize(n);  // sized first: masks_ points into it
   for (size_t v = 0; v < n; ++v) {
-    const Camera& c = full.cameras_[v];
-    const int w = std::max(1, static_cast<int>(std::lround(static_cast<double>(c.width) / factor)));
-    const int h =
-        std::max(1, static_cast<int>(std::lround(static_cast<double>(c.height) / factor)));
-    l.cameras_.push_back(c.Resized(w, h));
+    l.cameras_.push_back(CoarseCamera(full.cameras_[v], factor));
+    const int w = l.cameras_.back().width, h = l.cameras_.back().height;
     l.photos_.push_back(
         {ResizeImage(full.photos_[v][0], w, h), ResizeImage(full.photos_[v][1], w, h)});
     if (full.masks_[v] != nullptr) {
@@ -55,6 +52,13 @@ void ViewLevel::MakeGrays(int branch) {
     for (size_t i = 0; i < g.size(); ++i)
       g.data()[i] = 0.299f * rgb.plane(0)[i] + 0.587f * rgb.plane(1)[i] + 0.114f * rgb.plane(2)[i];
   }
+}
+
+Camera CoarseCamera(const Camera& camera, int factor) {
+  const auto side = [factor](int n) {
+    return std::max(1, static_cast<int>(std::lround(static_cast<double>(n) / factor)));
+  };
+  return camera.Resized(side(camera.width), side(camera.height));
 }
 
 int CoarseFactor(const Scene& scene, int max_size) {

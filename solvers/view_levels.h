@@ -48,6 +48,9 @@ class ViewLevel {
   std::array<std::vector<Image>, 2> grays_;
 };
 
+// `camera` divided by `factor`: each side rounded, at least 1 px (Camera::Resized).
+Camera CoarseCamera(const Camera& camera, int factor);
+
 // The factor of the coarse level: the smallest integer that brings the longest side of any
 // training view to at most `max_size` px; 1 (no coarse level) when they already fit or when
 // max_size is 0.
