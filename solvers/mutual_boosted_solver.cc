@@ -129,9 +129,11 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   train_ = scene.TrainIndices();
   static_assert(BranchIndex(Branch::kSurfels2D) == 0 && BranchIndex(Branch::kGaussians3D) == 1,
                 "ViewLevel keeps the 2DGS branch's photos first");
-  levels_[0] = ViewLevel::FullSize(scene, options.background_2d, options.background_3d);
-  if (options.coarse_factor > 1)
-    levels_[1] = ViewLevel::Downscaled(levels_[0], options.coarse_factor);
+  levels_.push_back(ViewLevel::FullSize(scene, options.background_2d, options.background_3d));
+  // Each coarse level straight from the full size (not from the next finer level): every pixel
+  // the exact mean of its block.
+  for (int k = 1; options.coarse_factor > 1 && k <= options.coarse_levels; ++k)
+    levels_.push_back(ViewLevel::Downscaled(levels_[0], options.CoarseLevelFactor(k)));
   // Initial points: a seeded subset when there are more than the options allow.
   std::vector<Eigen::Vector3f> points = scene.points, colors = scene.point_colors;
   if (points.size() > options.max_init_points) {
@@ -524,7 +526,7 @@ Status MutualBoostedSolver::Run() {
       PruneByContribution();
       CloseStageProfile(Stage::kWarmup);
       // The mutual stage's first round's size, for the fit too.
-      UseCoarse(o.CoarseAt(Stage::kMutual, 1));
+      UseLevel(o.CoarseLevelAt(Stage::kMutual, 1));
       if (o.exposure != ExposureMode::kOff && o.exposure_fit_at_mutual && o.train_2d &&
           o.train_3d) {
         Timer fit;
@@ -540,7 +542,7 @@ Status MutualBoostedSolver::Run() {
     const int it = next_iteration_;
     SetShDegree(std::min(o.sh_degree, it / o.sh_interval));
     const bool coarse = o.CoarseAt(Stage::kWarmup, it);
-    UseCoarse(coarse);
+    UseLevel(o.CoarseLevelAt(Stage::kWarmup, it));
     NextBatch();
     for (BranchTrainer* t : trainers_) {
       if (done[BranchIndex(t->branch())]) continue;
@@ -582,7 +584,7 @@ Status MutualBoostedSolver::Run() {
   while (both && next_iteration_ <= o.mutual_iterations) {
     const int it = next_iteration_;
     const bool joint = o.mutual_mode == "joint";
-    UseCoarse(o.CoarseAt(Stage::kMutual, it));
+    UseLevel(o.CoarseLevelAt(Stage::kMutual, it));
     NextBatch();
     // In alternate mode a round (the 2DGS step, then the 3DGS step) takes one batch, as the
     // reference's iteration takes one view for both branches: the views go back on the stack for

@@ -217,14 +217,15 @@ class MutualBoostedSolver {
   SolverOptions options_;
   const Scene& scene_;
   std::vector<int> train_;
-  // The views as the steps read them: [0] at the scene's size, [1] the coarse level when
-  // options_.coarse_factor > 1; level_ is the one the current iteration trains on
-  // (SolverOptions::CoarseAt). Multi-view terms (PrepareNeighbours) add the photos in grey.
-  std::array<ViewLevel, 2> levels_;
+  // The views as the steps read them: [0] at the scene's size, [k] divided by
+  // options_.CoarseLevelFactor(k) for each coarse level when options_.coarse_factor > 1; level_
+  // is the one the current iteration trains on (SolverOptions::CoarseLevelAt). Multi-view terms
+  // (PrepareNeighbours) add the photos in grey.
+  std::vector<ViewLevel> levels_;
   int level_ = 0;
   const ViewLevel& views() const { return levels_[level_]; }
-  // Trains the following steps on the coarse level or at full size.
-  void UseCoarse(bool coarse) { level_ = coarse && levels_[1].size() > 0 ? 1 : 0; }
+  // Trains the following steps on `level` (0: full size).
+  void UseLevel(int level) { level_ = level < static_cast<int>(levels_.size()) ? level : 0; }
   // Multi-view terms: each view's neighbours (chosen once, on the scene's cameras).
   std::vector<std::vector<int>> neighbours_;
   Rng rng_;

@@ -227,9 +227,9 @@ class ProgressLog : public IterationCallback {
   // branch when it trains alone); an untrained branch shows as "-".
   // For the time left: a density strategy that fills its budgets (MCMC) prices the rest of the
   // run at the budgets (0: none); one they only bound, at the model's present size.
-  // With a coarse start (SolverOptions::coarse_factor) the steps at either size are priced from
-  // the windows at that size; before the first full-size window, a full-size step is priced at a
-  // coarse one times the ratio of pixels to the power 0.7 (kFullSizeCostExponent).
+  // With a coarse start (SolverOptions::coarse_factor) the steps at each size are priced from
+  // the windows at that size; a size without windows yet is priced from the nearest size that has
+  // them, by the ratio of pixels to the power 0.7 (kPixelCostExponent).
   ProgressLog(const std::string& csv_path, int every, const SolverOptions& options, bool append)
       : path_(csv_path),
         every_(every),
@@ -238,7 +238,8 @@ class ProgressLog : public IterationCallback {
         train_3d_(options.train_3d),
         max_surfels_(options.max_surfels),
         max_gaussians_(options.max_gaussians),
-        fills_budget_(options.density == "mcmc") {
+        fills_budget_(options.density == "mcmc"),
+        eta_(options.coarse_factor > 1 ? 1 + options.coarse_levels : 1) {
     const int trained_branches = (train_2d_ ? 1 : 0) + (train_3d_ ? 1 : 0);
     branches_ = trained_branches;
     mutual_steps_ = options.mutual_mode == "joint" ? 2 : 1;
@@ -275,20 +276,20 @@ class ProgressLog : public IterationCallback {
     const double surfels = train_2d_ ? i.num_surfels : 0,
                  gaussians = train_3d_ ? i.num_gaussians : 0;
     const double primitives = surfels + gaussians;
-    const bool coarse = options_.CoarseAt(i.stage, i.iteration);
-    if (steps_ == 1) window_ = {steps_, i.seconds, primitives, coarse};
+    const int level = LevelAt(i.stage, i.iteration);
+    if (steps_ == 1) window_ = {steps_, i.seconds, primitives, level};
     if (i.iteration % every_ == 0 && is2d != train_3d_) {
-      // A window that spans the switch to full size prices neither size.
-      if (window_.coarse == coarse)
-        eta_[coarse ? 1 : 0].AddWindow(steps_ - window_.steps, i.seconds - window_.seconds,
-                                       0.5 * (primitives + window_.primitives));
+      // A window that spans a switch of size prices neither size.
+      if (window_.level == level)
+        eta_[level].AddWindow(steps_ - window_.steps, i.seconds - window_.seconds,
+                              0.5 * (primitives + window_.primitives));
       const auto heading_for = [&](bool trained, double count, size_t budget) {
         if (!trained) return 0.0;
         return fills_budget_ && budget > 0 ? std::max<double>(count, budget) : count;
       };
       const double heading = heading_for(train_2d_, surfels, max_surfels_) +
                              heading_for(train_3d_, gaussians, max_gaussians_);
-      window_ = {steps_, i.seconds, primitives, coarse};
+      window_ = {steps_, i.seconds, primitives, level};
       const double eta = SecondsLeft(i.stage, i.iteration, heading);
       const std::string loss_2d = train_2d_ ? Format("%.4f", loss_2d_) : "-";
       const std::string loss_3d = train_3d_ ? Format("%.4f", loss_3d_) : "-";
@@ -312,35 +313,75 @@ class ProgressLog : public IterationCallback {
     return buffer;
   }
 
-  // The time left after `iteration` of `stage`: the remaining coarse and full-size steps, each
-  // priced by the windows of their size.
-  double SecondsLeft(Stage stage, int iteration, double heading) const {
-    const int coarse_warmup = options_.CoarseWarmupIterations();
-    const int coarse_mutual = options_.CoarseMutualIterations();
-    int coarse_left = branches_ == 2 ? mutual_steps_ * coarse_mutual : 0;
+  // The level (SolverOptions::CoarseLevelAt) of a step, within the estimators kept.
+  int LevelAt(Stage stage, int iteration) const {
+    return std::min(options_.CoarseLevelAt(stage, iteration), static_cast<int>(eta_.size()) - 1);
+  }
+  // The steps left after `iteration` of `stage` at each level (index 0: full size).
+  std::vector<int> StepsLeft(Stage stage, int iteration) const {
+    std::vector<int> left(eta_.size(), 0);
+    // Adds the steps of `stage` after `from` at each level, `steps` per iteration.
+    const auto add = [&](Stage s, int from, int last, int steps) {
+      int start = 0;  // the end of the previous (coarser) level
+      const std::vector<int> ends = options_.CoarseLevelEnds(s);
+      for (size_t k = 0; k < ends.size(); ++k) {
+        const int level =
+            std::min(static_cast<int>(ends.size() - k), static_cast<int>(left.size()) - 1);
+        left[level] += steps * std::max(0, ends[k] - std::max(from, start));
+        start = ends[k];
+      }
+      left[0] += steps * std::max(0, last - std::max(from, start));
+    };
+    const int mutual = branches_ == 2 ? options_.mutual_iterations : 0;
     if (stage == Stage::kWarmup) {
-      coarse_left += branches_ * std::max(0, coarse_warmup - iteration);
+      add(Stage::kWarmup, iteration, options_.warmup_max_iterations, branches_);
+      add(Stage::kMutual, 0, mutual, mutual_steps_);
     } else {
-      coarse_left = mutual_steps_ * std::max(0, coarse_mutual - iteration);
+      add(Stage::kMutual, iteration, mutual, mutual_steps_);
     }
-    const int all_left = std::max(0, expected_ - steps_);
-    coarse_left = std::min(coarse_left, all_left);
-    const int full_left = all_left - coarse_left;
-    const EtaEstimator &full = eta_[0], &coarse = eta_[1];
+    // Never more than the run's own count of steps left (a safety: the stages' spans above
+    // already follow the iteration counter; what is cut is full-size steps first).
+    int over = -std::max(0, expected_ - steps_);
+    for (int n : left) over += n;
+    for (size_t k = 0; over > 0 && k < left.size(); ++k) {
+      const int cut = std::min(over, left[k]);
+      left[k] -= cut;
+      over -= cut;
+    }
+    return left;
+  }
+
+  // The time left after `iteration` of `stage`: the remaining steps at each size, each priced by
+  // the windows of their size.
+  double SecondsLeft(Stage stage, int iteration, double heading) const {
     // A full-size step costs less than the ratio of pixels times a coarse one: the per-primitive
     // passes do not shrink with the views and the raster passes shrink to about a third at half
     // size (docs/performance.md, "Coarse start"). A full-size step took 2.5 (512 px synthetic
     // object) and 2.75 (1600 px capture) coarse steps at factor 2: 4^0.66 and 4^0.73.
-    constexpr double kFullSizeCostExponent = 0.7;
-    const double full_over_coarse =
-        std::pow(static_cast<double>(options_.coarse_factor) * options_.coarse_factor,
-                 kFullSizeCostExponent);
-    const double full_step = full.has_windows() ? full.SecondsPerStep(heading)
-                                                : coarse.SecondsPerStep(heading) * full_over_coarse;
-    const double coarse_step = coarse.has_windows()
-                                   ? coarse.SecondsPerStep(heading)
-                                   : full.SecondsPerStep(heading) / full_over_coarse;
-    return full_left * full_step + (coarse_left > 0 ? coarse_left * coarse_step : 0.0);
+    constexpr double kPixelCostExponent = 0.7;
+    const std::vector<int> left = StepsLeft(stage, iteration);
+    double seconds = 0;
+    for (size_t k = 0; k < left.size(); ++k) {
+      if (left[k] == 0) continue;
+      // The nearest size with windows (the full size when none has any yet).
+      size_t from = 0;
+      for (size_t d = 0; d < eta_.size(); ++d) {
+        if (k >= d && eta_[k - d].has_windows()) {
+          from = k - d;
+          break;
+        }
+        if (k + d < eta_.size() && eta_[k + d].has_windows()) {
+          from = k + d;
+          break;
+        }
+      }
+      const double pixels =
+          static_cast<double>(options_.CoarseLevelFactor(static_cast<int>(from))) /
+          options_.CoarseLevelFactor(static_cast<int>(k));
+      seconds += left[k] * eta_[from].SecondsPerStep(heading) *
+                 std::pow(pixels * pixels, kPixelCostExponent);
+    }
+    return seconds;
   }
 
   int every_;
@@ -349,13 +390,13 @@ class ProgressLog : public IterationCallback {
   bool train_2d_, train_3d_;
   size_t max_surfels_, max_gaussians_;
   bool fills_budget_;
-  // Where the latest progress window started: steps, seconds, primitives, size.
+  // Where the latest progress window started: steps, seconds, primitives, level.
   struct {
     int steps;
     double seconds, primitives;
-    bool coarse;
-  } window_ = {0, 0, 0, false};
-  std::array<EtaEstimator, 2> eta_;  // full size, coarse
+    int level;
+  } window_ = {0, 0, 0, 0};
+  std::vector<EtaEstimator> eta_;  // per level (SolverOptions::CoarseLevelAt), 0 the full size
   double loss_2d_ = 0, loss_3d_ = 0;
 };
 
@@ -737,12 +778,18 @@ Status ReconstructionPipeline::ChooseCoarseLevel(RunState* st) {
   options.coarse_factor = CoarseFactor(st->scene, options_.coarse_max_size);
   if (options.coarse_factor <= 1 || options.coarse_fraction <= 0) return Status::Ok();
   const Camera& c = st->scene.views[st->scene.TrainIndices().front()].camera;
-  const Camera coarse = CoarseCamera(c, options.coarse_factor);
+  // Coarsest first: "1/4 size (400x295), then 1/2 size (800x590)".
+  std::string sizes;
+  for (const int factor : options.CoarseFactors()) {
+    const Camera coarse = CoarseCamera(c, factor);
+    sizes += (sizes.empty() ? "" : ", then ") + std::string("1/") + std::to_string(factor) +
+             " size (" + std::to_string(coarse.width) + "x" + std::to_string(coarse.height) + ")";
+  }
   std::printf(
-      "coarse start: the first %.0f%% of each stage at 1/%d size (%dx%d), then %dx%d "
-      "(--coarse_max_size %d, --coarse_fraction %g)\n",
-      100 * options.coarse_fraction, options.coarse_factor, coarse.width, coarse.height, c.width,
-      c.height, options_.coarse_max_size, options.coarse_fraction);
+      "coarse start: the first %.0f%% of each stage at %s, then %dx%d "
+      "(--coarse_max_size %d, --coarse_fraction %g, --coarse_levels %d)\n",
+      100 * options.coarse_fraction, sizes.c_str(), c.width, c.height, options_.coarse_max_size,
+      options.coarse_fraction, options.coarse_levels);
   return Status::Ok();
 }
 
@@ -1125,6 +1172,8 @@ nlohmann::json ReconstructionPipeline::MetricsJson(const RunState& st) const {
                        {"density_config", options.density_config}};
   // The coarse start (factor 1: none): the last coarse iteration of each stage.
   metrics["coarse"] = {{"factor", options.coarse_factor},
+                       {"levels", options.coarse_factor > 1 ? options.coarse_levels : 0},
+                       {"factors", options.CoarseFactors()},
                        {"max_size", o.coarse_max_size},
                        {"fraction", options.coarse_fraction},
                        {"warmup_iterations", options.CoarseWarmupIterations()},

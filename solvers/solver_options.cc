@@ -90,6 +90,37 @@ int SolverOptions::CoarseMutualIterations() const {
   return mutual_mode == "joint" ? n : n - n % 2;
 }
 
+std::vector<int> SolverOptions::CoarseLevelEnds(Stage stage) const {
+  const int n = stage == Stage::kWarmup ? CoarseWarmupIterations() : CoarseMutualIterations();
+  if (n <= 0) return {};
+  const int levels = std::max(1, coarse_levels);
+  // Alternate rounds stay whole at every switch, as at the switch to full size.
+  const bool rounds = stage == Stage::kMutual && mutual_mode != "joint";
+  std::vector<int> ends;
+  for (int k = 1; k < levels; ++k) {
+    const int end = static_cast<int>(static_cast<int64_t>(n) * k / levels);
+    ends.push_back(rounds ? end - end % 2 : end);
+  }
+  ends.push_back(n);
+  return ends;
+}
+
+std::vector<int> SolverOptions::CoarseFactors() const {
+  std::vector<int> factors;
+  for (int k = coarse_factor > 1 ? coarse_levels : 0; k >= 1; --k)
+    factors.push_back(CoarseLevelFactor(k));
+  return factors;
+}
+
+int SolverOptions::CoarseLevelAt(Stage stage, int iteration) const {
+  if (coarse_factor <= 1) return 0;
+  const std::vector<int> ends = CoarseLevelEnds(stage);
+  for (size_t k = 0; k < ends.size(); ++k) {
+    if (iteration <= ends[k]) return static_cast<int>(ends.size() - k);
+  }
+  return 0;
+}
+
 Status SolverOptions::Validate() const {
   if (!train_2d && !train_3d) return Status::Error("at least one branch must train");
   if (warmup_max_iterations < 1) return Status::Error("--warmup_max_iterations must be >= 1");
@@ -144,6 +175,7 @@ Status SolverOptions::Validate() const {
     return Status::Error("background levels must be in [0, 1]");
   if (batch_views < 1) return Status::Error("--batch_views must be >= 1");
   if (coarse_factor < 1) return Status::Error("the coarse level's factor must be >= 1");
+  if (coarse_levels < 1) return Status::Error("--coarse_levels must be >= 1");
   if (!(coarse_fraction >= 0 && coarse_fraction <= 1))
     return Status::Error("--coarse_fraction must be in [0, 1]");
   if (batch_views > 1 && bidirectional)
@@ -165,6 +197,12 @@ std::string Text(const BranchSchedule& b) {
 }
 
 }  // namespace
+
+std::string SolverOptions::CoarseSetting() const {
+  if (coarse_factor <= 1) return "none";
+  const std::string s = Text(coarse_factor) + " " + Text(coarse_fraction);
+  return coarse_levels == 1 ? s : s + " " + Text(coarse_levels) + " levels";
+}
 
 std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const {
   return {{"auto_stop", Text(auto_stop)},
@@ -240,8 +278,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"seed", std::to_string(seed)},
           {"batch_views", Text(batch_views)},
           {"batch_sqrt_lr", Text(batch_sqrt_lr)},
-          {"coarse", coarse_factor > 1 ? Text(coarse_factor) + " " + Text(coarse_fraction)
-                                       : std::string("none")}};
+          {"coarse", CoarseSetting()}};
 }
 
 }  // namespace mgsr

@@ -162,18 +162,32 @@ struct SolverOptions {
   int batch_views = 1;
   bool batch_sqrt_lr = true;
   // Coarse start (solvers/view_levels.h): the first `coarse_fraction` of each stage's iterations
-  // (of the warm-up cap, of the mutual stage) train on every view divided by `coarse_factor`, the
-  // rest at full size. 1: none (the pipeline derives it from --coarse_max_size and the photos).
-  // The warm-up's auto-stop reads only full-size losses; the mutual stage switches between rounds.
+  // (of the warm-up cap, of the mutual stage) train on every view divided by `coarse_factor` or
+  // more, the rest at full size. The coarse span is split evenly among `coarse_levels` levels,
+  // coarsest first, each half the size of the next: factors coarse_factor * 2^(levels - 1), ...,
+  // coarse_factor * 2, coarse_factor. 1: none (the pipeline derives it from --coarse_max_size and
+  // the photos). The warm-up's auto-stop reads only full-size losses; the mutual stage switches
+  // between rounds.
   int coarse_factor = 1;
   double coarse_fraction = 0.75;
+  int coarse_levels = 1;
   // The last coarse iteration of each stage (0: none).
   int CoarseWarmupIterations() const;
   int CoarseMutualIterations() const;
-  bool CoarseAt(Stage stage, int iteration) const {
-    return iteration <=
-           (stage == Stage::kWarmup ? CoarseWarmupIterations() : CoarseMutualIterations());
-  }
+  // The last iteration of each coarse level in `stage`, coarsest first: iterations
+  // (ends[k - 1], ends[k]] (ends[-1] = 0) train at level coarse_levels - k. Empty without a
+  // coarse start.
+  std::vector<int> CoarseLevelEnds(Stage stage) const;
+  // The level `iteration` of `stage` trains at: 0 full size, k >= 1 divided by
+  // CoarseLevelFactor(k).
+  int CoarseLevelAt(Stage stage, int iteration) const;
+  int CoarseLevelFactor(int level) const { return level <= 0 ? 1 : coarse_factor << (level - 1); }
+  // Every coarse level's factor, coarsest first (empty without a coarse start).
+  std::vector<int> CoarseFactors() const;
+  bool CoarseAt(Stage stage, int iteration) const { return CoarseLevelAt(stage, iteration) > 0; }
+  // The coarse start as checkpoints record it: "none", "F fraction" (one level) or
+  // "F fraction L levels".
+  std::string CoarseSetting() const;
   // Divides every iteration count (stage lengths, auto-stop window, density and SH schedules,
   // the position rate's decay, loss rows' first iterations) by `views`, so that a run with
   // batches of that many views sees as many views as a run without.

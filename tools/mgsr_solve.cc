@@ -85,6 +85,10 @@ DEFINE_int32(coarse_max_size, 800,
 DEFINE_double(coarse_fraction, 0.75,
               "Coarse start: the share of each stage's iterations (of the warm-up cap, of the "
               "mutual stage) on the downscaled views.");
+DEFINE_int32(coarse_levels, 1,
+             "Coarse start: that share is split evenly among this many levels, coarsest first, "
+             "each half the size of the next (2: a quarter of the --coarse_max_size fit, then the "
+             "fit; faster, and a little less accurate: docs/performance.md).");
 DEFINE_bool(auto_stop, true, "Stop each warm-up when its loss window flattens.");
 DEFINE_bool(bidirectional, false,
             "Ablation K: the supervising branch also learns from the supervision.");
@@ -296,7 +300,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
        {"Method and schedule",
         {"preset", "method", "mutual_mode", "warmup_max_iterations", "warmup_min_iterations",
          "mutual_iterations", "auto_stop", "auto_stop_window", "auto_stop_range", "bidirectional",
-         "coarse_max_size", "coarse_fraction", "seed"}},
+         "coarse_max_size", "coarse_fraction", "coarse_levels", "seed"}},
        {"Batches and MPI", {"batch_views", "batch_sqrt_lr", "batch_keep_iterations"}},
        {"Losses",
         {"loss_config",
@@ -491,6 +495,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   options.batch_views = FLAGS_batch_views;
   options.batch_sqrt_lr = FLAGS_batch_sqrt_lr;
   options.coarse_fraction = FLAGS_coarse_fraction;
+  options.coarse_levels = FLAGS_coarse_levels;
   ro.coarse_max_size = FLAGS_coarse_max_size;
   ro.batch_scale_iterations = !FLAGS_batch_keep_iterations;
   ro.group = group;

@@ -2,6 +2,8 @@
 // which iterations train on them (SolverOptions::CoarseAt), and the solver that switches.
 #include <gtest/gtest.h>
 
+#include <functional>
+#include <string>
 #include <vector>
 
 #include "mgsr/loss/loss_registry.h"
@@ -125,6 +127,40 @@ TEST(CoarseScheduleTest, TheFirstShareOfEachStageIsCoarseAndRoundsStayWhole) {
   EXPECT_FALSE(o.CoarseAt(Stage::kMutual, 1));
   o.coarse_fraction = 1.5;
   EXPECT_FALSE(o.Validate().ok());
+  o.coarse_fraction = 0.75;
+  o.coarse_levels = 0;
+  EXPECT_FALSE(o.Validate().ok());
+}
+
+TEST(CoarseScheduleTest, TwoLevelsSplitTheCoarseShareCoarsestFirst) {
+  SolverOptions o;
+  SolverOptions::FromPreset("fast", &o);
+  EXPECT_TRUE(o.CoarseFactors().empty());
+  EXPECT_EQ(o.CoarseSetting(), "none");
+  o.coarse_factor = 2;
+  o.coarse_levels = 2;
+  EXPECT_EQ(o.CoarseFactors(), (std::vector<int>{4, 2}));
+  EXPECT_EQ(o.CoarseLevelFactor(0), 1);
+  EXPECT_EQ(o.CoarseSetting(), "2 0.75 2 levels");
+  // Warm-up: 1-562 at 1/4, 563-1,125 at 1/2, then full size.
+  EXPECT_EQ(o.CoarseLevelEnds(Stage::kWarmup), (std::vector<int>{562, 1125}));
+  EXPECT_EQ(o.CoarseLevelAt(Stage::kWarmup, 1), 2);
+  EXPECT_EQ(o.CoarseLevelAt(Stage::kWarmup, 562), 2);
+  EXPECT_EQ(o.CoarseLevelAt(Stage::kWarmup, 563), 1);
+  EXPECT_EQ(o.CoarseLevelAt(Stage::kWarmup, 1125), 1);
+  EXPECT_EQ(o.CoarseLevelAt(Stage::kWarmup, 1126), 0);
+  // Mutual, alternate: every switch between whole rounds (1,124 / 2 = 562, even).
+  EXPECT_EQ(o.CoarseLevelEnds(Stage::kMutual), (std::vector<int>{562, 1124}));
+  o.coarse_levels = 3;  // 1,124 / 3 = 374.7 and 749.3: 374 and 748
+  EXPECT_EQ(o.CoarseLevelEnds(Stage::kMutual), (std::vector<int>{374, 748, 1124}));
+  EXPECT_EQ(o.CoarseLevelAt(Stage::kMutual, 375), 2);
+  EXPECT_EQ(o.CoarseFactors(), (std::vector<int>{8, 4, 2}));
+  o.mutual_mode = "joint";
+  EXPECT_EQ(o.CoarseLevelEnds(Stage::kMutual), (std::vector<int>{375, 750, 1125}));
+  // One level: as before, and recorded as before (checkpoints of one-level runs resume).
+  o.coarse_levels = 1;
+  EXPECT_EQ(o.CoarseLevelEnds(Stage::kWarmup), (std::vector<int>{1125}));
+  EXPECT_EQ(o.CoarseSetting(), "2 0.75");
 }
 
 // Records the size of every render the 2DGS loss sees, and of the photo and mask it compares.
@@ -168,15 +204,15 @@ SolverOptions ShortRun() {
   return o;
 }
 
-TEST(CoarseStartSolverTest, StepsTrainOnTheCoarseViewsUntilTheSwitch) {
+// Runs the short solve with the size probe and checks the size of every render, photo and mask
+// the 2DGS loss saw: `factor_at(stage, iteration)` gives the expected division (1: full size).
+void ExpectProbedSizes(const SolverOptions& base, const std::function<int(Stage, int)>& factor_at) {
   LossRegistry::Get().Register("test_size_probe", [](const nlohmann::json&, Status*) {
     return std::make_unique<SizeProbeLoss>();
   });
   const Scene scene = testing::TinySolverScene(testing::ScratchDir());
-  const int full = scene.views[scene.TrainIndices()[0]].camera.width;
-  SolverOptions o = ShortRun();
-  o.coarse_factor = 2;
-  o.coarse_fraction = 0.75;  // warm-up 1-30, mutual 1-8 (of 12: rounds stay whole)
+  const Camera& full = scene.views[scene.TrainIndices()[0]].camera;
+  SolverOptions o = base;
   o.losses = o.LossTable();
   ASSERT_TRUE(ApplyLossConfig(nlohmann::json::parse(R"({"losses": [{"branch": "2d",
       "stage": "both", "name": "probe", "term": "test_size_probe", "weight": 1}]})"),
@@ -190,18 +226,38 @@ TEST(CoarseStartSolverTest, StepsTrainOnTheCoarseViewsUntilTheSwitch) {
   ASSERT_TRUE(solver.Solve(&summary).ok());
   ASSERT_EQ(g_seen.size(), it.calls.size());
   ASSERT_EQ(it.calls.size(), 40u + 6u);  // the 2DGS steps: 40 warm-up, every odd mutual one
-  int coarse_steps = 0;
   for (size_t k = 0; k < g_seen.size(); ++k) {
     const auto [stage, iteration] = it.calls[k];
-    const bool coarse = iteration <= (stage == Stage::kWarmup ? 30 : 8);
-    const int expected = coarse ? (full + 1) / 2 : full;
+    const int expected = CoarseCamera(full, factor_at(stage, iteration)).width;
     SCOPED_TRACE(std::string(StageName(stage)) + " " + std::to_string(iteration));
     EXPECT_EQ(g_seen[k].render, expected);
     EXPECT_EQ(g_seen[k].photo, expected);
     EXPECT_EQ(g_seen[k].mask, scene.views[0].mask.empty() ? -1 : expected);
-    coarse_steps += coarse;
   }
-  EXPECT_EQ(coarse_steps, 30 + 4);
+}
+
+TEST(CoarseStartSolverTest, StepsTrainOnTheCoarseViewsUntilTheSwitch) {
+  SolverOptions o = ShortRun();
+  o.coarse_factor = 2;
+  o.coarse_levels = 1;
+  o.coarse_fraction = 0.75;  // warm-up 1-30, mutual 1-8 (of 12: rounds stay whole)
+  ExpectProbedSizes(o, [](Stage stage, int iteration) {
+    return iteration <= (stage == Stage::kWarmup ? 30 : 8) ? 2 : 1;
+  });
+}
+
+TEST(CoarseStartSolverTest, TwoLevelsTrainAQuarterSizeThenHalfSizeThenFullSize) {
+  SolverOptions o = ShortRun();
+  o.coarse_factor = 2;
+  o.coarse_levels = 2;
+  o.coarse_fraction = 0.75;  // warm-up 1-15 at 1/4, 16-30 at 1/2; mutual 1-4, 5-8
+  ASSERT_EQ(o.CoarseLevelEnds(Stage::kWarmup), (std::vector<int>{15, 30}));
+  ASSERT_EQ(o.CoarseLevelEnds(Stage::kMutual), (std::vector<int>{4, 8}));
+  ExpectProbedSizes(o, [](Stage stage, int iteration) {
+    const bool warmup = stage == Stage::kWarmup;
+    if (iteration <= (warmup ? 15 : 4)) return 4;
+    return iteration <= (warmup ? 30 : 8) ? 2 : 1;
+  });
 }
 
 // A run stopped on the coarse side of either stage's switch and resumed from its checkpoint
@@ -209,47 +265,60 @@ TEST(CoarseStartSolverTest, StepsTrainOnTheCoarseViewsUntilTheSwitch) {
 TEST(CoarseStartSolverTest, ResumedAcrossTheSwitchEqualsAnUninterruptedRun) {
   const std::string dir = testing::ScratchDir();
   const Scene scene = testing::TinySolverScene(dir + "/scene");
-  SolverOptions o = ShortRun();
-  o.coarse_factor = 2;
-  MutualBoostedSolver whole(o, scene);
-  SolveSummary s;
-  ASSERT_TRUE(whole.Solve(&s).ok());
-  for (const auto& [stage, at] : {std::make_pair(Stage::kWarmup, 25), {Stage::kMutual, 5}}) {
-    struct StopAt : IterationCallback {
-      MutualBoostedSolver* solver;
-      Stage stage;
-      int at;
-      CallbackReturnType operator()(const IterationInfo&) override {
-        return CallbackReturnType::kContinue;
-      }
-      CallbackReturnType OnIterationEnd(const MutualBoostedSolver&, Stage s, int i) override {
-        if (s == stage && i == at) solver->RequestStop();
-        return CallbackReturnType::kContinue;
-      }
-    };
-    MutualBoostedSolver first(o, scene);
-    StopAt stop;
-    stop.solver = &first;
-    stop.stage = stage;
-    stop.at = at;
-    first.AddCallback(&stop);
-    SolveSummary s1;
-    ASSERT_TRUE(first.Solve(&s1).ok());
-    ASSERT_EQ(s1.termination_type, TerminationType::kInterrupted);
-    const std::string ckpt = dir + "/run.ckpt";
-    ASSERT_TRUE(first.SaveCheckpoint(ckpt).ok());
-    MutualBoostedSolver second(o, scene);
-    ASSERT_TRUE(second.LoadCheckpoint(ckpt).ok());
-    SolveSummary s2;
-    ASSERT_TRUE(second.Solve(&s2).ok());
-    testing::ExpectSameModels(whole, second);
-    // Another coarse setting does not continue it.
-    SolverOptions other = o;
-    other.coarse_factor = 1;
-    MutualBoostedSolver third(other, scene);
-    const Status refused = third.LoadCheckpoint(ckpt);
-    ASSERT_FALSE(refused.ok());
-    EXPECT_NE(refused.message().find("coarse = 2 0.75"), std::string::npos) << refused.message();
+  for (const int levels : {1, 2}) {
+    SCOPED_TRACE(std::to_string(levels) + " levels");
+    SolverOptions o = ShortRun();
+    o.coarse_factor = 2;
+    o.coarse_levels = levels;
+    MutualBoostedSolver whole(o, scene);
+    SolveSummary s;
+    ASSERT_TRUE(whole.Solve(&s).ok());
+    // With two levels, 10 and 3 fall on the quarter-size level, 25 and 5 on the half-size one.
+    for (const auto& [stage, at] : {std::make_pair(Stage::kWarmup, 10),
+                                    {Stage::kWarmup, 25},
+                                    {Stage::kMutual, 3},
+                                    {Stage::kMutual, 5}}) {
+      struct StopAt : IterationCallback {
+        MutualBoostedSolver* solver;
+        Stage stage;
+        int at;
+        CallbackReturnType operator()(const IterationInfo&) override {
+          return CallbackReturnType::kContinue;
+        }
+        CallbackReturnType OnIterationEnd(const MutualBoostedSolver&, Stage s, int i) override {
+          if (s == stage && i == at) solver->RequestStop();
+          return CallbackReturnType::kContinue;
+        }
+      };
+      MutualBoostedSolver first(o, scene);
+      StopAt stop;
+      stop.solver = &first;
+      stop.stage = stage;
+      stop.at = at;
+      first.AddCallback(&stop);
+      SolveSummary s1;
+      ASSERT_TRUE(first.Solve(&s1).ok());
+      ASSERT_EQ(s1.termination_type, TerminationType::kInterrupted);
+      const std::string ckpt = dir + "/run.ckpt";
+      ASSERT_TRUE(first.SaveCheckpoint(ckpt).ok());
+      MutualBoostedSolver second(o, scene);
+      ASSERT_TRUE(second.LoadCheckpoint(ckpt).ok());
+      SolveSummary s2;
+      ASSERT_TRUE(second.Solve(&s2).ok());
+      testing::ExpectSameModels(whole, second);
+      // Another coarse setting does not continue it.
+      SolverOptions other = o;
+      other.coarse_factor = 1;
+      MutualBoostedSolver third(other, scene);
+      const Status refused = third.LoadCheckpoint(ckpt);
+      ASSERT_FALSE(refused.ok());
+      EXPECT_NE(refused.message().find(o.CoarseSetting()), std::string::npos) << refused.message();
+      // Nor does another number of levels.
+      SolverOptions relevelled = o;
+      relevelled.coarse_levels = 3 - levels;
+      MutualBoostedSolver fourth(relevelled, scene);
+      EXPECT_FALSE(fourth.LoadCheckpoint(ckpt).ok());
+    }
   }
 }
 

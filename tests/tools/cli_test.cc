@@ -122,25 +122,36 @@ TEST_F(CliTest, RgbPhotosWithMasksAreScoredOnTheObject) {
   EXPECT_TRUE(m["test"].contains("psnr_foreground")) << m["test"].dump();
 }
 
-// Views longer than --coarse_max_size train the first part of each stage downscaled: the log
-// says so and metrics.json records where each stage switched; a negative size is refused.
+// Views longer than --coarse_max_size train the first part of each stage downscaled (with two
+// levels a quarter of the fit, then the fit): the log says so and metrics.json records the
+// factors and where each stage switched; a negative size and no levels are refused.
 TEST_F(CliTest, SolveWithACoarseStartSaysSoAndRecordsIt) {
   const std::string out = Copy() + "/out";
   const auto r =
       testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + out +
                           " --warmup_max_iterations 20 --warmup_min_iterations 0 "
-                          "--mutual_iterations 6 --coarse_max_size 16");
+                          "--mutual_iterations 6 --coarse_max_size 16 --coarse_levels 2");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_NE(r.output.find("coarse start: the first 75% of each stage at 1/2 size (16x16), then "
-                          "32x32"),
+  EXPECT_NE(r.output.find("coarse start: the first 75% of each stage at 1/4 size (8x8), then 1/2 "
+                          "size (16x16), then 32x32"),
             std::string::npos)
       << r.output;
   std::string text;
   ASSERT_TRUE(ReadFileToString(out + "/metrics.json", &text).ok());
   const nlohmann::json m = nlohmann::json::parse(text);
   EXPECT_EQ(m["coarse"]["factor"], 2);
+  EXPECT_EQ(m["coarse"]["levels"], 2);
+  EXPECT_EQ(m["coarse"]["factors"], nlohmann::json::parse("[4, 2]"));
   EXPECT_EQ(m["coarse"]["warmup_iterations"], 15);
   EXPECT_EQ(m["coarse"]["mutual_iterations"], 4);
+  // One level (the default): half size, then full size.
+  const auto one = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " +
+                                       out + "_one --coarse_max_size 16 --check");
+  ASSERT_EQ(one.exit_code, 0) << one.output;
+  EXPECT_NE(one.output.find("coarse start: the first 75% of each stage at 1/2 size (16x16), then "
+                            "32x32"),
+            std::string::npos)
+      << one.output;
   const auto full = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " +
                                         out + "_full --check");
   ASSERT_EQ(full.exit_code, 0) << full.output;
@@ -149,6 +160,12 @@ TEST_F(CliTest, SolveWithACoarseStartSaysSoAndRecordsIt) {
                                        out + "_bad --coarse_max_size -1");
   EXPECT_EQ(bad.exit_code, 1) << bad.output;
   EXPECT_NE(bad.output.find("--coarse_max_size must be >= 0"), std::string::npos) << bad.output;
+  const auto no_levels =
+      testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + out +
+                          "_bad_levels --coarse_max_size 16 --coarse_levels 0");
+  EXPECT_EQ(no_levels.exit_code, 1) << no_levels.output;
+  EXPECT_NE(no_levels.output.find("--coarse_levels must be >= 1"), std::string::npos)
+      << no_levels.output;
 }
 
 TEST_F(CliTest, SolveReconstructsAGoodSceneAndWritesItsOutputs) {
