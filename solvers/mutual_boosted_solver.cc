@@ -56,15 +56,6 @@ MutualSupervision SupervisionFor(Branch learner) {
   return {Buffer::kDepth, OtherBranchTarget::kDepth, false};
 }
 
-// Sets every channel of `image` to `value` where the mask is 0.
-void FillOutsideMask(const Image& mask, float value, Image* image) {
-  for (int c = 0; c < image->channels(); ++c) {
-    for (size_t i = 0; i < image->plane_size(); ++i) {
-      if (mask.plane(0)[i] == 0.0f) image->plane(c)[i] = value;
-    }
-  }
-}
-
 // Keeps the strongest of the callbacks' requests: abort over terminate over continue.
 void Request(CallbackReturnType r, CallbackReturnType* kept) {
   if (r == CallbackReturnType::kAbort || *kept == CallbackReturnType::kAbort) {
@@ -347,7 +338,7 @@ Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* te
                      ? *kept
                      : *teacher->Hold(level.camera(view), BufferBit(sup.buffer)).Get(sup.buffer);
         if (sup.background_outside_mask && mask != nullptr)
-          FillOutsideMask(*mask, background, &target);
+          CompositeOverMask(*mask, background, &target);
       }
       return solver->LossTargets(learner->branch(), view, &target);
     }
@@ -382,7 +373,8 @@ Status MutualBoostedSolver::MutualStep(BranchTrainer* learner, BranchTrainer* te
   Image g =
       std::move(sup.target == OtherBranchTarget::kTransmitted ? d.transmitted : d.other_depth);
   if (!g.empty()) {
-    if (sup.background_outside_mask && mask != nullptr) FillOutsideMask(*mask, 0.0f, &g);
+    // The composite's derivative: the mask (0 outside, where the target is a constant).
+    if (sup.background_outside_mask && mask != nullptr) CompositeOverMask(*mask, 0.0f, &g);
     RenderGradients into;
     into.images[static_cast<int>(sup.buffer)] = std::move(g);
     MGSR_RETURN_IF_ERROR(teacher->BackpropHeld(&into, it));

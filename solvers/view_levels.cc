@@ -54,6 +54,20 @@ void ViewLevel::MakeGrays(int branch) {
   }
 }
 
+void CompositeOverMask(const Image& mask, float background, Image* image) {
+  for (int c = 0; c < image->channels(); ++c) {
+    float* p = image->plane(c);
+    const float* m = mask.plane(0);
+    for (size_t i = 0; i < image->plane_size(); ++i) {
+      // Selects, not the blend, at 0 and 1: the same values as before soft masks were blended
+      // (a non-finite render outside the mask stays replaced).
+      p[i] = m[i] == 0.0f   ? background
+             : m[i] == 1.0f ? p[i]
+                            : m[i] * p[i] + (1 - m[i]) * background;
+    }
+  }
+}
+
 Camera CoarseCamera(const Camera& camera, int factor) {
   const auto side = [factor](int n) {
     return std::max(1, static_cast<int>(std::lround(static_cast<double>(n) / factor)));

@@ -48,6 +48,12 @@ class ViewLevel {
   std::array<std::vector<Image>, 2> grays_;
 };
 
+// Each pixel of `image` (every channel) becomes mask x image + (1 - mask) x background: the image
+// where the mask holds the object, the background where it does not, and on a soft edge (a mask
+// area-averaged to a coarse level or resized with its photo) their mixture, as a photo's pixel
+// on the edge mixes the two. On a binary mask the pixels are kept or replaced exactly.
+void CompositeOverMask(const Image& mask, float background, Image* image);
+
 // `camera` divided by `factor`: each side rounded, at least 1 px (Camera::Resized).
 Camera CoarseCamera(const Camera& camera, int factor);
 

@@ -2,6 +2,7 @@
 // which iterations train on them (SolverOptions::CoarseAt), and the solver that switches.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <functional>
 #include <string>
 #include <vector>
@@ -90,6 +91,28 @@ TEST(ViewLevelTest, DownscaledViewsAverageBlocksAndScaleCameras) {
               0.299f * p.plane(0)[5] + 0.587f * p.plane(1)[5] + 0.114f * p.plane(2)[5], 1e-6);
   const ViewLevel moved = std::move(coarse);
   EXPECT_FLOAT_EQ(moved.mask(0)->plane(0)[1], 0.5f);
+}
+
+// The mutual stage's target outside the mask: the background where the mask is 0, the render
+// where it is 1 (to the bit), and their mixture on a soft edge (a coarse level's or a resized
+// capture's mask).
+TEST(ViewLevelTest, CompositeOverMaskMixesOnSoftEdgesOnly) {
+  Image mask(4, 1, 1), image(4, 1, 2);
+  const float m[4] = {0.0f, 0.25f, 1.0f, 0.5f};
+  for (int x = 0; x < 4; ++x) {
+    mask.plane(0)[x] = m[x];
+    image.plane(0)[x] = 0.1f + 0.2f * x;
+    image.plane(1)[x] = 0.3f;
+  }
+  image.plane(0)[0] = std::nanf("");  // replaced, not mixed
+  const Image before = image;
+  CompositeOverMask(mask, 0.8f, &image);
+  for (int c = 0; c < 2; ++c) {
+    EXPECT_EQ(image.plane(c)[0], 0.8f);
+    EXPECT_FLOAT_EQ(image.plane(c)[1], 0.25f * before.plane(c)[1] + 0.75f * 0.8f);
+    EXPECT_EQ(image.plane(c)[2], before.plane(c)[2]);
+    EXPECT_FLOAT_EQ(image.plane(c)[3], 0.5f * before.plane(c)[3] + 0.5f * 0.8f);
+  }
 }
 
 TEST(ViewLevelTest, CoarseFactorBringsTheLongestTrainingViewWithinTheSize) {
