@@ -122,7 +122,10 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
   for (const auto& [name, value] : options_.Settings()) {
     const auto it = recorded.find(name);
     // Options added after a checkpoint was written, with the value runs had before them.
-    if (it == recorded.end() && name == "coarse" && value == "none") continue;
+    static const std::map<std::string, std::string> kBefore = {{"coarse", "none"},
+                                                               {"lambda_mask_warmup", "-1"}};
+    const auto before = kBefore.find(name);
+    if (it == recorded.end() && before != kBefore.end() && before->second == value) continue;
     if (it == recorded.end()) {
       return Status::Error(path + ": the checkpoint does not record option " + name +
                            " (written by another version); start again with --overwrite");
@@ -135,8 +138,8 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
         hint =
             " (derived from the scene's size in pixels and --budget: did --downscale, "
             "--max_size, --max_width, --budget or the photos change?)";
-      else if (name == "lambda_normal")
-        hint = " (derived from whether the views have masks, unless --lambda_normal is given)";
+      else if (name == "lambda_normal" || name == "lambda_mask" || name == "lambda_mask_warmup")
+        hint = " (derived from whether the views have masks, unless --" + name + " is given)";
       else if (name == "coarse")
         hint = " (derived from --coarse_max_size and the photos' size, with --coarse_fraction)";
       else if (name == "background_2d" || name == "background_3d" || name == "environment")

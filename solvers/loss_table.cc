@@ -175,7 +175,7 @@ std::vector<LossSpec> PaperLossTable(const SolverOptions& o) {
           o.lambda_multiview_ncc, o.multiview_from_iteration + 1),
       Row(b2, warm, "multiview_depth", "multiview_depth", nlohmann::json::object(),
           o.lambda_multiview_depth, o.multiview_from_iteration + 1),
-      Row(b2, warm, "mask", "mask", nlohmann::json::object(), o.lambda_mask),
+      Row(b2, warm, "mask", "mask", nlohmann::json::object(), o.MaskWarmupWeight()),
       // 2DGS mutual (method.md 1.5): the render loss against the 3DGS transmitted image and against
       // the photo, the TVs guided by the transmitted image; everything weighted by w_2d.
       Row(b2, mutual, "render_transmitted", "render", RenderConfig("transmitted", o.lambda_l1),

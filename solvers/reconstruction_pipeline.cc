@@ -716,9 +716,9 @@ Status ReconstructionPipeline::ChooseSceneSettings(RunState* st) {
     if (o.mask_from_scene) options.lambda_mask = kMaskWeightWithForeground;
     if (o.one_sided_from_scene) options.normal_one_sided = true;
     std::printf(
-        "silhouette term: %g, normal consistency one-sided at depth steps: %s (the views "
-        "have masks or alpha)\n",
-        options.lambda_mask, options.normal_one_sided ? "yes" : "no");
+        "silhouette term: %g in the warm-up, %g in the mutual stage, normal consistency "
+        "one-sided at depth steps: %s (the views have masks or alpha)\n",
+        options.MaskWarmupWeight(), options.lambda_mask, options.normal_one_sided ? "yes" : "no");
   }
   if (o.depth_tv_from_scene && options.environment) {
     options.depth_tv_warmup_2d = options.depth_tv_mutual_2d = options.depth_tv_3d = 0;

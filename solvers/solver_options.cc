@@ -150,6 +150,8 @@ Status SolverOptions::Validate() const {
     if (!(w >= 0) || !std::isfinite(w))
       return Status::Error("loss weights must be finite and >= 0");
   }
+  if (lambda_mask_warmup != -1 && !(lambda_mask_warmup >= 0 && std::isfinite(lambda_mask_warmup)))
+    return Status::Error("--lambda_mask_warmup must be finite and >= 0 (or -1: --lambda_mask's)");
   MGSR_RETURN_IF_ERROR(CheckLossTable(LossTable()));
   if (!(exposure_lr >= 0) || !std::isfinite(exposure_lr))
     return Status::Error("--exposure_lr must be finite and >= 0");
@@ -227,6 +229,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"lambda_distortion", Text(lambda_distortion)},
           {"distortion_from_iteration", Text(distortion_from_iteration)},
           {"lambda_mask", Text(lambda_mask)},
+          {"lambda_mask_warmup", Text(lambda_mask_warmup)},
           {"lambda_multiview_ncc", Text(lambda_multiview_ncc)},
           {"lambda_multiview_depth", Text(lambda_multiview_depth)},
           {"multiview_from_iteration", Text(multiview_from_iteration)},

@@ -73,8 +73,13 @@ struct SolverOptions {
   // neighbouring views each (chosen once from the points' co-visibility). Warm-up: from
   // multiview_from_iteration; mutual stage: throughout, times w_2d.
   // Silhouette: the 2DGS alpha against the foreground mask (MaskLoss), warm-up and mutual stage
-  // (times w_2d); 0 without masks whatever the weight.
+  // (times w_2d); 0 without masks whatever the weight. lambda_mask_warmup >= 0 gives the warm-up
+  // its own weight (-1: lambda_mask in both stages).
   double lambda_mask = 0.0;
+  double lambda_mask_warmup = -1.0;
+  double MaskWarmupWeight() const {
+    return lambda_mask_warmup >= 0 ? lambda_mask_warmup : lambda_mask;
+  }
   double lambda_multiview_ncc = 0.0;
   double lambda_multiview_depth = 0.0;
   int multiview_from_iteration = 7000;

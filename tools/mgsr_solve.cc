@@ -149,6 +149,10 @@ DEFINE_double(lambda_mask, -1,
               "Weight of the 2DGS silhouette term: binary cross-entropy of the rendered alpha "
               "against the foreground mask (no effect without masks; -1: 3 where every training "
               "view has a mask or alpha).");
+DEFINE_double(lambda_mask_warmup, -1,
+              "Weight of the silhouette term in the warm-up alone (-1: --lambda_mask's). 10 "
+              "recovers deep grooves and slots of detailed objects at some cost on smooth ones "
+              "(docs/geometry.md, \"The silhouette's weight by stage\").");
 DEFINE_double(lambda_multiview_ncc, -1,
               "Weight of the 2DGS multi-view patch NCC through the rendered plane (-1: the "
               "default of SolverOptions).");
@@ -309,6 +313,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
          "lambda_normal",
          "lambda_distortion",
          "lambda_mask",
+         "lambda_mask_warmup",
          "lambda_multiview_ncc",
          "lambda_multiview_depth",
          "multiview_neighbours",
@@ -408,6 +413,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
         std::tuple{FLAGS_depth_tv_mutual_2d, &options.depth_tv_mutual_2d, "--depth_tv_mutual_2d"},
         std::tuple{FLAGS_lambda_distortion, &options.lambda_distortion, "--lambda_distortion"},
         std::tuple{FLAGS_lambda_mask, &options.lambda_mask, "--lambda_mask"},
+        std::tuple{FLAGS_lambda_mask_warmup, &options.lambda_mask_warmup, "--lambda_mask_warmup"},
         std::tuple{FLAGS_lambda_multiview_ncc, &options.lambda_multiview_ncc,
                    "--lambda_multiview_ncc"},
         std::tuple{FLAGS_lambda_multiview_depth, &options.lambda_multiview_depth,

@@ -28,6 +28,14 @@ TEST(LossTableTest, ThePaperTableFollowsTheOptions) {
   EXPECT_EQ(t.size(), 22u);
   EXPECT_EQ(Find(t, Branch::kSurfels2D, Stage::kWarmup, "mask")->weight, 0.3);
   EXPECT_EQ(Find(t, Branch::kSurfels2D, Stage::kMutual, "mask")->weight, 0.25 * 0.3);
+  // The warm-up's own silhouette weight, when given.
+  SolverOptions own = o;
+  own.lambda_mask_warmup = 4;
+  const std::vector<LossSpec> t_own = PaperLossTable(own);
+  EXPECT_EQ(Find(t_own, Branch::kSurfels2D, Stage::kWarmup, "mask")->weight, 4);
+  EXPECT_EQ(Find(t_own, Branch::kSurfels2D, Stage::kMutual, "mask")->weight, 0.25 * 0.3);
+  own.lambda_mask_warmup = -2;
+  EXPECT_FALSE(own.Validate().ok());
   const LossSpec* nc = Find(t, Branch::kSurfels2D, Stage::kWarmup, "normal_consistency");
   ASSERT_NE(nc, nullptr);
   EXPECT_EQ(nc->weight, 0.7);

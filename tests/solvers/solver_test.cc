@@ -598,6 +598,25 @@ TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
   std::string edited = body;
   std::memcpy(&edited[header_end + 8], &next, sizeof(next));
   ExpectRefused(&reader, bad, Reseal(edited), "next iteration 99");
+
+  // Written before an option existed: accepted when the run has the value runs had before it
+  // (the coarse start: none; the warm-up's own silhouette weight: none, -1), refused otherwise.
+  {
+    std::string old_body = Body(data);
+    for (const std::string line : {"coarse = none\n", "lambda_mask_warmup = -1\n"}) {
+      const size_t at = old_body.find(line);
+      ASSERT_NE(at, std::string::npos) << line;
+      old_body.erase(at, line.size());
+    }
+    ASSERT_TRUE(WriteStringToFileAtomic(bad, Reseal(old_body)).ok());
+    MutualBoostedSolver old_reader(o, scene);
+    EXPECT_TRUE(old_reader.LoadCheckpoint(bad).ok());
+    SolverOptions with_warmup_weight = o;
+    with_warmup_weight.lambda_mask_warmup = 10;
+    MutualBoostedSolver s(with_warmup_weight, scene);
+    ExpectRefused(&s, bad, Reseal(old_body),
+                  "the checkpoint does not record option lambda_mask_warmup");
+  }
   // Finished in the warm-up; then the random generator's state 0 (stage, next iteration and
   // finished flag, the SH degree, the summary's mutual count and three times, then the state).
   edited = body;

@@ -680,12 +680,17 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
   EXPECT_NE(r.output.find("normal weight: 0.05 (the reference's: no masks or alpha"),
             std::string::npos)
       << r.output;
-  auto normal_row_weight = [](const std::string& json_text) {
+  // The weight of the first row named `name` in `stage` (-1: none).
+  auto row_weight = [](const std::string& json_text, const std::string& name,
+                       const std::string& stage) {
     const nlohmann::json parsed = nlohmann::json::parse(json_text);
     for (const auto& row : parsed["losses"])
-      if (row.value("name", std::string()) == "normal_consistency")
+      if (row.value("name", std::string()) == name && row.value("stage", std::string()) == stage)
         return row.value("weight", -1.0);
     return -1.0;
+  };
+  auto normal_row_weight = [&](const std::string& json_text) {
+    return row_weight(json_text, "normal_consistency", "warmup");
   };
   EXPECT_DOUBLE_EQ(normal_row_weight(metrics), 0.05) << metrics;
   // An object before a uniform backdrop keeps the reference's depth TVs.
@@ -711,6 +716,29 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
       << r.output;
   ASSERT_TRUE(ReadFileToString(dir + "/out_masked/metrics.json", &metrics).ok());
   EXPECT_DOUBLE_EQ(normal_row_weight(metrics), 2.0);
+  // With masks the silhouette term is on in both stages (mutual: times w_2d, 0.5).
+  EXPECT_NE(r.output.find("silhouette term: 3 in the warm-up, 3 in the mutual stage"),
+            std::string::npos)
+      << r.output;
+  EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "warmup"), 3.0);
+  EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "mutual"), 1.5);
+  // A weight given for the term holds in both stages; the warm-up's can be given apart.
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
+                          "/out_mask_given --lambda_mask 2" + few);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_TRUE(ReadFileToString(dir + "/out_mask_given/metrics.json", &metrics).ok());
+  EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "warmup"), 2.0);
+  EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "mutual"), 1.0);
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
+                          "/out_mask_warmup --lambda_mask_warmup 4" + few);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_TRUE(ReadFileToString(dir + "/out_mask_warmup/metrics.json", &metrics).ok());
+  EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "warmup"), 4.0);
+  EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "mutual"), 1.5);
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
+                          "/out_mask_bad --lambda_mask_warmup -3" + few);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("--lambda_mask_warmup must be >= 0"), std::string::npos) << r.output;
   // Given on the command line, the weight is kept as given.
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
                           "/out_given --lambda_normal 0.7" + few);
