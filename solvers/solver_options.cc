@@ -177,7 +177,9 @@ Status SolverOptions::Validate() const {
     return Status::Error("background levels must be in [0, 1]");
   if (batch_views < 1) return Status::Error("--batch_views must be >= 1");
   if (coarse_factor < 1) return Status::Error("the coarse level's factor must be >= 1");
-  if (coarse_levels < 1) return Status::Error("--coarse_levels must be >= 1");
+  // Each level halves the next: beyond 8 a level is under 1/256 of the coarse fit's size.
+  if (coarse_levels < 1 || coarse_levels > 8)
+    return Status::Error("--coarse_levels must be in [1, 8]");
   if (!(coarse_fraction >= 0 && coarse_fraction <= 1))
     return Status::Error("--coarse_fraction must be in [0, 1]");
   if (batch_views > 1 && bidirectional)

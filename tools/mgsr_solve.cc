@@ -86,9 +86,9 @@ DEFINE_double(coarse_fraction, 0.75,
               "Coarse start: the share of each stage's iterations (of the warm-up cap, of the "
               "mutual stage) on the downscaled views.");
 DEFINE_int32(coarse_levels, 1,
-             "Coarse start: that share is split evenly among this many levels, coarsest first, "
-             "each half the size of the next (2: a quarter of the --coarse_max_size fit, then the "
-             "fit; faster, and a little less accurate: docs/performance.md).");
+             "Coarse start (1-8): that share is split evenly among this many levels, coarsest "
+             "first, each half the size of the next (2: a quarter of the --coarse_max_size fit, "
+             "then the fit; faster, and a little less accurate: docs/performance.md).");
 DEFINE_bool(auto_stop, true, "Stop each warm-up when its loss window flattens.");
 DEFINE_bool(bidirectional, false,
             "Ablation K: the supervising branch also learns from the supervision.");

@@ -153,6 +153,8 @@ TEST(CoarseScheduleTest, TheFirstShareOfEachStageIsCoarseAndRoundsStayWhole) {
   o.coarse_fraction = 0.75;
   o.coarse_levels = 0;
   EXPECT_FALSE(o.Validate().ok());
+  o.coarse_levels = 9;
+  EXPECT_FALSE(o.Validate().ok());
 }
 
 TEST(CoarseScheduleTest, TwoLevelsSplitTheCoarseShareCoarsestFirst) {

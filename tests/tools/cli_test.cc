@@ -164,7 +164,7 @@ TEST_F(CliTest, SolveWithACoarseStartSaysSoAndRecordsIt) {
       testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + out +
                           "_bad_levels --coarse_max_size 16 --coarse_levels 0");
   EXPECT_EQ(no_levels.exit_code, 1) << no_levels.output;
-  EXPECT_NE(no_levels.output.find("--coarse_levels must be >= 1"), std::string::npos)
+  EXPECT_NE(no_levels.output.find("--coarse_levels must be in [1, 8]"), std::string::npos)
       << no_levels.output;
 }
 
