@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <tuple>
 
 #include "mgsr/core/subprocess.h"
 #include "mgsr/eval/image_metrics.h"
@@ -723,18 +724,16 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
   EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "warmup"), 3.0);
   EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "mutual"), 1.5);
   // A weight given for the term holds in both stages; the warm-up's can be given apart.
-  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
-                          "/out_mask_given --lambda_mask 2" + few);
-  ASSERT_EQ(r.exit_code, 0) << r.output;
-  ASSERT_TRUE(ReadFileToString(dir + "/out_mask_given/metrics.json", &metrics).ok());
-  EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "warmup"), 2.0);
-  EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "mutual"), 1.0);
-  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
-                          "/out_mask_warmup --lambda_mask_warmup 4" + few);
-  ASSERT_EQ(r.exit_code, 0) << r.output;
-  ASSERT_TRUE(ReadFileToString(dir + "/out_mask_warmup/metrics.json", &metrics).ok());
-  EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "warmup"), 4.0);
-  EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "mutual"), 1.5);
+  for (const auto& [flag, warmup, mutual] : {std::make_tuple("--lambda_mask 2", 2.0, 1.0),
+                                             std::make_tuple("--lambda_mask_warmup 4", 4.0, 1.5)}) {
+    SCOPED_TRACE(flag);
+    r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
+                            "/out_mask " + flag + few + " --overwrite");
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    ASSERT_TRUE(ReadFileToString(dir + "/out_mask/metrics.json", &metrics).ok());
+    EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "warmup"), warmup);
+    EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "mutual"), mutual);
+  }
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
                           "/out_mask_bad --lambda_mask_warmup -3" + few);
   EXPECT_EQ(r.exit_code, 1) << r.output;
