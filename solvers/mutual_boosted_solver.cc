@@ -533,8 +533,8 @@ Status MutualBoostedSolver::Run() {
     }
     const int it = next_iteration_;
     SetShDegree(std::min(o.sh_degree, it / o.sh_interval));
-    const bool coarse = o.CoarseAt(Stage::kWarmup, it);
     UseLevel(o.CoarseLevelAt(Stage::kWarmup, it));
+    const bool coarse = level_ != 0;
     NextBatch();
     for (BranchTrainer* t : trainers_) {
       if (done[BranchIndex(t->branch())]) continue;

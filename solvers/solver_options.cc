@@ -90,18 +90,20 @@ int SolverOptions::CoarseMutualIterations() const {
   return mutual_mode == "joint" ? n : n - n % 2;
 }
 
-std::vector<int> SolverOptions::CoarseLevelEnds(Stage stage) const {
+int SolverOptions::CoarseLevelEnd(Stage stage, int k) const {
   const int n = stage == Stage::kWarmup ? CoarseWarmupIterations() : CoarseMutualIterations();
-  if (n <= 0) return {};
   const int levels = std::max(1, coarse_levels);
+  if (k >= levels) return n;
+  const int end = static_cast<int>(static_cast<int64_t>(n) * k / levels);
   // Alternate rounds stay whole at every switch, as at the switch to full size.
   const bool rounds = stage == Stage::kMutual && mutual_mode != "joint";
+  return rounds ? end - end % 2 : end;
+}
+
+std::vector<int> SolverOptions::CoarseLevelEnds(Stage stage) const {
   std::vector<int> ends;
-  for (int k = 1; k < levels; ++k) {
-    const int end = static_cast<int>(static_cast<int64_t>(n) * k / levels);
-    ends.push_back(rounds ? end - end % 2 : end);
-  }
-  ends.push_back(n);
+  if (coarse_factor <= 1 || CoarseLevelEnd(stage, coarse_levels) <= 0) return ends;
+  for (int k = 1; k <= std::max(1, coarse_levels); ++k) ends.push_back(CoarseLevelEnd(stage, k));
   return ends;
 }
 
@@ -114,9 +116,10 @@ std::vector<int> SolverOptions::CoarseFactors() const {
 
 int SolverOptions::CoarseLevelAt(Stage stage, int iteration) const {
   if (coarse_factor <= 1) return 0;
-  const std::vector<int> ends = CoarseLevelEnds(stage);
-  for (size_t k = 0; k < ends.size(); ++k) {
-    if (iteration <= ends[k]) return static_cast<int>(ends.size() - k);
+  // Once per iteration: the spans' ends one by one, without building CoarseLevelEnds.
+  const int levels = std::max(1, coarse_levels);
+  for (int k = 1; k <= levels; ++k) {
+    if (iteration <= CoarseLevelEnd(stage, k)) return levels - k + 1;
   }
   return 0;
 }

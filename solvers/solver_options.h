@@ -183,6 +183,9 @@ struct SolverOptions {
   // (ends[k - 1], ends[k]] (ends[-1] = 0) train at level coarse_levels - k. Empty without a
   // coarse start.
   std::vector<int> CoarseLevelEnds(Stage stage) const;
+  // The last iteration of the k-th coarse span of `stage` (k from 1, coarsest first; k >= the
+  // number of levels: the stage's last coarse iteration).
+  int CoarseLevelEnd(Stage stage, int k) const;
   // The level `iteration` of `stage` trains at: 0 full size, k >= 1 divided by
   // CoarseLevelFactor(k).
   int CoarseLevelAt(Stage stage, int iteration) const;
