@@ -6,6 +6,7 @@
 #include <functional>
 #include <map>
 
+#include "mean_alpha_loss.h"
 #include "mgsr/core/rng.h"
 #include "mgsr/core/sha256.h"
 #include "mgsr/eval/image_metrics.h"
@@ -997,26 +998,7 @@ namespace mgsr {
 namespace {
 
 // A term a researcher might add: the mean accumulated opacity (pulls the render transparent).
-class MeanAlphaLoss : public LossTermImpl<MeanAlphaLoss> {
- public:
-  std::string Name() const override { return "test_mean_alpha"; }
-  std::vector<Buffer> Inputs() const override { return {Buffer::kAlpha}; }
-  Status Check(const RenderBuffers& in, const Targets&) const override {
-    return RequireImage(Name(), "alpha", in.Get(Buffer::kAlpha));
-  }
-  template <typename T>
-  double Compute(const RenderBuffersT<T>& in, const TargetsT<T>&, double scale,
-                 RenderGradientsT<T>* grad) const {
-    const ImageT<T>& a = *in.Get(Buffer::kAlpha);
-    double sum = 0;
-    for (size_t i = 0; i < a.size(); ++i) sum += a.data()[i];
-    if (grad != nullptr) {
-      T* g = grad->Get(Buffer::kAlpha, a).data();
-      for (size_t i = 0; i < a.size(); ++i) g[i] += static_cast<T>(scale / a.size());
-    }
-    return sum / a.size();
-  }
-};
+using testing::MeanAlphaLoss;
 
 double MeanSurfelAlpha(MutualBoostedSolver* solver, const Scene& scene) {
   double sum = 0;
