@@ -138,7 +138,7 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
         hint =
             " (derived from the scene's size in pixels and --budget: did --downscale, "
             "--max_size, --max_width, --budget or the photos change?)";
-      else if (name == "lambda_normal" || name == "lambda_mask" || name == "lambda_mask_warmup")
+      else if (name == "lambda_normal" || name == "lambda_mask")
         hint = " (derived from whether the views have masks, unless --" + name + " is given)";
       else if (name == "coarse")
         hint = " (derived from --coarse_max_size and the photos' size, with --coarse_fraction)";
