@@ -21,7 +21,7 @@ void GaussianRenderer::Forward(const GaussianModel& model, const GaussianRenderO
   {
     ProfileScope scope("binning");
     BinPrimitives(projected_.rects, projected_.depth.data(), options.camera.width,
-                  options.camera.height, &bins_);
+                  options.camera.height, &bins_, projected_.shapes.data(), 1);
   }
   ProfileScope scope("raster forward");
   RasterizeGaussians(projected_, bins_, options, out, scratch_.get());

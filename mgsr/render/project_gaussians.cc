@@ -41,6 +41,7 @@ void ProjectedGaussians::Resize(size_t n) {
   extent.resize(2 * n);
   min_power.resize(n);
   rects.resize(n);
+  shapes.resize(n);
   opacity.resize(n);
   ref_opacity.resize(n);
   beta.resize(n);
@@ -267,6 +268,7 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
       out->depth[i] = L.g.t[2][l];
       out->radius[i] = 0;
       out->rects[i] = TileRect();
+      out->shapes[i] = TileEllipse();
       out->extent[2 * i] = out->extent[2 * i + 1] = 0;
       out->min_power[i] = 0;
       const float radius = L.radius[l], u = L.u[l], v = L.v[l];
@@ -288,6 +290,13 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
       out->conic[3 * i] = c / det;
       out->conic[3 * i + 1] = -bb / det;
       out->conic[3 * i + 2] = a / det;
+      // The pixel loops blend where -conic(d) / 2 >= min_power; the 2% (1% of the width, as the
+      // box's) covers their rounding of the same form.
+      if (!out->rects[i].empty()) {
+        out->shapes[i] =
+            TileEllipse::Of(u, v, out->conic[3 * i], out->conic[3 * i + 1], out->conic[3 * i + 2],
+                            -2.0f * out->min_power[i] * 1.0201f);
+      }
       for (int k = 0; k < 3; ++k) out->view_dir[3 * i + k] = L.dir[k][l];
     }
   }

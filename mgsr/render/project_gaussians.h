@@ -38,6 +38,9 @@ struct ProjectedGaussians {
   // larger of the two opacities (the transmitted one without reflection); 0 where not binned.
   std::vector<float> min_power;
   std::vector<TileRect> rects;
+  // N: the ellipse within the rectangle where the pixel loops' exponent test can pass (binning
+  // leaves out the rectangle's tiles it misses).
+  std::vector<TileEllipse> shapes;
   std::vector<float> opacity, ref_opacity, beta;  // N, activated
   std::vector<float> color_t, color_r;            // N x 3
   std::vector<uint8_t> clamp_t, clamp_r;          // N x 3

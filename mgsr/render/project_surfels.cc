@@ -1,6 +1,7 @@
 #include "mgsr/render/project_surfels.h"
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 
@@ -27,6 +28,7 @@ void ProjectedSurfels::Resize(size_t n) {
   view_dir.resize(3 * n);
   min_power.resize(n);
   extent.resize(2 * n);
+  shapes.resize(2 * n);
 }
 
 void ProjectedSurfelsGrad::Resize(size_t n) {
@@ -138,8 +140,36 @@ struct SurfelLanes {
   float opacity[kLanes], min_power[kLanes];
   float mx[kLanes], my[kLanes], radius[kLanes], sign[kLanes];
   float n[3][kLanes], rows[9][kLanes], ex[kLanes], ey[kLanes], dir[3][kLanes];
-  int ok[kLanes];  // passed every test before the tile rectangle's
+  int ok[kLanes];     // passed every test before the tile rectangle's
+  int reach[kLanes];  // (ex, ey) bound where the disk and the circle reach 1/255
 };
+
+// The pixels where a surfel's rho3d = u^2 + v^2 <= r2 (its disk's image), as an ellipse around
+// the centre m, from its rows centred on m (see the header). The pixel loops' intersection is
+// p = k x l = dx c0 + dy c1 + c2 with c0 = T_v' x T_w, c1 = T_w x T_u', c2 = T_u' x T_v', and
+// (u, v) = (p_x, p_y) / p_z, so the disk is p_x^2 + p_y^2 - r2 p_z^2 <= 0: a conic in (dx, dy),
+// an ellipse where its quadratic part is positive definite; anything else keeps the whole box.
+TileEllipse DiskEllipse(const float rows[9], float mx, float my, float r2) {
+  const Eigen::Vector3d tu(rows[0], rows[1], rows[2]), tv(rows[3], rows[4], rows[5]),
+      tw(rows[6], rows[7], rows[8]);
+  const Eigen::Vector3d c[3] = {tv.cross(tw), tw.cross(tu), tu.cross(tv)};
+  double q[3][3];
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j)
+      q[i][j] = c[i][0] * c[j][0] + c[i][1] * c[j][1] - r2 * c[i][2] * c[j][2];
+  }
+  const double det = q[0][0] * q[1][1] - q[0][1] * q[0][1];
+  if (!(q[0][0] > 0 && det > 0)) return TileEllipse();
+  // The centre e solves Q2 e = -(q02, q12); the form is (d - e)^T Q2 (d - e) <= -f, with f its
+  // value at e. Scaled by 1 / q00 (which keeps the floats in range).
+  const double e0 = -(q[1][1] * q[0][2] - q[0][1] * q[1][2]) / det;
+  const double e1 = -(q[0][0] * q[1][2] - q[0][1] * q[0][2]) / det;
+  const double f = q[2][2] + q[0][2] * e0 + q[1][2] * e1;
+  const double s = 1.0 / q[0][0];
+  return TileEllipse::Of(static_cast<float>(mx + e0), static_cast<float>(my + e1), 1.0f,
+                         static_cast<float>(q[0][1] * s), static_cast<float>(q[1][1] * s),
+                         static_cast<float>(-f * s));
+}
 
 }  // namespace
 
@@ -273,6 +303,7 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
           (L.opacity[l] > kMinBlendAlpha) & (d < 0.0f) & std::isfinite(x) & std::isfinite(y);
       L.ex[l] = reach ? std::min(radius, x) : radius;
       L.ey[l] = reach ? std::min(radius, y) : radius;
+      L.reach[l] = reach;
     }
 #pragma omp simd
     for (int l = 0; l < kLanes; ++l) {  // the view direction
@@ -306,6 +337,15 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
       out->rects[i] = opacity > kMinBlendAlpha
                           ? TileRectFromBox(mx, my, L.ex[l], L.ey[l], tiles_x, tiles_y)
                           : rect;
+      // The disk's image and the low-pass circle at its widest, as the box above; their 4% (2% of
+      // the width, as the box's) covers the pixel loops' rounding of the intersection.
+      TileEllipse* shape = &out->shapes[2 * i];
+      shape[0] = shape[1] = TileEllipse();
+      if (L.reach[l]) {
+        const float r2 = -2.0f * L.min_power[l] * 1.0404f;
+        shape[0] = DiskEllipse(&out->M[9 * i], mx, my, r2);
+        shape[1] = TileEllipse::Of(mx, my, 1.0f, 0.0f, 1.0f, r2 / inv_square);
+      }
     }
   }
   // The SH colours of the drawn surfels, in a loop of their own: a loop over more per-surfel

@@ -42,6 +42,9 @@ struct ProjectedSurfels {
   // wide.
   std::vector<float> min_power;  // N
   std::vector<float> extent;     // N x 2
+  // N x 2: the ellipses within the rectangle where the pixel loops' test can pass, the image of
+  // the disk and the low-pass circle (binning leaves out the rectangle's tiles both miss).
+  std::vector<TileEllipse> shapes;
 
   size_t size() const { return depth.size(); }
   void Resize(size_t n);

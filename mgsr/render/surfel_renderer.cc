@@ -21,7 +21,7 @@ void SurfelRenderer::Forward(const SurfelModel& model, const SurfelRenderOptions
   {
     ProfileScope scope("binning");
     BinPrimitives(projected_.rects, projected_.depth.data(), options.camera.width,
-                  options.camera.height, &bins_);
+                  options.camera.height, &bins_, projected_.shapes.data(), 2);
   }
   ProfileScope scope("raster forward");
   RasterizeSurfels(projected_, bins_, options, out, scratch_.get());

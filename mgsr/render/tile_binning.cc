@@ -23,6 +23,69 @@ TileRect TileRectFromBox(float cx, float cy, float rx, float ry, int tiles_x, in
   return r;
 }
 
+TileEllipse TileEllipse::Of(float cx, float cy, float a_f, float b_f, float c_f, float r_f) {
+  TileEllipse e;
+  const double a = a_f, b = b_f, c = c_f;
+  if (!(r_f < std::numeric_limits<float>::infinity()) || !(a > 0 && c > 0)) return e;
+  // How close the form is to degenerate: rho = |b| / sqrt(ac) < 1 for an ellipse. Its value at
+  // a point is at least (1 - rho) (a dx^2 + c dy^2), and its float rounding a few epsilons of
+  // a dx^2 + c dy^2 + 2 |b dx dy| <= 2 (a dx^2 + c dy^2): relative to the value, at most 2 / (1 -
+  // rho) times that. So r is widened by 1e-5 / (1 - rho), some 80 float epsilons' worth, and
+  // nearly degenerate forms keep the whole rectangle.
+  const double rho = std::abs(b) / std::sqrt(a * c);
+  if (!(rho < 0.999)) return e;
+  e.cx = cx;
+  e.cy = cy;
+  if (r_f < 0) {
+    e.reach_x = e.reach_y = -1;
+    return std::isfinite(cx) && std::isfinite(cy) ? e : TileEllipse();
+  }
+  const double r = r_f / (1.0 - 1e-5 / (1.0 - rho));
+  const double det = a * c - b * b;
+  // Across row dy the ellipse spans -b dy / a -+ sqrt(a r - det dy^2) / a.
+  e.reach_x = static_cast<float>(std::sqrt(c * r / det));
+  e.reach_y = static_cast<float>(std::sqrt(a * r / det));
+  e.slope = static_cast<float>(-b / a);
+  e.k0 = static_cast<float>(r / a);
+  e.k1 = static_cast<float>(det / (a * a));
+  e.left_row = static_cast<float>(b * std::sqrt(c * r / det) / c);
+  // Out of float's range (or NaN from the caller's centre): the whole rectangle.
+  for (const float v : {e.cx, e.cy, e.reach_x, e.reach_y, e.slope, e.k0, e.k1, e.left_row}) {
+    if (!std::isfinite(v)) return TileEllipse();
+  }
+  return e;
+}
+
+void EllipseTileColumns(const TileEllipse& e, int ty, int width, int height, int* first,
+                        int* last) {
+  const int tiles_x = (width + kTileSize - 1) / kTileSize;
+  *first = 0;
+  *last = tiles_x;
+  if (e.whole()) return;
+  *last = 0;
+  // The rows of pixel centres of tile row ty, relative to the centre and grown by the margin,
+  // within the ellipse's own rows.
+  constexpr float m = kTileEllipseMarginPx;
+  const float y0 = std::max(ty * kTileSize + 0.5f - m - e.cy, -e.reach_y);
+  const float y1 = std::min(std::min(height, (ty + 1) * kTileSize) - 0.5f + m - e.cy, e.reach_y);
+  if (!(y0 <= y1)) return;
+  // The left edge is convex in dy and the right edge concave, so over [y0, y1] each is extreme
+  // at the ellipse's leftmost (rightmost) point if that row is inside, else at an end.
+  const auto half = [&](float dy) { return std::sqrt(std::max(0.0f, e.k0 - e.k1 * dy * dy)); };
+  const float h0 = half(y0), h1 = half(y1);
+  const float x_min = y0 <= e.left_row && e.left_row <= y1
+                          ? -e.reach_x
+                          : std::min(e.slope * y0 - h0, e.slope * y1 - h1);
+  const float x_max = y0 <= -e.left_row && -e.left_row <= y1
+                          ? e.reach_x
+                          : std::max(e.slope * y0 + h0, e.slope * y1 + h1);
+  // Tile tx's pixel centres (grown) span [16 tx + 0.5 - m, 16 tx + 15.5 + m].
+  const float lo = std::ceil((e.cx + x_min - (kTileSize - 0.5f) - m) / kTileSize);
+  const float hi = std::floor((e.cx + x_max - 0.5f + m) / kTileSize) + 1;
+  *first = static_cast<int>(std::clamp(lo, 0.0f, static_cast<float>(tiles_x)));
+  *last = static_cast<int>(std::clamp(hi, 0.0f, static_cast<float>(tiles_x)));
+}
+
 namespace {
 
 // The element range [begin, end) of chunk t of `chunks` over n elements.
@@ -106,10 +169,30 @@ void RadixSortByKey(int chunks, std::vector<uint32_t>* keys, std::vector<uint32_
   }
 }
 
+// The columns [*x0, *x1) of tile row ty of rectangle `r` that primitive `id` is binned to: those
+// one of its shapes may reach (all of the rectangle's without shapes).
+inline void ColumnsReached(const TileEllipse* shapes, int per_primitive, uint32_t id,
+                           const TileRect& r, int ty, int width, int height, int* x0, int* x1) {
+  *x0 = r.x0;
+  *x1 = r.x1;
+  if (shapes == nullptr || r.x1 - r.x0 < kMinEllipseBinningWidth) return;
+  const TileEllipse* e = shapes + static_cast<size_t>(id) * per_primitive;
+  int lo = r.x1, hi = r.x0;  // the hull of the shapes' columns
+  for (int k = 0; k < per_primitive; ++k) {
+    int first, last;
+    EllipseTileColumns(e[k], ty, width, height, &first, &last);
+    if (first >= last) continue;
+    lo = std::min(lo, first);
+    hi = std::max(hi, last);
+  }
+  *x0 = std::max<int>(r.x0, lo);
+  *x1 = std::min<int>(r.x1, hi);
+}
+
 }  // namespace
 
 void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int width, int height,
-                   TileBins* bins) {
+                   TileBins* bins, const TileEllipse* shapes, int per_primitive) {
   bins->tiles_x = (width + kTileSize - 1) / kTileSize;
   bins->tiles_y = (height + kTileSize - 1) / kTileSize;
   CHECK(bins->tiles_x <= kMaxTiles && bins->tiles_y <= kMaxTiles)
@@ -168,10 +251,13 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
     size_t begin, end;
     ChunkRange(n, chunks, t, &begin, &end);
     for (size_t q = begin; q < end; ++q) {
-      const TileRect r = rects[bins->order[q]];
+      const uint32_t id = bins->order[q];
+      const TileRect r = rects[id];
       bins->sorted_rects[q] = r;
       for (int ty = r.y0; ty < r.y1; ++ty) {
-        for (int tx = r.x0; tx < r.x1; ++tx) ++counts[ty * bins->tiles_x + tx];
+        int x0, x1;
+        ColumnsReached(shapes, per_primitive, id, r, ty, width, height, &x0, &x1);
+        for (int tx = x0; tx < x1; ++tx) ++counts[ty * bins->tiles_x + tx];
       }
     }
   }
@@ -190,7 +276,9 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
       const uint32_t id = bins->order[q];
       const TileRect& r = bins->sorted_rects[q];
       for (int ty = r.y0; ty < r.y1; ++ty) {
-        for (int tx = r.x0; tx < r.x1; ++tx) bins->ids[offsets[ty * bins->tiles_x + tx]++] = id;
+        int x0, x1;
+        ColumnsReached(shapes, per_primitive, id, r, ty, width, height, &x0, &x1);
+        for (int tx = x0; tx < x1; ++tx) bins->ids[offsets[ty * bins->tiles_x + tx]++] = id;
       }
     }
   }

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -25,6 +26,16 @@ inline double MaxAbsDiff(const Image& im, const std::vector<double>& ref) {
   double d = 0;
   for (size_t i = 0; i < im.size(); ++i) d = std::max(d, std::abs(im.data()[i] - ref[i]));
   return d;
+}
+
+// The same size and the same bits (NaN included).
+inline bool SameBits(const Image& a, const Image& b) {
+  return a.width() == b.width() && a.height() == b.height() && a.size() == b.size() &&
+         (a.size() == 0 || std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0);
+}
+inline bool SameBits(const std::vector<float>& a, const std::vector<float>& b) {
+  return a.size() == b.size() &&
+         (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0);
 }
 
 // An image of uniform random values in [-1, 1) (an upstream gradient).

@@ -189,6 +189,97 @@ TEST_P(TileBinningTest, MatchesBruteForceSortsByDepthAndOrdersTilesBySize) {
 
 INSTANTIATE_TEST_SUITE_P(Threads, TileBinningTest, ::testing::Values(1, 2, 3));
 
+// An ellipse's tile columns per tile row hold every tile with a pixel centre inside it (the form
+// in double at most r), and leave out tiles of its box: long thin ellipses at random angles,
+// nearly degenerate ones, off-centre ones, on a 200 x 120 image. Binning with such shapes gives the
+// whole rectangles' lists less exactly the tiles their columns leave out, in the same order.
+TEST(TileBinningTest, EllipseColumnsHoldEveryReachedTileAndBinningKeepsOnlyThose) {
+  Rng rng(5);
+  const int W = 200, H = 120, tiles_x = (W + 15) / 16, tiles_y = (H + 15) / 16;
+  const int n = 400;
+  std::vector<TileRect> rects(n);
+  std::vector<TileEllipse> shapes(n);
+  std::vector<float> depths(n);
+  size_t box_tiles = 0, reached_tiles = 0;
+  for (int i = 0; i < n; ++i) {
+    // A form with axes s1 >= s2 at angle t: a dx^2 + 2 b dx dy + c dy^2 <= r.
+    const double t = rng.Uniform(0, M_PI), s1 = rng.Uniform(2, 60);
+    const double s2 = i % 10 == 0 ? s1 * 1e-3 : rng.Uniform(0.3, s1);
+    const double ct = std::cos(t), st = std::sin(t);
+    const float a = static_cast<float>(ct * ct / (s1 * s1) + st * st / (s2 * s2));
+    const float b = static_cast<float>(ct * st * (1 / (s1 * s1) - 1 / (s2 * s2)));
+    const float c = static_cast<float>(st * st / (s1 * s1) + ct * ct / (s2 * s2));
+    const float r = static_cast<float>(rng.Uniform(0.5, 9)), cx = rng.Uniform(-30, 230),
+                cy = rng.Uniform(-30, 150);
+    shapes[i] = TileEllipse::Of(cx, cy, a, b, c, r);
+    // Its box (half-widths sqrt(r c / det), sqrt(r a / det)).
+    const double det = double(a) * c - double(b) * b;
+    rects[i] = TileRectFromBox(cx, cy, static_cast<float>(std::sqrt(r * c / det)) + 1,
+                               static_cast<float>(std::sqrt(r * a / det)) + 1, tiles_x, tiles_y);
+    depths[i] = static_cast<float>(rng.Uniform(0.2, 10));
+    for (int ty = rects[i].y0; ty < rects[i].y1; ++ty) {
+      int first, last;
+      EllipseTileColumns(shapes[i], ty, W, H, &first, &last);
+      for (int tx = rects[i].x0; tx < rects[i].x1; ++tx) {
+        ++box_tiles;
+        bool reached = false;
+        for (int y = ty * 16; y < std::min(H, ty * 16 + 16) && !reached; ++y) {
+          for (int x = tx * 16; x < std::min(W, tx * 16 + 16) && !reached; ++x) {
+            const double dx = x + 0.5 - cx, dy = y + 0.5 - cy;
+            reached = a * dx * dx + 2.0 * b * dx * dy + c * dy * dy <= r;
+          }
+        }
+        reached_tiles += reached;
+        if (reached) {
+          ASSERT_TRUE(tx >= first && tx < last) << i << " " << tx << " " << ty;
+        }
+      }
+    }
+  }
+  // The columns do leave tiles out (the boxes' tiles that hold no reached centre).
+  int kept = 0;
+  for (int i = 0; i < n; ++i) {
+    for (int ty = rects[i].y0; ty < rects[i].y1; ++ty) {
+      int first, last;
+      EllipseTileColumns(shapes[i], ty, W, H, &first, &last);
+      kept += std::max(0, std::min<int>(last, rects[i].x1) - std::max<int>(first, rects[i].x0));
+    }
+  }
+  EXPECT_LT(kept, 0.8 * box_tiles) << reached_tiles << " reached of " << box_tiles;
+  // Degenerate and infinite forms keep the whole row; a negative r none.
+  int first, last;
+  EllipseTileColumns(TileEllipse::Of(50, 50, 1, 1, 1, 4), 3, W, H, &first, &last);
+  EXPECT_EQ(first, 0);
+  EXPECT_EQ(last, tiles_x);
+  EllipseTileColumns(TileEllipse(), 3, W, H, &first, &last);
+  EXPECT_EQ(last - first, tiles_x);
+  EllipseTileColumns(TileEllipse::Of(std::nanf(""), 50, 1, 0, 1, 4), 3, W, H, &first, &last);
+  EXPECT_EQ(last - first, tiles_x);
+  EllipseTileColumns(TileEllipse::Of(50, 50, 1e-38f, 0, 1, 4), 3, W, H, &first, &last);
+  EXPECT_EQ(last - first, tiles_x);
+  EllipseTileColumns(TileEllipse::Of(50, 50, 1, 0, 1, -1), 3, W, H, &first, &last);
+  EXPECT_GE(first, last);
+  // Binning: the whole rectangles' lists, less the columns each row leaves out.
+  TileBins whole, fitted;
+  BinPrimitives(rects, depths.data(), W, H, &whole);
+  BinPrimitives(rects, depths.data(), W, H, &fitted, shapes.data(), 1);
+  for (int tile = 0; tile < tiles_x * tiles_y; ++tile) {
+    std::vector<uint32_t> expected;
+    for (uint32_t e = whole.tile_start[tile]; e < whole.tile_start[tile + 1]; ++e) {
+      const uint32_t id = whole.ids[e];
+      const TileRect& r = rects[id];
+      EllipseTileColumns(shapes[id], tile / tiles_x, W, H, &first, &last);
+      // (Narrow rectangles are binned whole.)
+      const bool narrow = r.x1 - r.x0 < kMinEllipseBinningWidth;
+      if (narrow || (tile % tiles_x >= first && tile % tiles_x < last)) expected.push_back(id);
+    }
+    const std::vector<uint32_t> got(fitted.ids.begin() + fitted.tile_start[tile],
+                                    fitted.ids.begin() + fitted.tile_start[tile + 1]);
+    ASSERT_EQ(got, expected) << tile;
+  }
+  EXPECT_LT(fitted.ids.size(), whole.ids.size());
+}
+
 // Which thread draws which tile depends on scheduling, so every thread's buffers must be sized
 // before the parallel loops: for the largest tile's primitives and for the most pixel arrays a
 // pass (forward or backward) carves out. A thread that first drew a backward tile late grew its

@@ -590,6 +590,50 @@ TEST(SurfelRendererTest, BackwardWritesEveryRowWhateverTheBuffersHeld) {
   }
 }
 
+// Binning by the surfels' ellipses (the disk's image and the low-pass circle) leaves out the
+// tiles of their rectangles that no pixel they could blend lies in: the renders and gradients are
+// those of the whole rectangles to the bit, from fewer tile entries. Disks at random angles (many
+// seen nearly edge-on), large and small, on a 160 px view; both low-pass forms.
+TEST(SurfelRendererTest, BinningByEllipseRendersAsTheWholeRectangles) {
+  const int w = 160, h = 144;
+  const Camera cam = testing::RenderTestCamera(w, h);
+  const SurfelModel m = RandomSurfels(300, 17, 0.005, 0.6);
+  for (const SurfelLowPass low_pass : {SurfelLowPass::kAreaPreserving, SurfelLowPass::kReference}) {
+    SurfelRenderOptions o = Options(cam, low_pass);
+    o.distortion = true;
+    ProjectedSurfels p;
+    ProjectSurfels(m, cam, o.sh_degree, &p, o.filter_sigma);
+    TileBins whole, fitted;
+    BinPrimitives(p.rects, p.depth.data(), w, h, &whole);
+    BinPrimitives(p.rects, p.depth.data(), w, h, &fitted, p.shapes.data(), 2);
+    EXPECT_LT(fitted.ids.size(), whole.ids.size() * 9 / 10) << whole.ids.size();
+    SurfelRenderGrad grad;
+    grad.color = testing::RandomImage(w, h, 3, 8);
+    grad.depth = testing::RandomImage(w, h, 1, 9);
+    grad.alpha = testing::RandomImage(w, h, 1, 10);
+    grad.normal_world = testing::RandomImage(w, h, 3, 11);
+    grad.median_depth = testing::RandomImage(w, h, 1, 12);
+    grad.distortion = testing::RandomImage(w, h, 1, 13);
+    const auto render = [&](const TileBins& bins, SurfelRender* out, ProjectedSurfelsGrad* d) {
+      RasterScratch scratch;
+      RasterizeSurfels(p, bins, o, out, &scratch);
+      d->Resize(p.size());
+      RasterizeSurfelsBackward(p, bins, o, *out, grad, d, &scratch);
+    };
+    SurfelRender a, b;
+    ProjectedSurfelsGrad da, db;
+    render(whole, &a, &da);
+    render(fitted, &b, &db);
+    using testing::SameBits;
+    EXPECT_TRUE(SameBits(a.color, b.color) && SameBits(a.depth, b.depth) &&
+                SameBits(a.alpha, b.alpha) && SameBits(a.normal_world, b.normal_world) &&
+                SameBits(a.median_depth, b.median_depth) && SameBits(a.distortion, b.distortion));
+    EXPECT_TRUE(SameBits(da.M, db.M) && SameBits(da.center, db.center) &&
+                SameBits(da.normal, db.normal) && SameBits(da.opacity, db.opacity) &&
+                SameBits(da.color, db.color));
+  }
+}
+
 // The backward reuses the rows its forward packed, computing only the low-pass offsets' gradients
 // (d c / d M), for the projection that forward packed, and packs any other (here the forward's
 // with every colour changed): both give a fresh scratch's gradients. Small surfels, so the
