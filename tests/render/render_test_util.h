@@ -5,7 +5,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <string>
 #include <vector>
 
@@ -13,6 +12,7 @@
 #include "mgsr/core/image.h"
 #include "mgsr/core/rng.h"
 #include "mgsr/model/param_block.h"
+#include "mgsr/render/tile_binning.h"
 
 namespace mgsr::testing {
 
@@ -28,14 +28,26 @@ inline double MaxAbsDiff(const Image& im, const std::vector<double>& ref) {
   return d;
 }
 
-// The same size and the same bits (NaN included).
-inline bool SameBits(const Image& a, const Image& b) {
-  return a.width() == b.width() && a.height() == b.height() && a.size() == b.size() &&
-         (a.size() == 0 || std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0);
+// The bytes of images and float vectors, appended (renders compared to the bit, NaN included).
+inline void AppendBytes(const Image& im, std::string* bytes) {
+  bytes->append(reinterpret_cast<const char*>(im.data()), im.size() * sizeof(float));
 }
-inline bool SameBits(const std::vector<float>& a, const std::vector<float>& b) {
-  return a.size() == b.size() &&
-         (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0);
+inline void AppendBytes(const std::vector<float>& v, std::string* bytes) {
+  bytes->append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(float));
+}
+
+// Binning by the projection's ellipses (`per_primitive` a primitive) leaves out tiles of the
+// rectangles but changes no render or gradient: `render(bins)`, the forward and backward over
+// those bins as bytes (AppendBytes), is the same for the whole rectangles' bins as for the
+// fitted ones, which hold at most 90% of the entries.
+template <class Projected, class RenderBytes>
+void ExpectEllipseBinningRendersAsTheWholeRectangles(const Projected& p, int w, int h,
+                                                     int per_primitive, const RenderBytes& render) {
+  TileBins whole, fitted;
+  BinPrimitives(p.rects, p.depth.data(), w, h, &whole);
+  BinPrimitives(p.rects, p.depth.data(), w, h, &fitted, p.shapes.data(), per_primitive);
+  EXPECT_LT(fitted.ids.size(), whole.ids.size() * 9 / 10) << whole.ids.size();
+  EXPECT_TRUE(render(whole) == render(fitted));
 }
 
 // An image of uniform random values in [-1, 1) (an upstream gradient).
