@@ -268,7 +268,6 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
       out->depth[i] = L.g.t[2][l];
       out->radius[i] = 0;
       out->rects[i] = TileRect();
-      out->shapes[i] = TileEllipse();
       out->extent[2 * i] = out->extent[2 * i + 1] = 0;
       out->min_power[i] = 0;
       const float radius = L.radius[l], u = L.u[l], v = L.v[l];
@@ -292,7 +291,10 @@ void ProjectGaussians(const GaussianModel& m, const Camera& cam, int sh_degree, 
       out->conic[3 * i + 2] = a / det;
       // The pixel loops blend where -conic(d) / 2 >= min_power; the 2% (1% of the width, as the
       // box's) covers their rounding of the same form.
-      if (!out->rects[i].empty()) {
+      // (Only for rectangles binning reads them for: computed for every Gaussian they cost a
+      // 256 px render more than its binning.)
+      const TileRect& rect = out->rects[i];
+      if (!rect.empty() && rect.x1 - rect.x0 >= kMinEllipseBinningWidth) {
         out->shapes[i] =
             TileEllipse::Of(u, v, out->conic[3 * i], out->conic[3 * i + 1], out->conic[3 * i + 2],
                             -2.0f * out->min_power[i] * 1.0201f);

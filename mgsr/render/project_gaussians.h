@@ -39,7 +39,8 @@ struct ProjectedGaussians {
   std::vector<float> min_power;
   std::vector<TileRect> rects;
   // N: the ellipse within the rectangle where the pixel loops' exponent test can pass (binning
-  // leaves out the rectangle's tiles it misses).
+  // leaves out the rectangle's tiles it misses). Set only where the rectangle is at least
+  // kMinEllipseBinningWidth tiles wide, the only ones binning reads.
   std::vector<TileEllipse> shapes;
   std::vector<float> opacity, ref_opacity, beta;  // N, activated
   std::vector<float> color_t, color_r;            // N x 3

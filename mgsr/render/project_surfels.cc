@@ -339,7 +339,11 @@ void ProjectSurfels(const SurfelModel& m, const Camera& cam, int sh_degree, Proj
                           : rect;
       // The disk's image and the low-pass circle at its widest, as the box above; their 4% (2% of
       // the width, as the box's) covers the pixel loops' rounding of the intersection.
+      // (Only for rectangles binning reads them for: computed for every surfel they cost a 256 px
+      // render more than its binning.)
       TileEllipse* shape = &out->shapes[2 * i];
+      const TileRect& binned = out->rects[i];
+      if (binned.x1 - binned.x0 < kMinEllipseBinningWidth) continue;
       shape[0] = shape[1] = TileEllipse();
       if (L.reach[l]) {
         const float r2 = -2.0f * L.min_power[l] * 1.0404f;

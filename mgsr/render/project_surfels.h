@@ -43,7 +43,9 @@ struct ProjectedSurfels {
   std::vector<float> min_power;  // N
   std::vector<float> extent;     // N x 2
   // N x 2: the ellipses within the rectangle where the pixel loops' test can pass, the image of
-  // the disk and the low-pass circle (binning leaves out the rectangle's tiles both miss).
+  // the disk and the low-pass circle (binning leaves out the rectangle's tiles both miss). Set
+  // only where the rectangle is at least kMinEllipseBinningWidth tiles wide, the only ones
+  // binning reads.
   std::vector<TileEllipse> shapes;
 
   size_t size() const { return depth.size(); }

@@ -169,13 +169,14 @@ void RadixSortByKey(int chunks, std::vector<uint32_t>* keys, std::vector<uint32_
   }
 }
 
-// The columns [*x0, *x1) of tile row ty of rectangle `r` that primitive `id` is binned to: those
-// one of its shapes may reach (all of the rectangle's without shapes).
+// Whether rectangle `r`'s rows are binned by the primitive's ellipses (else whole). Then the
+// columns [*x0, *x1) of its tile row ty that primitive `id` is binned to: the hull of those its
+// shapes reach.
+inline bool FitsByEllipse(const TileEllipse* shapes, const TileRect& r) {
+  return shapes != nullptr && r.x1 - r.x0 >= kMinEllipseBinningWidth;
+}
 inline void ColumnsReached(const TileEllipse* shapes, int per_primitive, uint32_t id,
                            const TileRect& r, int ty, int width, int height, int* x0, int* x1) {
-  *x0 = r.x0;
-  *x1 = r.x1;
-  if (shapes == nullptr || r.x1 - r.x0 < kMinEllipseBinningWidth) return;
   const TileEllipse* e = shapes + static_cast<size_t>(id) * per_primitive;
   int lo = r.x1, hi = r.x0;  // the hull of the shapes' columns
   for (int k = 0; k < per_primitive; ++k) {
@@ -254,6 +255,12 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
       const uint32_t id = bins->order[q];
       const TileRect r = rects[id];
       bins->sorted_rects[q] = r;
+      if (!FitsByEllipse(shapes, r)) {
+        for (int ty = r.y0; ty < r.y1; ++ty) {
+          for (int tx = r.x0; tx < r.x1; ++tx) ++counts[ty * bins->tiles_x + tx];
+        }
+        continue;
+      }
       for (int ty = r.y0; ty < r.y1; ++ty) {
         int x0, x1;
         ColumnsReached(shapes, per_primitive, id, r, ty, width, height, &x0, &x1);
@@ -275,6 +282,12 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
     for (size_t q = begin; q < end; ++q) {
       const uint32_t id = bins->order[q];
       const TileRect& r = bins->sorted_rects[q];
+      if (!FitsByEllipse(shapes, r)) {
+        for (int ty = r.y0; ty < r.y1; ++ty) {
+          for (int tx = r.x0; tx < r.x1; ++tx) bins->ids[offsets[ty * bins->tiles_x + tx]++] = id;
+        }
+        continue;
+      }
       for (int ty = r.y0; ty < r.y1; ++ty) {
         int x0, x1;
         ColumnsReached(shapes, per_primitive, id, r, ty, width, height, &x0, &x1);
