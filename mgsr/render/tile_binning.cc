@@ -169,25 +169,30 @@ void RadixSortByKey(int chunks, std::vector<uint32_t>* keys, std::vector<uint32_
   }
 }
 
-// Whether rectangle `r`'s rows are binned by the primitive's ellipses (else whole). Then the
-// columns [*x0, *x1) of its tile row ty that primitive `id` is binned to: the hull of those its
-// shapes reach.
-inline bool FitsByEllipse(const TileEllipse* shapes, const TileRect& r) {
-  return shapes != nullptr && r.x1 - r.x0 >= kMinEllipseBinningWidth;
-}
-inline void ColumnsReached(const TileEllipse* shapes, int per_primitive, uint32_t id,
-                           const TileRect& r, int ty, int width, int height, int* x0, int* x1) {
-  const TileEllipse* e = shapes + static_cast<size_t>(id) * per_primitive;
-  int lo = r.x1, hi = r.x0;  // the hull of the shapes' columns
-  for (int k = 0; k < per_primitive; ++k) {
-    int first, last;
-    EllipseTileColumns(e[k], ty, width, height, &first, &last);
-    if (first >= last) continue;
-    lo = std::min(lo, first);
-    hi = std::max(hi, last);
+// Calls tile(tx, ty) for every tile of rectangle `r` that primitive `id` is binned to: all of them,
+// or where the rectangle is at least kMinEllipseBinningWidth tiles wide and the primitive has
+// shapes, per tile row the hull of the columns its shapes reach.
+template <class Tile>
+inline void ForEachBinnedTile(const TileEllipse* shapes, int per_primitive, uint32_t id,
+                              const TileRect& r, int width, int height, const Tile& tile) {
+  const bool fitted = shapes != nullptr && r.x1 - r.x0 >= kMinEllipseBinningWidth;
+  const TileEllipse* e = fitted ? shapes + static_cast<size_t>(id) * per_primitive : nullptr;
+  for (int ty = r.y0; ty < r.y1; ++ty) {
+    int x0 = r.x0, x1 = r.x1;
+    if (fitted) {
+      int lo = r.x1, hi = r.x0;
+      for (int k = 0; k < per_primitive; ++k) {
+        int first, last;
+        EllipseTileColumns(e[k], ty, width, height, &first, &last);
+        if (first >= last) continue;
+        lo = std::min(lo, first);
+        hi = std::max(hi, last);
+      }
+      x0 = std::max<int>(x0, lo);
+      x1 = std::min<int>(x1, hi);
+    }
+    for (int tx = x0; tx < x1; ++tx) tile(tx, ty);
   }
-  *x0 = std::max<int>(r.x0, lo);
-  *x1 = std::min<int>(r.x1, hi);
 }
 
 }  // namespace
@@ -255,17 +260,8 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
       const uint32_t id = bins->order[q];
       const TileRect r = rects[id];
       bins->sorted_rects[q] = r;
-      if (!FitsByEllipse(shapes, r)) {
-        for (int ty = r.y0; ty < r.y1; ++ty) {
-          for (int tx = r.x0; tx < r.x1; ++tx) ++counts[ty * bins->tiles_x + tx];
-        }
-        continue;
-      }
-      for (int ty = r.y0; ty < r.y1; ++ty) {
-        int x0, x1;
-        ColumnsReached(shapes, per_primitive, id, r, ty, width, height, &x0, &x1);
-        for (int tx = x0; tx < x1; ++tx) ++counts[ty * bins->tiles_x + tx];
-      }
+      ForEachBinnedTile(shapes, per_primitive, id, r, width, height,
+                        [&](int tx, int ty) { ++counts[ty * bins->tiles_x + tx]; });
     }
   }
   // 3. Offsets: within a tile, chunk t's (deeper) entries follow those of chunks < t, so every
@@ -282,17 +278,9 @@ void BinPrimitives(const std::vector<TileRect>& rects, const float* depths, int 
     for (size_t q = begin; q < end; ++q) {
       const uint32_t id = bins->order[q];
       const TileRect& r = bins->sorted_rects[q];
-      if (!FitsByEllipse(shapes, r)) {
-        for (int ty = r.y0; ty < r.y1; ++ty) {
-          for (int tx = r.x0; tx < r.x1; ++tx) bins->ids[offsets[ty * bins->tiles_x + tx]++] = id;
-        }
-        continue;
-      }
-      for (int ty = r.y0; ty < r.y1; ++ty) {
-        int x0, x1;
-        ColumnsReached(shapes, per_primitive, id, r, ty, width, height, &x0, &x1);
-        for (int tx = x0; tx < x1; ++tx) bins->ids[offsets[ty * bins->tiles_x + tx]++] = id;
-      }
+      ForEachBinnedTile(shapes, per_primitive, id, r, width, height, [&](int tx, int ty) {
+        bins->ids[offsets[ty * bins->tiles_x + tx]++] = id;
+      });
     }
   }
   // 4. The largest tiles first.
