@@ -154,6 +154,7 @@ void RegisterBuiltinLosses(LossRegistry* r) {
     m.min_alpha = Number(c, "min_alpha", m.min_alpha);
     m.max_reprojection_px = Number(c, "max_reprojection_px", m.max_reprojection_px);
     m.max_plane_offset_px = Number(c, "max_plane_offset_px", m.max_plane_offset_px);
+    m.max_pair_loss = Number(c, "max_pair_loss", m.max_pair_loss);
     if (c.contains("check_occlusion")) {
       if (!c["check_occlusion"].is_boolean()) {
         *s = Status::Error("'check_occlusion' must be true or false");
@@ -162,10 +163,10 @@ void RegisterBuiltinLosses(LossRegistry* r) {
       m.check_occlusion = c["check_occlusion"].get<bool>();
     }
     if (m.patch_radius < 1 || m.patch_radius > 10 || m.stride < 1 || m.stride > 64 ||
-        !(m.min_variance >= 0) || !(m.max_reprojection_px > 0)) {
+        !(m.min_variance >= 0) || !(m.max_reprojection_px > 0) || !(m.max_pair_loss > 0)) {
       *s = Status::Error(
           "multiview_ncc: patch_radius in [1, 10], stride in [1, 64], min_variance >= 0, "
-          "max_reprojection_px > 0");
+          "max_reprojection_px > 0, max_pair_loss > 0");
       return nullptr;
     }
     return std::make_unique<MultiviewNccLoss>(m);

@@ -68,6 +68,8 @@ class MultiviewDepthLoss : public LossTermImpl<MultiviewDepthLoss> {
     T* gD = grad != nullptr ? grad->Get(Buffer::kDepth, D).data() : nullptr;
     static thread_local std::vector<double> row_sums;
     row_sums.assign(rows, 0.0);
+    // A pointer, not the thread_local, into the parallel region (each thread's own is empty).
+    double* const sums = row_sums.data();
 #pragma omp parallel for schedule(dynamic, 4) if (static_cast <int64_t>(w) * h >= kParallelPixels)
     for (int row = 0; row < rows; ++row) {
       const int y = row * stride;
@@ -89,10 +91,10 @@ class MultiviewDepthLoss : public LossTermImpl<MultiviewDepthLoss> {
         }
         if (gD != nullptr) gD[i] += static_cast<T>(scale * inv_count * d_depth);
       }
-      row_sums[row] = sum;
+      sums[row] = sum;
     }
     double total = 0;
-    for (double s : row_sums) total += s;
+    for (int row = 0; row < rows; ++row) total += sums[row];
     return total * inv_count;
   }
 

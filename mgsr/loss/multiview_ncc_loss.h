@@ -19,7 +19,9 @@
 // of it uncovered, or its rendered depth more than `max_plane_offset_px` pixel footprints off the
 // plane: at an outline, a step, or a surface curved within the patch, where one homography maps
 // the patch onto the wrong pixels), or, when the neighbours' rendered depth is given, the centre is
-// occluded there (forward-backward reprojection error above `max_reprojection_px`).
+// occluded there (forward-backward reprojection error above `max_reprojection_px`), or the two
+// patches do not correlate (1 - NCC above `max_pair_loss`: an outlier, such as a highlight that
+// moves between the views, rather than evidence about the plane).
 #pragma once
 
 #include <Eigen/Core>
@@ -46,6 +48,10 @@ struct MultiviewNccConfig {
   // min_alpha) and within this many pixel footprints of the plane (<= 0: no test).
   double max_plane_offset_px = 1.0;
   bool check_occlusion = true;  // read the neighbours' rendered depth for it
+  // Pairs whose patches correlate this badly (1 - NCC above it) are outliers, not evidence: a
+  // highlight or reflection that moves between the views, an occluder the depth test missed.
+  // They are left out, as in PGSR; >= 2 keeps every pair.
+  double max_pair_loss = 0.9;
 };
 
 class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
@@ -112,6 +118,9 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
   // Per-row sums, added in row order: the same value whatever the thread count.
   static thread_local std::vector<double> row_sums;
   row_sums.assign(rows, 0.0);
+  // A pointer, not the thread_local, into the parallel region: there each thread naming
+  // `row_sums` would get its own, empty one.
+  double* const sums = row_sums.data();
   const Eigen::Matrix3d K_inv = (Eigen::Matrix3d() << 1.0 / cam.fx, 0, -cam.cx / cam.fx, 0,
                                  1.0 / cam.fy, -cam.cy / cam.fy, 0, 0, 1)
                                     .finished();
@@ -224,6 +233,7 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
         var_b /= m;
         const double S = std::sqrt(var_a * var_b + 1e-8);
         const double ncc = cov / S;
+        if (1.0 - ncc > c_.max_pair_loss) continue;
         sum += 1.0 - ncc;
         if (gD == nullptr) continue;
         // d(1 - NCC)/d b_k = -(a_k / (m S) - cov var_a b_k / (m S^3)).
@@ -244,10 +254,10 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
       const Eigen::Vector3d g_N = (g_w - nw * nw.dot(g_w)) / norm;
       for (int k = 0; k < 3; ++k) gN[k][i] += static_cast<T>(gain * g_N[k]);
     }
-    row_sums[row] = sum;
+    sums[row] = sum;
   }
   double total = 0;
-  for (double s : row_sums) total += s;
+  for (int row = 0; row < rows; ++row) total += sums[row];
   return total * inv_count;
 }
 

@@ -148,6 +148,7 @@ TEST(LossGradientTest, EveryTermMatchesNumericDifferentiation) {
     c.patch_radius = 2;
     c.stride = 2;
     c.max_plane_offset_px = 0;  // random depths lie on no plane (multiview_test: on a plane)
+    c.max_pair_loss = 2;        // random patches: keep every pair (multiview_test: the outliers)
     return c;
   }()));
   ExpectGradientMatchesNumeric(EdgeAwareTvLoss(Buffer::kTransmitted, TargetKind::kImage));
@@ -287,10 +288,11 @@ TEST(LossValueTest, ExposureTransformUndoesAKnownGainAndLeavesTheBackgroundAlone
 TEST(LossGradientTest, EveryRegisteredTermPassesTheHarness) {
   for (const std::string& name : LossRegistry::Get().Names()) {
     Status s;
-    // Random depths and normals lie on no plane: the patch term would skip every patch.
-    const nlohmann::json config = name == "multiview_ncc"
-                                      ? nlohmann::json{{"max_plane_offset_px", 0}}
-                                      : nlohmann::json::object();
+    // Random depths and normals lie on no plane: the patch term would skip every patch; its
+    // random patches would fall on both sides of the outlier threshold.
+    const nlohmann::json config =
+        name == "multiview_ncc" ? nlohmann::json{{"max_plane_offset_px", 0}, {"max_pair_loss", 2}}
+                                : nlohmann::json::object();
     auto term = LossRegistry::Get().Create(name, config, &s);
     ASSERT_TRUE(s.ok()) << s.message();
     ExpectGradientMatchesNumeric(*term, 3);

@@ -3,6 +3,7 @@
 // and neighbour selection on a known camera layout. (Their gradients on random inputs are checked
 // by loss_test's harness with every registered term.)
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <cmath>
 #include <set>
@@ -12,6 +13,7 @@
 #include "mgsr/loss/multiview_depth_loss.h"
 #include "mgsr/loss/multiview_geometry.h"
 #include "mgsr/loss/multiview_ncc_loss.h"
+#include "mgsr/loss/parallel_pixels.h"
 #include "test_util.h"
 
 namespace mgsr {
@@ -81,18 +83,18 @@ TEST(MultiviewGeometryTest, PlaneWarpMatchesTheIntersectedPlane) {
   EXPECT_GT((off - nb.WorldToPixel(point_of(p))).norm(), 0.5);
 }
 
+// Three views of a textured plane, 64 x 48 pixels (or `scale` times that on each side, the same
+// field of view).
 struct TwoViewScene {
-  Camera ref = LookAtCamera({0.3, -3, 0.6}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 64, 48, 60, 60);
-  std::array<Camera, 2> nb = {
-      LookAtCamera({1.0, -2.85, 0.8}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 64, 48, 60, 60),
-      LookAtCamera({-0.5, -2.9, 0.2}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 64, 48, 60, 60)};
-  Eigen::Vector3d origin{0, 0, 0}, n = Eigen::Vector3d(0.15, -1.0, 0.3).normalized();
-  PlaneView view = RenderPlane(ref, origin, n);
-  std::array<PlaneView, 2> nb_view = {RenderPlane(nb[0], origin, n), RenderPlane(nb[1], origin, n)};
-  RenderBuffersD in;
-  TargetsD targets;
-
-  TwoViewScene() {
+  explicit TwoViewScene(int scale = 1)
+      : ref(LookAtCamera({0.3, -3, 0.6}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 64 * scale,
+                         48 * scale, 60 * scale, 60 * scale)),
+        nb{LookAtCamera({1.0, -2.85, 0.8}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 64 * scale,
+                        48 * scale, 60 * scale, 60 * scale),
+           LookAtCamera({-0.5, -2.9, 0.2}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), 64 * scale,
+                        48 * scale, 60 * scale, 60 * scale)},
+        view(RenderPlane(ref, origin, n)),
+        nb_view{RenderPlane(nb[0], origin, n), RenderPlane(nb[1], origin, n)} {
     in.camera = &ref;
     in.Set(Buffer::kDepth, &view.depth);
     in.Set(Buffer::kNormal, &view.normal);
@@ -102,7 +104,44 @@ struct TwoViewScene {
       targets.neighbours[k] = {&nb[k], &nb_view[k].gray, &nb_view[k].depth};
     targets.num_neighbours = 2;
   }
+  Eigen::Vector3d origin{0, 0, 0}, n = Eigen::Vector3d(0.15, -1.0, 0.3).normalized();
+  Camera ref;
+  std::array<Camera, 2> nb;
+  PlaneView view;
+  std::array<PlaneView, 2> nb_view;
+  RenderBuffersD in;
+  TargetsD targets;
 };
+
+// Both terms split their rows over threads on images of kParallelPixels or more: the same value
+// and gradient on one thread and on three (each thread once summed into a row table it did not
+// have, and crashed).
+TEST(MultiviewTermsTest, LargeImagesGiveTheSameResultOnAnyThreadCount) {
+  TwoViewScene s(3);  // 192 x 144
+  ASSERT_GE(static_cast<int64_t>(s.ref.width) * s.ref.height, kParallelPixels);
+  const PlaneView far = RenderPlane(s.ref, s.origin, s.n, 1.01);
+  s.in.Set(Buffer::kDepth, &far.depth);
+  MultiviewNccConfig nc;
+  nc.check_occlusion = true;
+  const MultiviewNccLoss ncc(nc);
+  const MultiviewDepthLoss depth;
+  const int saved = omp_get_max_threads();
+  for (const LossTerm* term : std::array<const LossTerm*, 2>{&ncc, &depth}) {
+    double value[2];
+    RenderGradientsD g[2];
+    for (int k = 0; k < 2; ++k) {
+      omp_set_num_threads(k == 0 ? 1 : 3);
+      value[k] = term->Evaluate(s.in, s.targets, 1.0, &g[k]);
+    }
+    omp_set_num_threads(saved);
+    EXPECT_GT(value[0], 0) << term->Name();
+    EXPECT_EQ(value[0], value[1]) << term->Name();
+    const ImageD& a = g[0].Get(Buffer::kDepth);
+    const ImageD& b = g[1].Get(Buffer::kDepth);
+    ASSERT_EQ(a.size(), b.size());
+    for (size_t i = 0; i < a.size(); ++i) ASSERT_EQ(a.data()[i], b.data()[i]) << term->Name() << i;
+  }
+}
 
 TEST(MultiviewNccTest, ExactPlaneAgreesAndAWrongDepthDoesNot) {
   TwoViewScene s;
@@ -115,6 +154,7 @@ TEST(MultiviewNccTest, ExactPlaneAgreesAndAWrongDepthDoesNot) {
   // otherwise drop every pair that disagrees).
   MultiviewNccConfig c;
   c.check_occlusion = false;
+  c.max_pair_loss = 2;  // every pair: at 10% off many no longer correlate (the outlier test below)
   const MultiviewNccLoss no_occlusion(c);
   const PlaneView far = RenderPlane(s.ref, s.origin, s.n, 1.1);
   s.in.Set(Buffer::kDepth, &far.depth);
@@ -197,6 +237,50 @@ TEST(MultiviewNccTest, OnlyPatchesOnTheCentresPlaneCount) {
   for (int x : {21, 24}) EXPECT_EQ(g_hole.Get(Buffer::kDepth).at(0, 21, x), 0.0) << x;
   EXPECT_NE(g_hole.Get(Buffer::kDepth).at(0, 21, 27), 0.0);
   EXPECT_NE(g_hole.Get(Buffer::kDepth).at(0, 21, 18), 0.0);
+}
+
+// Outliers: a pair whose patches do not correlate (here the first neighbour's photo is the
+// negative of the truth, NCC = -1, as where a highlight covers the texture in one view only) is
+// left out by default and counted with max_pair_loss = 2. What is left is the second neighbour's
+// pairs: half the value and gradient of a scene with the second neighbour in both places (the
+// normaliser counts both neighbours), on the exact plane and on a wrong one.
+TEST(MultiviewNccTest, PairsWhosePatchesDoNotCorrelateAreLeftOut) {
+  TwoViewScene s;
+  MultiviewNccConfig keep_all;
+  keep_all.check_occlusion = false;
+  keep_all.max_pair_loss = 2;
+  MultiviewNccConfig by_default;
+  by_default.check_occlusion = false;
+  EXPECT_EQ(by_default.max_pair_loss, 0.9);
+  const MultiviewNccLoss robust(by_default), plain(keep_all);
+  // On the exact scene nothing is an outlier.
+  EXPECT_EQ(robust.Evaluate(s.in, s.targets, 1.0, nullptr),
+            plain.Evaluate(s.in, s.targets, 1.0, nullptr));
+  TargetsD second = s.targets;
+  second.neighbours[0] = second.neighbours[1];
+  ImageD negative = s.nb_view[0].gray;
+  for (size_t i = 0; i < negative.size(); ++i) negative.data()[i] = 1.0 - negative.data()[i];
+  s.targets.neighbours[0].gray = &negative;
+  // Counted, each pair with the first neighbour adds about 2 / M.
+  EXPECT_GT(plain.Evaluate(s.in, s.targets, 1.0, nullptr), 0.5);
+  const PlaneView far = RenderPlane(s.ref, s.origin, s.n, 1.05);
+  for (const ImageD* depth : std::array<const ImageD*, 2>{&s.view.depth, &far.depth}) {
+    s.in.Set(Buffer::kDepth, depth);
+    RenderGradientsD g_robust, g_second;
+    const double v_robust = robust.Evaluate(s.in, s.targets, 1.0, &g_robust);
+    const double v_second = plain.Evaluate(s.in, second, 1.0, &g_second);
+    EXPECT_GT(v_second, 0);
+    EXPECT_NEAR(v_robust, 0.5 * v_second, 1e-12 * v_second);
+    const ImageD& a = g_robust.Get(Buffer::kDepth);
+    const ImageD& b = g_second.Get(Buffer::kDepth);
+    double worst = 0, largest = 0;
+    for (size_t i = 0; i < a.size(); ++i) {
+      worst = std::max(worst, std::abs(a.data()[i] - 0.5 * b.data()[i]));
+      largest = std::max(largest, std::abs(b.data()[i]));
+    }
+    EXPECT_GT(largest, 0);
+    EXPECT_LT(worst, 1e-9 * largest);
+  }
 }
 
 TEST(MultiviewDepthTest, ExactPlaneReprojectsOntoItselfAndTheDerivativeIsExact) {
