@@ -147,9 +147,9 @@ Status SolverOptions::Validate() const {
   if (sh_interval < 1) return Status::Error("--sh_interval must be >= 1");
   if (!(surfel_filter_sigma >= 0.01f && surfel_filter_sigma <= 2.0f))
     return Status::Error("--surfel_filter_sigma must be in [0.01, 2] pixels");
-  for (double w : {w_2d, w_3d, w_depth, lambda_normal, lambda_distortion, depth_tv_warmup_2d,
-                   depth_tv_mutual_2d, transmitted_tv_3d, depth_tv_3d, lambda_multiview_ncc,
-                   lambda_multiview_depth, lambda_mask}) {
+  for (double w : {w_2d, w_3d, w_depth, lambda_normal, lambda_normal_tv, lambda_distortion,
+                   depth_tv_warmup_2d, depth_tv_mutual_2d, transmitted_tv_3d, depth_tv_3d,
+                   lambda_multiview_ncc, lambda_multiview_depth, lambda_mask}) {
     if (!(w >= 0) || !std::isfinite(w))
       return Status::Error("loss weights must be finite and >= 0");
   }
@@ -228,6 +228,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"normal_from_iteration", Text(normal_from_iteration)},
           {"normal_depth_gradient", Text(normal_depth_gradient)},
           {"lambda_normal_mutual", Text(lambda_normal_mutual)},
+          {"lambda_normal_tv", Text(lambda_normal_tv)},
           {"normal_edge_weight", Text(normal_edge_weight)},
           {"normal_robust_scale", Text(normal_robust_scale)},
           {"normal_one_sided", Text(normal_one_sided)},

@@ -48,15 +48,20 @@ struct SolverOptions {
   bool reflection = true;
   // Loss weights (method.md 1.3-1.7).
   double lambda_l1 = 0.8;  // render loss: lambda L1 + (1 - lambda) D-SSIM
-  // Normal consistency and normal TV. The reference uses 0.05; at that weight the trained disks
+  // Normal consistency. The reference uses 0.05; at that weight the trained disks
   // stay tilted (4-20 degrees off the true normal, larger disks more), each tilted disk's near rim
   // stands out of the surface unless its centre sits deeper, and the surface ends 0.4-1.0 px
   // inside the truth. 2.0 aligns them: 0.1-0.25 px on five scenes, CD 2-4x lower, NC up (docs/
   // geometry.md). 4.0 over-smooths concavities.
   double lambda_normal = kNormalWeightWithForeground;
   int normal_from_iteration = 7000;  // warm-up: normal terms off before this
-  // >= 0: the normal terms' weight in the mutual stage (before w_2d); -1: lambda_normal.
+  // >= 0: the normal consistency's weight in the mutual stage (before w_2d); -1: lambda_normal.
   double lambda_normal_mutual = -1;
+  // The edge-aware TV of the rendered normals: the reference's weight (its lambda_4 = 1 times its
+  // normal weight 0.05), whatever lambda_normal is. It acts where neighbouring normals differ,
+  // which on a smooth surface is little and at a crease is everything: tied to lambda_normal at
+  // 2.0 it rounded every edge of the detailed shapes (docs/geometry.md, "The normal TV").
+  double lambda_normal_tv = 0.05;
   // false: the normal consistency does not pull the depth (only the rendered normals turn).
   bool normal_depth_gradient = true;
   // > 0: the normal consistency relaxes where the photo has edges (NormalConsistencyLoss).
@@ -80,7 +85,11 @@ struct SolverOptions {
   double MaskWarmupWeight() const {
     return lambda_mask_warmup >= 0 ? lambda_mask_warmup : lambda_mask;
   }
-  double lambda_multiview_ncc = 0.0;
+  // The patch term is on by default (0.15): with its outlier test it lowered CD on the scene-level
+  // captures by a third to a half, on the detailed shapes and on most objects, and cost the
+  // twelve-view scene 0.3 NC (docs/geometry.md, "The normal TV, and the patch term by default").
+  // The depth term stays off: it pulls a groove towards the tooth a neighbour sees in front of it.
+  double lambda_multiview_ncc = 0.15;
   double lambda_multiview_depth = 0.0;
   int multiview_from_iteration = 7000;
   int multiview_neighbours = 2;

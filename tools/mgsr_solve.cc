@@ -123,8 +123,11 @@ DEFINE_double(w_3d, 0.5, "Weight of the 3DGS loss in the mutual stage.");
 DEFINE_double(w_depth, 0.01, "Weight of the mutual depth loss.");
 DEFINE_double(lambda_l1, 0.8, "Render loss: lambda L1 + (1 - lambda) D-SSIM.");
 DEFINE_double(lambda_normal, -1,
-              "Weight of the normal consistency and normal TV terms; -1: 2.0 where the views have "
-              "masks or alpha, the reference's 0.05 where they have neither.");
+              "Weight of the normal consistency term; -1: 2.0 where the views have masks or "
+              "alpha, the reference's 0.05 where they have neither.");
+DEFINE_double(lambda_normal_tv, 0.05,
+              "Weight of the 2DGS branch's edge-aware normal TV (the reference's 0.05), "
+              "independent of --lambda_normal.");
 DEFINE_double(depth_tv_warmup_2d, -1,
               "Weight of the 2DGS branch's edge-aware depth TV in its warm-up; -1: the "
               "reference's 1.0, or 0 for a scene in the world (learnt background; then the 3DGS "
@@ -161,7 +164,7 @@ DEFINE_double(lambda_multiview_depth, -1,
               "default).");
 DEFINE_double(
     lambda_normal_mutual, -1,
-    "Weight of the normal terms in the mutual stage (before w_2d); -1: --lambda_normal's.");
+    "Weight of the normal consistency in the mutual stage (before w_2d); -1: --lambda_normal's.");
 DEFINE_bool(normal_depth_gradient, true,
             "The normal consistency also pulls the depth (false: only the rendered normals turn "
             "towards the depth's).");
@@ -311,6 +314,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
          "list_losses",
          "lambda_l1",
          "lambda_normal",
+         "lambda_normal_tv",
          "lambda_distortion",
          "lambda_mask",
          "lambda_mask_warmup",
@@ -435,6 +439,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   if (!(FLAGS_lambda_normal_mutual >= 0 || FLAGS_lambda_normal_mutual == -1))
     return Fail("--lambda_normal_mutual must be >= 0 (or -1 for --lambda_normal's)");
   options.lambda_normal_mutual = FLAGS_lambda_normal_mutual;
+  options.lambda_normal_tv = FLAGS_lambda_normal_tv;
   options.mutual_transmitted_weight = FLAGS_mutual_transmitted_weight;
   options.mutual_image_weight = 1.0 - FLAGS_mutual_transmitted_weight;
   if (FLAGS_auto_stop_window >= 0) options.auto_stop_window = FLAGS_auto_stop_window;

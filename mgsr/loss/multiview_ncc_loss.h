@@ -43,11 +43,15 @@ struct MultiviewNccConfig {
   int stride = 3;                    // pixel grid of the patch centres
   double min_variance = 1e-4;        // grey variance below which a patch has no texture
   double min_alpha = 0.5;            // centres where the render covers the pixel
-  double max_reprojection_px = 1.0;  // occlusion test (with the neighbours' depth)
+  double max_reprojection_px = 1.0;  // occlusion test (check_occlusion)
   // The patch must lie on the centre's plane: every pixel covered (alpha and mask at least
   // min_alpha) and within this many pixel footprints of the plane (<= 0: no test).
   double max_plane_offset_px = 1.0;
-  bool check_occlusion = true;  // read the neighbours' rendered depth for it
+  // Render each neighbour's depth every step and skip centres occluded there. Off by default: with
+  // the outlier test below it changed no mesh by more than the spread between runs, and the two
+  // renders cost a quarter of the run (docs/geometry.md, "The normal TV, and the patch term by
+  // default").
+  bool check_occlusion = false;
   // Pairs whose patches correlate this badly (1 - NCC above it) are outliers, not evidence: a
   // highlight or reflection that moves between the views, an occluder the depth test missed.
   // They are left out, as in PGSR; >= 2 keeps every pair.

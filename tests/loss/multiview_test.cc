@@ -160,6 +160,11 @@ TEST(MultiviewNccTest, ExactPlaneAgreesAndAWrongDepthDoesNot) {
   s.in.Set(Buffer::kDepth, &far.depth);
   const double wrong = no_occlusion.Evaluate(s.in, s.targets, 1.0, nullptr);
   EXPECT_GT(wrong, 10 * exact + 0.02);
+  // With the occlusion test every centre reprojects through the neighbours' (right) depth more
+  // than a pixel off: all skipped.
+  MultiviewNccConfig occlusion = c;
+  occlusion.check_occlusion = true;
+  EXPECT_EQ(MultiviewNccLoss(occlusion).Evaluate(s.in, s.targets, 1.0, nullptr), 0.0);
   // Its gradient pushes the depth back: a step against it lowers the loss.
   RenderGradientsD g;
   no_occlusion.Evaluate(s.in, s.targets, 1.0, &g);
@@ -250,8 +255,8 @@ TEST(MultiviewNccTest, PairsWhosePatchesDoNotCorrelateAreLeftOut) {
   keep_all.check_occlusion = false;
   keep_all.max_pair_loss = 2;
   MultiviewNccConfig by_default;
-  by_default.check_occlusion = false;
   EXPECT_EQ(by_default.max_pair_loss, 0.9);
+  EXPECT_FALSE(by_default.check_occlusion);
   const MultiviewNccLoss robust(by_default), plain(keep_all);
   // On the exact scene nothing is an outlier.
   EXPECT_EQ(robust.Evaluate(s.in, s.targets, 1.0, nullptr),

@@ -43,6 +43,18 @@ TEST(LossTableTest, ThePaperTableFollowsTheOptions) {
   const LossSpec* mnc = Find(t, Branch::kSurfels2D, Stage::kMutual, "normal_consistency");
   ASSERT_NE(mnc, nullptr);
   EXPECT_EQ(mnc->weight, 0.25 * 0.7);
+  // The normal TV keeps its own weight (the reference's 0.05 unless set), not the consistency's.
+  EXPECT_EQ(Find(t, Branch::kSurfels2D, Stage::kWarmup, "normal_tv")->weight, 0.05);
+  EXPECT_EQ(Find(t, Branch::kSurfels2D, Stage::kWarmup, "normal_tv")->first_iteration, 301);
+  EXPECT_EQ(Find(t, Branch::kSurfels2D, Stage::kMutual, "normal_tv")->weight, 0.25 * 0.05);
+  SolverOptions tv = o;
+  tv.lambda_normal_tv = 0.4;
+  const std::vector<LossSpec> t_tv = PaperLossTable(tv);
+  EXPECT_EQ(Find(t_tv, Branch::kSurfels2D, Stage::kWarmup, "normal_tv")->weight, 0.4);
+  EXPECT_EQ(Find(t_tv, Branch::kSurfels2D, Stage::kMutual, "normal_tv")->weight, 0.25 * 0.4);
+  EXPECT_EQ(Find(t_tv, Branch::kSurfels2D, Stage::kWarmup, "normal_consistency")->weight, 0.7);
+  tv.lambda_normal_tv = -1;
+  EXPECT_FALSE(tv.Validate().ok());
   // The photo rows sit behind the view's colour transform, the transmitted target does not.
   EXPECT_TRUE(Find(t, Branch::kGaussians3D, Stage::kMutual, "photo")->exposure);
   EXPECT_FALSE(Find(t, Branch::kSurfels2D, Stage::kMutual, "render_transmitted")->exposure);
