@@ -1,6 +1,8 @@
 // BM_LossSet3D / BM_LossSet2D: the full loss sets of the two branches (value and gradient) at
 // 256 and 512 pixels, BM_PhotoRow (the exposure-compensated render loss) and BM_Dssim alone, to
-// compare with the rasterizer's forward+backward (D-SSIM should stay well under a quarter of it).
+// compare with the rasterizer's forward+backward (D-SSIM should stay well under a quarter of it);
+// BM_MultiviewNcc, the multi-view patch term (on by default) against two neighbours, on a textured
+// plane seen exactly, so that every patch passes its tests and is compared.
 // Argument: image width (square images).
 #include <benchmark/benchmark.h>
 
@@ -8,6 +10,7 @@
 #include "mgsr/loss/dssim_loss.h"
 #include "mgsr/loss/edge_aware_tv_loss.h"
 #include "mgsr/loss/exposure_compensation.h"
+#include "mgsr/loss/multiview_ncc_loss.h"
 #include "mgsr/loss/mutual_depth_loss.h"
 #include "mgsr/loss/normal_consistency_loss.h"
 #include "mgsr/loss/problem.h"
@@ -62,6 +65,59 @@ mgsr::Problem MakeProblem() {
   return p;
 }
 
+// A textured plane through the origin seen by a view and two neighbours (square, `w` pixels):
+// rendered depth, normal and alpha of the view, grey photos of all three.
+struct PlaneViews {
+  mgsr::Camera view, nb[2];
+  mgsr::Image depth, normal, alpha, gray[3];
+  mgsr::RenderBuffers in;
+  mgsr::Targets targets;
+  explicit PlaneViews(int w)
+      : view(mgsr::bench::ShellCamera(w)),
+        nb{mgsr::LookAtCamera({1.0, -2.8, 0.8}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), w, w, view.fx,
+                              view.fy),
+           mgsr::LookAtCamera({-0.4, -2.9, 0.2}, {0, 0, 0}, Eigen::Vector3d::UnitZ(), w, w, view.fx,
+                              view.fy)},
+        depth(w, w, 1),
+        normal(w, w, 3),
+        alpha(w, w, 1) {
+    const Eigen::Vector3d n = Eigen::Vector3d(0.15, -1.0, 0.3).normalized();
+    const mgsr::Camera* cams[3] = {&view, &nb[0], &nb[1]};
+    for (int c = 0; c < 3; ++c) {
+      gray[c] = mgsr::Image(w, w, 1);
+      const Eigen::Vector3d C = cams[c]->Center();
+      for (int y = 0; y < w; ++y) {
+        for (int x = 0; x < w; ++x) {
+          const Eigen::Vector3d r = cams[c]->R.transpose() * cams[c]->PixelToRay(x + 0.5, y + 0.5);
+          const double t = -n.dot(C) / n.dot(r);  // z-depth: r has camera z = 1
+          const Eigen::Vector3d X = C + t * r;
+          gray[c].at(0, y, x) = static_cast<float>(
+              0.5 + 0.2 * std::sin(21 * X.x() + 4 * X.y()) * std::cos(15 * X.z() - 1.2 * X.x()) +
+              0.15 * std::sin(33 * X.y() + 9 * X.z()));
+          if (c > 0) continue;
+          depth.at(0, y, x) = static_cast<float>(t);
+          for (int k = 0; k < 3; ++k) normal.at(k, y, x) = static_cast<float>(-n[k]);
+          alpha.at(0, y, x) = 1.0f;
+        }
+      }
+    }
+    in.camera = &view;
+    in.Set(mgsr::Buffer::kDepth, &depth);
+    in.Set(mgsr::Buffer::kNormal, &normal);
+    in.Set(mgsr::Buffer::kAlpha, &alpha);
+    targets.gray = &gray[0];
+    for (int k = 0; k < 2; ++k) targets.neighbours[k] = {&nb[k], &gray[k + 1], nullptr};
+    targets.num_neighbours = 2;
+  }
+};
+
+void BM_MultiviewNcc(benchmark::State& state) {
+  PlaneViews v(static_cast<int>(state.range(0)));
+  const mgsr::MultiviewNccLoss term;
+  mgsr::RenderGradients g;
+  for (auto _ : state) benchmark::DoNotOptimize(term.Evaluate(v.in, v.targets, 1.0, &g));
+}
+
 void BM_LossSet3D(benchmark::State& state) {
   Inputs in(static_cast<int>(state.range(0)));
   const mgsr::Problem p = MakeProblem();
@@ -112,6 +168,12 @@ void BM_EdgeAwareTv(benchmark::State& state) {
 
 BENCHMARK(BM_LossSet3D)->Arg(256)->Arg(512)->ArgName("width")->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_LossSet2D)->Arg(256)->Arg(512)->ArgName("width")->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_MultiviewNcc)
+    ->Arg(256)
+    ->Arg(512)
+    ->Arg(1024)
+    ->ArgName("width")
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_EdgeAwareTv)
     ->ArgsProduct({{256, 512}, {1, 3}})
     ->ArgNames({"width", "channels"})

@@ -60,7 +60,8 @@ struct SolverOptions {
   // The edge-aware TV of the rendered normals: the reference's weight (its lambda_4 = 1 times its
   // normal weight 0.05), whatever lambda_normal is. It acts where neighbouring normals differ,
   // which on a smooth surface is little and at a crease is everything: tied to lambda_normal at
-  // 2.0 it rounded every edge of the detailed shapes (docs/geometry.md, "The normal TV").
+  // 2.0 it rounded every edge of the detailed shapes (docs/geometry.md, "The normal TV, and the
+  // patch term by default").
   double lambda_normal_tv = 0.05;
   // false: the normal consistency does not pull the depth (only the rendered normals turn).
   bool normal_depth_gradient = true;

@@ -150,6 +150,8 @@ void RegisterBuiltinLosses(LossRegistry* r) {
     MultiviewNccConfig m;
     m.patch_radius = static_cast<int>(Number(c, "patch_radius", m.patch_radius));
     m.stride = static_cast<int>(Number(c, "stride", m.stride));
+    const double max_centres = Number(c, "max_centres", m.max_centres);
+    m.max_centres = max_centres >= 1 && max_centres <= 1e9 ? static_cast<int>(max_centres) : 0;
     m.min_variance = Number(c, "min_variance", m.min_variance);
     m.min_alpha = Number(c, "min_alpha", m.min_alpha);
     m.max_reprojection_px = Number(c, "max_reprojection_px", m.max_reprojection_px);
@@ -163,10 +165,11 @@ void RegisterBuiltinLosses(LossRegistry* r) {
       m.check_occlusion = c["check_occlusion"].get<bool>();
     }
     if (m.patch_radius < 1 || m.patch_radius > 10 || m.stride < 1 || m.stride > 64 ||
-        !(m.min_variance >= 0) || !(m.max_reprojection_px > 0) || !(m.max_pair_loss > 0)) {
+        m.max_centres < 1 || !(m.min_variance >= 0) || !(m.max_reprojection_px > 0) ||
+        !(m.max_pair_loss > 0)) {
       *s = Status::Error(
-          "multiview_ncc: patch_radius in [1, 10], stride in [1, 64], min_variance >= 0, "
-          "max_reprojection_px > 0, max_pair_loss > 0");
+          "multiview_ncc: patch_radius in [1, 10], stride in [1, 64], max_centres in [1, 1e9], "
+          "min_variance >= 0, max_reprojection_px > 0, max_pair_loss > 0");
       return nullptr;
     }
     return std::make_unique<MultiviewNccLoss>(m);

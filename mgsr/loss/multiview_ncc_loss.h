@@ -7,6 +7,10 @@
 //
 //   L = sum over sampled pixels p (a grid of `stride`) and neighbours n of (1 - NCC(a_p, b_pn)) / M
 //
+// On a large image the grid widens so that it holds at most `max_centres` pixels: the cost of a
+// step stays bounded (PGSR samples a fixed number of pixels for the same reason) instead of growing
+// with the photo's size.
+//
 // a_p: the view's grey photo at the (2r + 1)^2 pixel centres q around p; b_pn: the neighbour's grey
 // photo, bilinearly sampled at H_pn q. With the plane n_c . X = d in the view's camera frame (n_c
 // the unit normal turned into the camera, d = n_c . X_p, X_p = D r_p), a pixel q's ray r_q maps to
@@ -41,6 +45,7 @@ namespace mgsr {
 struct MultiviewNccConfig {
   int patch_radius = 3;              // (2r + 1)^2 samples per patch
   int stride = 3;                    // pixel grid of the patch centres
+  int max_centres = 16384;           // the grid widens beyond `stride` to keep at most this many
   double min_variance = 1e-4;        // grey variance below which a patch has no texture
   double min_alpha = 0.5;            // centres where the render covers the pixel
   double max_reprojection_px = 1.0;  // occlusion test (check_occlusion)
@@ -81,6 +86,14 @@ class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
                  RenderGradientsT<T>* grad) const;
 
   const MultiviewNccConfig& config() const { return c_; }
+  // The centres' grid on a w x h image: `stride`, or wider where that grid would hold more than
+  // `max_centres` pixels.
+  int Stride(int w, int h) const {
+    int s = std::max(1, c_.stride);
+    const double pixels = static_cast<double>(w) * h;
+    while (c_.max_centres > 0 && pixels / (static_cast<double>(s) * s) > c_.max_centres) ++s;
+    return s;
+  }
 
  private:
   // Whether the (2r + 1)^2 patch around (x, y) lies on the plane of the centre (camera-frame unit
@@ -106,7 +119,7 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
   const ImageT<T>& G = *t.gray;
   const Camera& cam = *in.camera;
   const int w = D.width(), h = D.height();
-  const int r = std::max(0, c_.patch_radius), stride = std::max(1, c_.stride);
+  const int r = std::max(0, c_.patch_radius), stride = Stride(w, h);
   const int m = (2 * r + 1) * (2 * r + 1);
   const int rows = (h + stride - 1) / stride;
   // The sampled foreground centres: the normaliser (constant: alpha and the mask are constants).

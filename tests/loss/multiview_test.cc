@@ -288,6 +288,44 @@ TEST(MultiviewNccTest, PairsWhosePatchesDoNotCorrelateAreLeftOut) {
   }
 }
 
+// A large image: the centres' grid widens so that it holds at most max_centres pixels (512 x 384
+// at stride 3 would hold 21,888; a grid of 4 holds 12,288), and every centre that pulls lies on
+// it. A small image keeps its stride.
+TEST(MultiviewNccTest, LargeImagesSampleAtMostMaxCentres) {
+  TwoViewScene s(8);  // 512 x 384
+  const PlaneView far = RenderPlane(s.ref, s.origin, s.n, 1.01);
+  s.in.Set(Buffer::kDepth, &far.depth);
+  MultiviewNccConfig bounded;
+  EXPECT_EQ(bounded.max_centres, 16384);
+  MultiviewNccConfig every = bounded;
+  every.max_centres = 1000000000;
+  const MultiviewNccLoss a(bounded), b(every);
+  EXPECT_EQ(a.Stride(512, 384), 4);
+  EXPECT_EQ(b.Stride(512, 384), 3);
+  EXPECT_EQ(a.Stride(64, 48), 3);
+  for (const MultiviewNccLoss* term : {&a, &b}) {
+    RenderGradientsD g;
+    EXPECT_GT(term->Evaluate(s.in, s.targets, 1.0, &g), 0);
+    const ImageD& gd = g.Get(Buffer::kDepth);
+    const int stride = term->Stride(512, 384);
+    int pulled = 0, off_grid = 0;
+    for (int y = 0; y < gd.height(); ++y) {
+      for (int x = 0; x < gd.width(); ++x) {
+        if (gd.at(0, y, x) == 0) continue;
+        ++pulled;
+        off_grid += (x % stride != 0 || y % stride != 0);
+      }
+    }
+    EXPECT_EQ(off_grid, 0);
+    EXPECT_GT(pulled, 5000);
+    if (term == &a) {
+      EXPECT_LE(pulled, 16384);
+    } else {
+      EXPECT_GT(pulled, 16384);
+    }
+  }
+}
+
 TEST(MultiviewDepthTest, ExactPlaneReprojectsOntoItselfAndTheDerivativeIsExact) {
   TwoViewScene s;
   const MultiviewDepthLoss depth;
