@@ -39,14 +39,21 @@ TEST(LossTableTest, ThePaperTableFollowsTheOptions) {
   EXPECT_EQ(t.size(), 22u);
   EXPECT_EQ(Weight2D(t, Stage::kWarmup, "mask"), 0.3);
   EXPECT_EQ(Weight2D(t, Stage::kMutual, "mask"), 0.25 * 0.3);
+  // An option of its own moves its row's weights to `warmup` and `mutual`; a negative value of
+  // it is refused.
+  const auto expect_own_weight = [&o](double SolverOptions::*option, double value,
+                                      const std::string& row, double warmup, double mutual) {
+    SCOPED_TRACE(row);
+    SolverOptions own = o;
+    own.*option = value;
+    const std::vector<LossSpec> t_own = PaperLossTable(own);
+    EXPECT_EQ(Weight2D(t_own, Stage::kWarmup, row), warmup);
+    EXPECT_EQ(Weight2D(t_own, Stage::kMutual, row), mutual);
+    own.*option = -2;
+    EXPECT_FALSE(own.Validate().ok());
+  };
   // The warm-up's own silhouette weight, when given.
-  SolverOptions own = o;
-  own.lambda_mask_warmup = 4;
-  const std::vector<LossSpec> t_own = PaperLossTable(own);
-  EXPECT_EQ(Weight2D(t_own, Stage::kWarmup, "mask"), 4);
-  EXPECT_EQ(Weight2D(t_own, Stage::kMutual, "mask"), 0.25 * 0.3);
-  own.lambda_mask_warmup = -2;
-  EXPECT_FALSE(own.Validate().ok());
+  expect_own_weight(&SolverOptions::lambda_mask_warmup, 4, "mask", 4, 0.25 * 0.3);
   const LossSpec* nc = Find(t, Branch::kSurfels2D, Stage::kWarmup, "normal_consistency");
   ASSERT_NE(nc, nullptr);
   EXPECT_EQ(nc->weight, 0.7);
@@ -59,14 +66,10 @@ TEST(LossTableTest, ThePaperTableFollowsTheOptions) {
   ASSERT_NE(Find(t, Branch::kSurfels2D, Stage::kWarmup, "normal_tv"), nullptr);
   EXPECT_EQ(Find(t, Branch::kSurfels2D, Stage::kWarmup, "normal_tv")->first_iteration, 301);
   EXPECT_EQ(Weight2D(t, Stage::kMutual, "normal_tv"), 0.25 * 0.05);
+  expect_own_weight(&SolverOptions::lambda_normal_tv, 0.4, "normal_tv", 0.4, 0.25 * 0.4);
   SolverOptions tv = o;
   tv.lambda_normal_tv = 0.4;
-  const std::vector<LossSpec> t_tv = PaperLossTable(tv);
-  EXPECT_EQ(Weight2D(t_tv, Stage::kWarmup, "normal_tv"), 0.4);
-  EXPECT_EQ(Weight2D(t_tv, Stage::kMutual, "normal_tv"), 0.25 * 0.4);
-  EXPECT_EQ(Weight2D(t_tv, Stage::kWarmup, "normal_consistency"), 0.7);
-  tv.lambda_normal_tv = -1;
-  EXPECT_FALSE(tv.Validate().ok());
+  EXPECT_EQ(Weight2D(PaperLossTable(tv), Stage::kWarmup, "normal_consistency"), 0.7);
   // The photo rows sit behind the view's colour transform, the transmitted target does not.
   EXPECT_TRUE(Find(t, Branch::kGaussians3D, Stage::kMutual, "photo")->exposure);
   EXPECT_FALSE(Find(t, Branch::kSurfels2D, Stage::kMutual, "render_transmitted")->exposure);
