@@ -62,9 +62,10 @@ TEST(LossTableTest, ThePaperTableFollowsTheOptions) {
   ASSERT_NE(mnc, nullptr);
   EXPECT_EQ(mnc->weight, 0.25 * 0.7);
   // The normal TV keeps its own weight (the reference's 0.05 unless set), not the consistency's.
-  EXPECT_EQ(Weight2D(t, Stage::kWarmup, "normal_tv"), 0.05);
-  ASSERT_NE(Find(t, Branch::kSurfels2D, Stage::kWarmup, "normal_tv"), nullptr);
-  EXPECT_EQ(Find(t, Branch::kSurfels2D, Stage::kWarmup, "normal_tv")->first_iteration, 301);
+  const LossSpec* ntv = Find(t, Branch::kSurfels2D, Stage::kWarmup, "normal_tv");
+  ASSERT_NE(ntv, nullptr);
+  EXPECT_EQ(ntv->weight, 0.05);
+  EXPECT_EQ(ntv->first_iteration, 301);
   EXPECT_EQ(Weight2D(t, Stage::kMutual, "normal_tv"), 0.25 * 0.05);
   expect_own_weight(&SolverOptions::lambda_normal_tv, 0.4, "normal_tv", 0.4, 0.25 * 0.4);
   SolverOptions tv = o;
