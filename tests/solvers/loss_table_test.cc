@@ -39,21 +39,23 @@ TEST(LossTableTest, ThePaperTableFollowsTheOptions) {
   EXPECT_EQ(t.size(), 22u);
   EXPECT_EQ(Weight2D(t, Stage::kWarmup, "mask"), 0.3);
   EXPECT_EQ(Weight2D(t, Stage::kMutual, "mask"), 0.25 * 0.3);
-  // An option of its own moves its row's weights to `warmup` and `mutual`; a negative value of
-  // it is refused.
+  // An option of its own moves its row's weights to `warmup` and `mutual`; `refused` (a negative
+  // value that is not the option's "unset") is refused.
   const auto expect_own_weight = [&o](double SolverOptions::*option, double value,
-                                      const std::string& row, double warmup, double mutual) {
+                                      const std::string& row, double warmup, double mutual,
+                                      double refused) {
     SCOPED_TRACE(row);
     SolverOptions own = o;
     own.*option = value;
     const std::vector<LossSpec> t_own = PaperLossTable(own);
     EXPECT_EQ(Weight2D(t_own, Stage::kWarmup, row), warmup);
     EXPECT_EQ(Weight2D(t_own, Stage::kMutual, row), mutual);
-    own.*option = -2;
+    own.*option = refused;
     EXPECT_FALSE(own.Validate().ok());
   };
   // The warm-up's own silhouette weight, when given.
-  expect_own_weight(&SolverOptions::lambda_mask_warmup, 4, "mask", 4, 0.25 * 0.3);
+  // (-1 means "unset" there, so -2 is the value refused.)
+  expect_own_weight(&SolverOptions::lambda_mask_warmup, 4, "mask", 4, 0.25 * 0.3, -2);
   const LossSpec* nc = Find(t, Branch::kSurfels2D, Stage::kWarmup, "normal_consistency");
   ASSERT_NE(nc, nullptr);
   EXPECT_EQ(nc->weight, 0.7);
@@ -67,7 +69,7 @@ TEST(LossTableTest, ThePaperTableFollowsTheOptions) {
   EXPECT_EQ(ntv->weight, 0.05);
   EXPECT_EQ(ntv->first_iteration, 301);
   EXPECT_EQ(Weight2D(t, Stage::kMutual, "normal_tv"), 0.25 * 0.05);
-  expect_own_weight(&SolverOptions::lambda_normal_tv, 0.4, "normal_tv", 0.4, 0.25 * 0.4);
+  expect_own_weight(&SolverOptions::lambda_normal_tv, 0.4, "normal_tv", 0.4, 0.25 * 0.4, -1);
   SolverOptions tv = o;
   tv.lambda_normal_tv = 0.4;
   EXPECT_EQ(Weight2D(PaperLossTable(tv), Stage::kWarmup, "normal_consistency"), 0.7);
