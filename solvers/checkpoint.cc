@@ -124,8 +124,10 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
     // Options added after a checkpoint was written, with the value runs had before them.
     // (A run from before lambda_normal_tv whose normal TV was 2.0 is still refused: the loss
     // table it recorded, option "losses", differs.)
-    static const std::map<std::string, std::string> kBefore = {
-        {"coarse", "none"}, {"lambda_mask_warmup", "-1"}, {"lambda_normal_tv", "0.05"}};
+    static const std::map<std::string, std::string> kBefore = {{"coarse", "none"},
+                                                               {"lambda_mask_warmup", "-1"},
+                                                               {"lambda_normal_tv", "0.05"},
+                                                               {"position_lr_max_steps_2d", "-1"}};
     const auto before = kBefore.find(name);
     if (it == recorded.end() && before != kBefore.end() && before->second == value) continue;
     if (it == recorded.end()) {

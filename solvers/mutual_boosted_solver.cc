@@ -19,18 +19,18 @@ double Now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-// Log-linear decay from init to final over max_steps (method.md 1.8).
-double PositionLearningRate(const SolverOptions& o, int step, double extent) {
-  const double t = std::clamp(static_cast<double>(step) / o.position_lr_max_steps, 0.0, 1.0);
+// Log-linear decay from init to final over the branch's decay steps (method.md 1.8).
+double PositionLearningRate(const SolverOptions& o, Branch branch, int step, double extent) {
+  const double t = std::clamp(static_cast<double>(step) / o.PositionDecaySteps(branch), 0.0, 1.0);
   return extent *
          std::exp(std::log(o.position_lr_init) * (1 - t) + std::log(o.position_lr_final) * t);
 }
 
-// The rates of a step by kind (the primitive types map their blocks onto them), with the
-// sqrt(batch) rule (SolverOptions::batch_sqrt_lr).
-RateSchedule RatesAtStep(const SolverOptions& o, int step, double extent) {
+// The rates of a branch's step by kind (the primitive types map their blocks onto them), with
+// the sqrt(batch) rule (SolverOptions::batch_sqrt_lr).
+RateSchedule RatesAtStep(const SolverOptions& o, Branch branch, int step, double extent) {
   RateSchedule s;
-  s.position = PositionLearningRate(o, step, extent);
+  s.position = PositionLearningRate(o, branch, step, extent);
   s.scale = o.scaling_lr;
   s.rotation = o.rotation_lr;
   s.opacity = o.opacity_lr;
@@ -162,7 +162,6 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   common.extent = scene.extent;
   const SolverOptions* o = &options_;
   const double extent = scene.extent;
-  common.rate_schedule = [o, extent](int it) { return RatesAtStep(*o, it, extent); };
   common.auto_stop_min_iteration = options.warmup_min_iterations;
   common.auto_stop_window = options.auto_stop_window;
   common.auto_stop_range = options.auto_stop_range;
@@ -173,6 +172,9 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   common.environment = options.environment;
 
   BranchTrainerOptions o2 = common;
+  o2.rate_schedule = [o, extent](int it) {
+    return RatesAtStep(*o, Branch::kSurfels2D, it, extent);
+  };
   o2.schedule = options.schedule_2d;
   o2.density.max_primitives = options.max_surfels;
   o2.background = options.background_2d;
@@ -185,6 +187,9 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   surfels_ = std::make_unique<SurfelTrainer>(std::move(surfels), r2, o2, e2, &rng_);
 
   BranchTrainerOptions o3 = common;
+  o3.rate_schedule = [o, extent](int it) {
+    return RatesAtStep(*o, Branch::kGaussians3D, it, extent);
+  };
   o3.schedule = options.schedule_3d;
   o3.density.max_primitives = options.max_gaussians;
   o3.background = options.background_3d;

@@ -126,9 +126,16 @@ struct SolverOptions {
   // over every pixel of every training view, stay below this is dropped (0: off), so the saved
   // models hold only what renders.
   double prune_contribution = 0;
-  // Learning rates (method.md 1.8); positions scale with the scene extent and decay log-linearly.
+  // Learning rates (method.md 1.8); positions scale with the scene extent and decay log-linearly
+  // over position_lr_max_steps iterations of each stage (the reference's 30,000), the 2DGS
+  // branch's over position_lr_max_steps_2d when that is >= 1 (both presets: 2,250, FromPreset).
   double position_lr_init = 1.6e-4, position_lr_final = 1.6e-6;
   int position_lr_max_steps = 30000;
+  int position_lr_max_steps_2d = -1;
+  int PositionDecaySteps(Branch branch) const {
+    return branch == Branch::kSurfels2D && position_lr_max_steps_2d >= 1 ? position_lr_max_steps_2d
+                                                                         : position_lr_max_steps;
+  }
   double feature_lr = 2.5e-3, opacity_lr = 0.05, scaling_lr = 5e-3, rotation_lr = 1e-3;
   // SH degree grows by one every `sh_interval` warm-up iterations up to `sh_degree`.
   int sh_degree = 3, sh_interval = 1000;
@@ -211,7 +218,9 @@ struct SolverOptions {
   // batches of that many views sees as many views as a run without.
   void ScaleIterationsForBatch(int views);
 
-  // "paper": the reference counts; "fast": every iteration count scaled to minutes on a laptop CPU.
+  // "paper": the reference's stage lengths, with fast's schedule for what shapes the surface (the
+  // 2DGS position rate's decay, the start of the normal and patch terms); "fast": every iteration
+  // count scaled to minutes on a laptop CPU.
   static bool FromPreset(const std::string& name, SolverOptions* options);
   // Sets train_2d / train_3d / reflection for "mgsr", "2dgs" (ablation B), "3dgs" (plain, no
   // reflection) or "3dgs-ref" (ablation A). A single branch gets the warm-up cap plus the mutual

@@ -78,6 +78,11 @@ DEFINE_string(surfel_init, "neighbours",
 DEFINE_int32(warmup_max_iterations, -1, "Cap of warm-up iterations per branch (-1: preset).");
 DEFINE_int32(warmup_min_iterations, -1, "Auto-stop only after this iteration (-1: preset).");
 DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");
+DEFINE_int32(position_lr_max_steps, -1,
+             "The 3DGS position learning rate decays over this many iterations of each stage "
+             "(-1: preset, fast 2250, paper the reference's 30000).");
+DEFINE_int32(position_lr_max_steps_2d, -1,
+             "The same for the 2DGS branch (-1: preset, 2250 in both; the reference's is 30000).");
 DEFINE_int32(coarse_max_size, 800,
              "Coarse start: views longer than this train the first part of each stage "
              "(--coarse_fraction) downscaled by the smallest integer that fits them (0: always "
@@ -306,8 +311,9 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
          "profile"}},
        {"Method and schedule",
         {"preset", "method", "mutual_mode", "warmup_max_iterations", "warmup_min_iterations",
-         "mutual_iterations", "auto_stop", "auto_stop_window", "auto_stop_range", "bidirectional",
-         "coarse_max_size", "coarse_fraction", "coarse_levels", "seed"}},
+         "mutual_iterations", "position_lr_max_steps", "position_lr_max_steps_2d", "auto_stop",
+         "auto_stop_window", "auto_stop_range", "bidirectional", "coarse_max_size",
+         "coarse_fraction", "coarse_levels", "seed"}},
        {"Batches and MPI", {"batch_views", "batch_sqrt_lr", "batch_keep_iterations"}},
        {"Losses",
         {"loss_config",
@@ -379,11 +385,20 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
         std::pair{FLAGS_mutual_iterations, "--mutual_iterations"}}) {
     if (value < -1) return Fail(std::string(name) + " must be >= 0 (or -1 for the preset's)");
   }
+  for (const auto& [value, name] :
+       {std::pair{FLAGS_position_lr_max_steps, "--position_lr_max_steps"},
+        std::pair{FLAGS_position_lr_max_steps_2d, "--position_lr_max_steps_2d"}}) {
+    if (value == 0 || value < -1)
+      return Fail(std::string(name) + " must be >= 1 (or -1 for the preset's)");
+  }
   if (!(FLAGS_far_radius > 1 && FLAGS_far_radius <= 1e4))
     return Fail("--far_radius must be in (1, 10000] scene extents");
   if (FLAGS_warmup_max_iterations >= 0) options.warmup_max_iterations = FLAGS_warmup_max_iterations;
   if (FLAGS_warmup_min_iterations >= 0) options.warmup_min_iterations = FLAGS_warmup_min_iterations;
   if (FLAGS_mutual_iterations >= 0) options.mutual_iterations = FLAGS_mutual_iterations;
+  if (FLAGS_position_lr_max_steps > 0) options.position_lr_max_steps = FLAGS_position_lr_max_steps;
+  if (FLAGS_position_lr_max_steps_2d > 0)
+    options.position_lr_max_steps_2d = FLAGS_position_lr_max_steps_2d;
   if (!mgsr::SolverOptions::ApplyMethod(FLAGS_method, &options))
     return Fail("unknown --method '" + FLAGS_method + "' (mgsr, 2dgs, 3dgs or 3dgs-ref)");
   options.auto_stop = FLAGS_auto_stop;

@@ -251,6 +251,19 @@ TEST(MutualBoostedSolverTest, DensityStrategiesSeeTheStepsPositionRate) {
                 std::pow(o.position_lr_final / o.position_lr_init, 10.0 / o.position_lr_max_steps));
     EXPECT_LE(lr, 1.0001 * o.position_lr_init * scene.extent);
   }
+  // The 2DGS branch's own decay: over its 10 steps here, while the 3DGS branch keeps
+  // position_lr_max_steps. The branches step in turn, 2DGS first.
+  o.position_lr_max_steps_2d = 10;
+  PositionRateProbe::seen.clear();
+  MutualBoostedSolver own_decay(o, scene);
+  ASSERT_TRUE(own_decay.Solve(&summary).ok());
+  ASSERT_EQ(PositionRateProbe::seen.size(), 20u);
+  EXPECT_NEAR(PositionRateProbe::seen[18], o.position_lr_final * scene.extent,
+              1e-4 * o.position_lr_final * scene.extent);
+  EXPECT_GT(PositionRateProbe::seen[19],
+            0.99 * o.position_lr_init * scene.extent *
+                std::pow(o.position_lr_final / o.position_lr_init, 10.0 / o.position_lr_max_steps));
+  EXPECT_LT(PositionRateProbe::seen[2], PositionRateProbe::seen[3]);
 }
 
 TEST(MutualBoostedSolverTest, ProfileAccountsForEachStage) {
@@ -416,6 +429,47 @@ TEST(MutualBoostedSolverTest, InvalidOptionsAreRejected) {
   o = TinyOptions();
   o.background_3d = std::nanf("");
   EXPECT_EQ(o.Validate().message(), "background levels must be in [0, 1]");
+  o = TinyOptions();
+  o.position_lr_max_steps = 0;
+  EXPECT_EQ(o.Validate().message(), "--position_lr_max_steps must be >= 1");
+}
+
+// `paper` keeps the reference's stage lengths but shapes the surface on fast's schedule: the 2DGS
+// position rate's decay and the start of the normal and patch terms; the 3DGS branch keeps the
+// reference's decay.
+TEST(SolverOptionsTest, PaperShapesTheSurfaceOnFastsSchedule) {
+  SolverOptions paper, fast;
+  ASSERT_TRUE(SolverOptions::FromPreset("paper", &paper));
+  ASSERT_TRUE(SolverOptions::FromPreset("fast", &fast));
+  EXPECT_EQ(paper.warmup_max_iterations, 20000);
+  EXPECT_EQ(paper.warmup_min_iterations, 15000);
+  EXPECT_EQ(paper.mutual_iterations, 20000);
+  EXPECT_EQ(fast.warmup_max_iterations, 1500);
+  EXPECT_EQ(fast.mutual_iterations, 1500);
+  EXPECT_EQ(fast.position_lr_max_steps_2d, -1);  // as before the option: both branches alike
+  for (const SolverOptions* o : {&paper, &fast}) {
+    EXPECT_EQ(o->PositionDecaySteps(Branch::kSurfels2D), 2250);
+    EXPECT_EQ(o->normal_from_iteration, 525);
+    EXPECT_EQ(o->multiview_from_iteration, 525);
+    EXPECT_TRUE(o->Validate().ok()) << o->Validate().message();
+  }
+  EXPECT_EQ(paper.PositionDecaySteps(Branch::kGaussians3D), 30000);
+  EXPECT_EQ(fast.PositionDecaySteps(Branch::kGaussians3D), 2250);
+  // The rows the loss table builds start where the options say.
+  for (const LossSpec& row : paper.LossTable()) {
+    if (row.branch == Branch::kSurfels2D && row.stage == Stage::kWarmup &&
+        (row.name == "normal_consistency" || row.name == "normal_tv" ||
+         row.name == "multiview_ncc")) {
+      EXPECT_EQ(row.first_iteration, 526) << row.name;
+    }
+  }
+  SolverOptions defaults;
+  EXPECT_EQ(defaults.PositionDecaySteps(Branch::kSurfels2D), 30000);
+  defaults.position_lr_max_steps_2d = 0;
+  EXPECT_EQ(defaults.Validate().message(),
+            "--position_lr_max_steps_2d must be >= 1 (or -1: --position_lr_max_steps)");
+  SolverOptions unknown;
+  EXPECT_FALSE(SolverOptions::FromPreset("slow", &unknown));
 }
 
 }  // namespace
@@ -601,10 +655,12 @@ TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
   ExpectRefused(&reader, bad, Reseal(edited), "next iteration 99");
 
   // Written before an option existed: accepted when the run has the value runs had before it
-  // (the coarse start: none; the warm-up's own silhouette weight: none, -1), refused otherwise.
+  // (the coarse start: none; the warm-up's own silhouette weight and the 2DGS branch's own
+  // position decay: none, -1), refused otherwise.
   {
     std::string old_body = Body(data);
-    for (const std::string line : {"coarse = none\n", "lambda_mask_warmup = -1\n"}) {
+    for (const std::string line :
+         {"coarse = none\n", "lambda_mask_warmup = -1\n", "position_lr_max_steps_2d = -1\n"}) {
       const size_t at = old_body.find(line);
       ASSERT_NE(at, std::string::npos) << line;
       old_body.erase(at, line.size());
@@ -617,6 +673,11 @@ TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
     MutualBoostedSolver s(with_warmup_weight, scene);
     ExpectRefused(&s, bad, Reseal(old_body),
                   "the checkpoint does not record option lambda_mask_warmup");
+    SolverOptions with_own_decay = o;
+    with_own_decay.position_lr_max_steps_2d = 2250;
+    MutualBoostedSolver d(with_own_decay, scene);
+    ExpectRefused(&d, bad, Reseal(old_body),
+                  "the checkpoint does not record option position_lr_max_steps_2d");
   }
   // Finished in the warm-up; then the random generator's state 0 (stage, next iteration and
   // finished flag, the SH degree, the summary's mutual count and three times, then the state).
