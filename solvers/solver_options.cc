@@ -21,7 +21,7 @@ bool SolverOptions::FromPreset(const std::string& name, SolverOptions* o) {
   // fast: 20,000 -> 1,500 iterations per stage; every schedule keeps its place in the run.
   const double f = 0.075;
   // Both presets shape the surface on fast's schedule: the 2DGS position rate decays over 2,250
-  // iterations of each stage, and the normal and patch terms start at warm-up iteration 525
+  // iterations of each stage, and the normal and patch terms start after warm-up iteration 525
   // (the reference's 30,000 and 7,000, scaled). `paper`'s longer stages do not stretch them: in
   // the thousands of iterations at a high rate or without the normal terms, each step's one
   // view, lit its own way, bends the surfels to explain its light (docs/geometry.md, "Training

@@ -128,7 +128,8 @@ struct SolverOptions {
   double prune_contribution = 0;
   // Learning rates (method.md 1.8); positions scale with the scene extent and decay log-linearly
   // over position_lr_max_steps iterations of each stage (the reference's 30,000), the 2DGS
-  // branch's over position_lr_max_steps_2d when that is >= 1 (both presets: 2,250, FromPreset).
+  // branch's over position_lr_max_steps_2d when that is >= 1 (-1: the same). Both presets
+  // decay the 2DGS rate over 2,250 (FromPreset).
   double position_lr_init = 1.6e-4, position_lr_final = 1.6e-6;
   int position_lr_max_steps = 30000;
   int position_lr_max_steps_2d = -1;

@@ -79,10 +79,12 @@ DEFINE_int32(warmup_max_iterations, -1, "Cap of warm-up iterations per branch (-
 DEFINE_int32(warmup_min_iterations, -1, "Auto-stop only after this iteration (-1: preset).");
 DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");
 DEFINE_int32(position_lr_max_steps, -1,
-             "The 3DGS position learning rate decays over this many iterations of each stage "
-             "(-1: preset, fast 2250, paper the reference's 30000).");
+             "The position learning rate decays over this many iterations of each stage: the "
+             "3DGS branch's, and the 2DGS branch's unless --position_lr_max_steps_2d (-1: "
+             "preset, fast 2250, paper the reference's 30000).");
 DEFINE_int32(position_lr_max_steps_2d, -1,
-             "The same for the 2DGS branch (-1: preset, 2250 in both; the reference's is 30000).");
+             "The 2DGS branch's own decay (-1: preset, paper 2250, fast the same as "
+             "--position_lr_max_steps; the reference's is 30000).");
 DEFINE_int32(coarse_max_size, 800,
              "Coarse start: views longer than this train the first part of each stage "
              "(--coarse_fraction) downscaled by the smallest integer that fits them (0: always "
