@@ -171,10 +171,12 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   common.exposure_mean_prior = options.exposure_mean_prior;
   common.environment = options.environment;
 
-  BranchTrainerOptions o2 = common;
-  o2.rate_schedule = [o, extent](int it) {
-    return RatesAtStep(*o, Branch::kSurfels2D, it, extent);
+  // Each branch's rates: its own position decay (SolverOptions::PositionDecaySteps).
+  const auto rates_of = [o, extent](Branch branch) {
+    return [o, extent, branch](int it) { return RatesAtStep(*o, branch, it, extent); };
   };
+  BranchTrainerOptions o2 = common;
+  o2.rate_schedule = rates_of(Branch::kSurfels2D);
   o2.schedule = options.schedule_2d;
   o2.density.max_primitives = options.max_surfels;
   o2.background = options.background_2d;
@@ -187,9 +189,7 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   surfels_ = std::make_unique<SurfelTrainer>(std::move(surfels), r2, o2, e2, &rng_);
 
   BranchTrainerOptions o3 = common;
-  o3.rate_schedule = [o, extent](int it) {
-    return RatesAtStep(*o, Branch::kGaussians3D, it, extent);
-  };
+  o3.rate_schedule = rates_of(Branch::kGaussians3D);
   o3.schedule = options.schedule_3d;
   o3.density.max_primitives = options.max_gaussians;
   o3.background = options.background_3d;
