@@ -219,9 +219,9 @@ struct SolverOptions {
   // batches of that many views sees as many views as a run without.
   void ScaleIterationsForBatch(int views);
 
-  // "paper": the reference's stage lengths, with fast's schedule for what shapes the surface (the
-  // 2DGS position rate's decay, the start of the normal and patch terms); "fast": every iteration
-  // count scaled to minutes on a laptop CPU.
+  // "paper": the reference's mutual stage (20,000 iterations) and schedules, with fast's warm-up
+  // and fast's schedule for what shapes the surface (the 2DGS position rate's decay, the start of
+  // the normal and patch terms); "fast": every iteration count scaled to minutes on a laptop CPU.
   static bool FromPreset(const std::string& name, SolverOptions* options);
   // Sets train_2d / train_3d / reflection for "mgsr", "2dgs" (ablation B), "3dgs" (plain, no
   // reflection) or "3dgs-ref" (ablation A). A single branch gets the warm-up cap plus the mutual

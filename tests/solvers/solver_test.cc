@@ -433,20 +433,22 @@ TEST(MutualBoostedSolverTest, InvalidOptionsAreRejected) {
   EXPECT_EQ(o.Validate().message(), "--position_lr_max_steps must be >= 1");
 }
 
-// `paper` keeps the reference's stage lengths but shapes the surface on fast's schedule: the 2DGS
-// position rate's decay and the start of the normal and patch terms; the 3DGS branch keeps the
-// reference's decay.
+// `paper` keeps the reference's mutual stage but warms up and shapes the surface on fast's
+// schedule: the warm-up's length, the 2DGS position rate's decay and the start of the normal and
+// patch terms; the 3DGS branch keeps the reference's decay and both the reference's density
+// schedules.
 TEST(SolverOptionsTest, PaperShapesTheSurfaceOnFastsSchedule) {
   SolverOptions paper, fast;
   ASSERT_TRUE(SolverOptions::FromPreset("paper", &paper));
   ASSERT_TRUE(SolverOptions::FromPreset("fast", &fast));
-  EXPECT_EQ(paper.warmup_max_iterations, 20000);
-  EXPECT_EQ(paper.warmup_min_iterations, 15000);
   EXPECT_EQ(paper.mutual_iterations, 20000);
-  EXPECT_EQ(fast.warmup_max_iterations, 1500);
   EXPECT_EQ(fast.mutual_iterations, 1500);
   EXPECT_EQ(fast.position_lr_max_steps_2d, -1);  // as before the option: both branches alike
+  EXPECT_EQ(paper.schedule_2d.densify_until, 15000);
+  EXPECT_EQ(fast.schedule_2d.densify_until, 1000);
   for (const SolverOptions* o : {&paper, &fast}) {
+    EXPECT_EQ(o->warmup_min_iterations, 1125);
+    EXPECT_EQ(o->warmup_max_iterations, 1500);
     EXPECT_EQ(o->PositionDecaySteps(Branch::kSurfels2D), 2250);
     EXPECT_EQ(o->normal_from_iteration, 525);
     EXPECT_EQ(o->multiview_from_iteration, 525);
