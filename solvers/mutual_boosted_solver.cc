@@ -11,34 +11,13 @@
 #include "mgsr/loss/loss_registry.h"
 #include "mgsr/model/init_from_points.h"
 #include "solvers/exposure_fit.h"
+#include "solvers/step_rates.h"
 
 namespace mgsr {
 namespace {
 
 double Now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-// Log-linear decay from init to final over the branch's decay steps (method.md 1.8).
-double PositionLearningRate(const SolverOptions& o, Branch branch, int step, double extent) {
-  const double t = std::clamp(static_cast<double>(step) / o.PositionDecaySteps(branch), 0.0, 1.0);
-  return extent *
-         std::exp(std::log(o.position_lr_init) * (1 - t) + std::log(o.position_lr_final) * t);
-}
-
-// The rates of a branch's step by kind (the primitive types map their blocks onto them), with
-// the sqrt(batch) rule (SolverOptions::batch_sqrt_lr).
-RateSchedule RatesAtStep(const SolverOptions& o, Branch branch, int step, double extent) {
-  RateSchedule s;
-  s.position = PositionLearningRate(o, branch, step, extent);
-  s.scale = o.scaling_lr;
-  s.rotation = o.rotation_lr;
-  s.opacity = o.opacity_lr;
-  s.color = o.feature_lr;
-  s.reflection = o.reflection;
-  if (o.batch_views > 1 && o.batch_sqrt_lr)
-    s.batch_factor = static_cast<float>(std::sqrt(static_cast<double>(o.batch_views)));
-  return s;
 }
 
 // What the mutual stage hands a learning branch from the supervising one (method.md 1.5): the

@@ -288,6 +288,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"opacity_lr", Text(opacity_lr)},
           {"scaling_lr", Text(scaling_lr)},
           {"rotation_lr", Text(rotation_lr)},
+          {"surfel_shape_decay", Text(surfel_shape_decay)},
           {"sh_degree", Text(sh_degree)},
           {"sh_interval", Text(sh_interval)},
           {"background_2d", Text(background_2d)},

@@ -138,6 +138,13 @@ struct SolverOptions {
                                                                          : position_lr_max_steps;
   }
   double feature_lr = 2.5e-3, opacity_lr = 0.05, scaling_lr = 5e-3, rotation_lr = 1e-3;
+  // In a stage longer than the 2DGS branch's position decay, let the surfels' shape settle after
+  // their position has: from step PositionDecaySteps(2D) on, the 2DGS scale and rotation rates
+  // fall log-linearly by position_lr_final / position_lr_init over as many steps again. A stage
+  // that ends before that (`fast`'s) is unchanged. Off by default: in `paper`'s 20,000 mutual
+  // iterations it keeps a room's floor from bending to each view's light (indoor_mirror), but
+  // costs detailed shapes their grooves (the gear); docs/geometry.md, "Training longer".
+  bool surfel_shape_decay = false;
   // SH degree grows by one every `sh_interval` warm-up iterations up to `sh_degree`.
   int sh_degree = 3, sh_interval = 1000;
   // Grey level each branch renders on and composites its masked photos on: 2DGS white, 3DGS black

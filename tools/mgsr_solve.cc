@@ -85,6 +85,10 @@ DEFINE_int32(position_lr_max_steps, -1,
 DEFINE_int32(position_lr_max_steps_2d, -1,
              "The 2DGS branch's own decay (-1: preset, paper 2250, fast the same as "
              "--position_lr_max_steps; the reference's is 30000).");
+DEFINE_bool(surfel_shape_decay, false,
+            "In a stage longer than the 2DGS position decay (paper's mutual stage), the 2DGS "
+            "scale and rotation rates then decay the same way, so the surfels' shape settles: "
+            "steadier large surfaces under changing light, shallower grooves.");
 DEFINE_int32(coarse_max_size, 800,
              "Coarse start: views longer than this train the first part of each stage "
              "(--coarse_fraction) downscaled by the smallest integer that fits them (0: always "
@@ -313,9 +317,9 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
          "profile"}},
        {"Method and schedule",
         {"preset", "method", "mutual_mode", "warmup_max_iterations", "warmup_min_iterations",
-         "mutual_iterations", "position_lr_max_steps", "position_lr_max_steps_2d", "auto_stop",
-         "auto_stop_window", "auto_stop_range", "bidirectional", "coarse_max_size",
-         "coarse_fraction", "coarse_levels", "seed"}},
+         "mutual_iterations", "position_lr_max_steps", "position_lr_max_steps_2d",
+         "surfel_shape_decay", "auto_stop", "auto_stop_window", "auto_stop_range", "bidirectional",
+         "coarse_max_size", "coarse_fraction", "coarse_levels", "seed"}},
        {"Batches and MPI", {"batch_views", "batch_sqrt_lr", "batch_keep_iterations"}},
        {"Losses",
         {"loss_config",
@@ -401,6 +405,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   if (FLAGS_position_lr_max_steps > 0) options.position_lr_max_steps = FLAGS_position_lr_max_steps;
   if (FLAGS_position_lr_max_steps_2d > 0)
     options.position_lr_max_steps_2d = FLAGS_position_lr_max_steps_2d;
+  options.surfel_shape_decay = FLAGS_surfel_shape_decay;
   if (!mgsr::SolverOptions::ApplyMethod(FLAGS_method, &options))
     return Fail("unknown --method '" + FLAGS_method + "' (mgsr, 2dgs, 3dgs or 3dgs-ref)");
   options.auto_stop = FLAGS_auto_stop;

@@ -657,11 +657,11 @@ TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
 
   // Written before an option existed: accepted when the run has the value runs had before it
   // (the coarse start: none; the warm-up's own silhouette weight and the 2DGS branch's own
-  // position decay: none, -1), refused otherwise.
+  // position decay: none, -1; the surfels' shape decay: off), refused otherwise.
   {
     std::string old_body = Body(data);
-    for (const std::string line :
-         {"coarse = none\n", "lambda_mask_warmup = -1\n", "position_lr_max_steps_2d = -1\n"}) {
+    for (const std::string line : {"coarse = none\n", "lambda_mask_warmup = -1\n",
+                                   "position_lr_max_steps_2d = -1\n", "surfel_shape_decay = 0\n"}) {
       const size_t at = old_body.find(line);
       ASSERT_NE(at, std::string::npos) << line;
       old_body.erase(at, line.size());
@@ -679,6 +679,11 @@ TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
     MutualBoostedSolver d(with_own_decay, scene);
     ExpectRefused(&d, bad, Reseal(old_body),
                   "the checkpoint does not record option position_lr_max_steps_2d");
+    SolverOptions with_shape_decay = o;
+    with_shape_decay.surfel_shape_decay = true;
+    MutualBoostedSolver sd(with_shape_decay, scene);
+    ExpectRefused(&sd, bad, Reseal(old_body),
+                  "the checkpoint does not record option surfel_shape_decay");
   }
   // Finished in the warm-up; then the random generator's state 0 (stage, next iteration and
   // finished flag, the SH degree, the summary's mutual count and three times, then the state).
