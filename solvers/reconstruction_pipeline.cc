@@ -712,6 +712,12 @@ Status ReconstructionPipeline::ChooseSceneSettings(RunState* st) {
                            : "the reference's: no masks or alpha to tell the object from its "
                              "backdrop");
   }
+  if (o.distortion_from_scene) {
+    options.lambda_distortion = foreground ? 0.0 : kDistortionWeightWithoutForeground;
+    std::printf("depth distortion: %g (%s)\n", options.lambda_distortion,
+                foreground ? "the reference's: the views have masks or alpha"
+                           : "no masks or alpha: keeps the surfels in one layer");
+  }
   if (foreground && (o.mask_from_scene || o.one_sided_from_scene)) {
     if (o.mask_from_scene) options.lambda_mask = kMaskWeightWithForeground;
     if (o.one_sided_from_scene) options.normal_one_sided = true;

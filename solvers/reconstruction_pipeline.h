@@ -66,6 +66,14 @@ struct ReconstructionOptions {
   // differences alone raised CD on the scene-level captures).
   bool mask_from_scene = false;
   bool one_sided_from_scene = false;
+  // Sets solver.lambda_distortion from the scene: kDistortionWeightWithoutForeground (1000, 2DGS's
+  // weight for its object scenes) where no mask or alpha tells the object from its backdrop, the
+  // reference's 0 where they do. Without masks nothing else keeps surfels in one layer: over a
+  // long mutual stage a second layer, each view seeing its own, fits each photo's light (harness
+  // indoor_mirror, `paper`: CD x1000 28.97 -> 19.47; docs/geometry.md, "Training longer"). With
+  // masks it moved the harness within the spread between seeds. Off: solver.lambda_distortion
+  // as given.
+  bool distortion_from_scene = false;
   // Sets the depth TVs (both branches') from the scene: off where the background is learnt (a
   // scene in the world: no masks, photos whose borders vary), the reference's weights (solver's
   // depth_tv_* as given) otherwise. In a scene-level capture every silhouette, horizon and

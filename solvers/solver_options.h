@@ -25,6 +25,9 @@ struct BranchSchedule {
 // whose pixels are known (masks or alpha; docs/geometry.md, state D).
 constexpr double kReferenceNormalWeight = 0.05;
 constexpr double kNormalWeightWithForeground = 2.0;
+// The 2DGS depth distortion where no mask tells the object from its backdrop (2DGS's weight for
+// its object scenes; ReconstructionOptions::distortion_from_scene).
+constexpr double kDistortionWeightWithoutForeground = 1000.0;
 // The silhouette term's weight where the views have masks or alpha (docs/geometry.md).
 constexpr double kMaskWeightWithForeground = 3.0;
 

@@ -158,7 +158,8 @@ DEFINE_string(loss_config, "",
 DEFINE_bool(list_losses, false,
             "Print the registered loss terms and the loss table these options give, then exit.");
 DEFINE_double(lambda_distortion, -1,
-              "Weight of the 2DGS depth-distortion term (-1: the default of SolverOptions).");
+              "Weight of the 2DGS depth-distortion term (-1: from the scene: 1000 where no mask or "
+              "alpha tells the object from its backdrop, else 0 as in the reference).");
 DEFINE_double(lambda_mask, -1,
               "Weight of the 2DGS silhouette term: binary cross-entropy of the rendered alpha "
               "against the foreground mask (no effect without masks; -1: 3 where every training "
@@ -431,6 +432,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
     return Fail("--lambda_normal must be >= 0 (or -1 for the default)");
   }
   ro.mask_from_scene = FLAGS_lambda_mask == -1;
+  ro.distortion_from_scene = FLAGS_lambda_distortion == -1;
   ro.one_sided_from_scene = gflags::GetCommandLineFlagInfoOrDie("normal_one_sided").is_default;
   ro.depth_tv_from_scene = FLAGS_depth_tv_warmup_2d == -1 && FLAGS_depth_tv_mutual_2d == -1;
   // Weights whose -1 means "the default" (some chosen from the scene by the pipeline).

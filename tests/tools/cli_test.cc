@@ -698,6 +698,12 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
     return row_weight(json_text, "normal_consistency", "warmup");
   };
   EXPECT_DOUBLE_EQ(normal_row_weight(metrics), 0.05) << metrics;
+  // Without masks the depth distortion keeps the surfels in one layer: 1000, the mutual row
+  // times w_2d (0.5).
+  EXPECT_NE(r.output.find("depth distortion: 1000 (no masks or alpha"), std::string::npos)
+      << r.output;
+  EXPECT_DOUBLE_EQ(row_weight(metrics, "distortion", "warmup"), 1000.0) << metrics;
+  EXPECT_DOUBLE_EQ(row_weight(metrics, "distortion", "mutual"), 500.0) << metrics;
   // An object before a uniform backdrop keeps the reference's depth TVs.
   EXPECT_EQ(r.output.find("depth TVs: off"), std::string::npos) << r.output;
   // A loss configuration edits the table the scene chose: its row changes, the scene's normal
@@ -721,6 +727,11 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
       << r.output;
   ASSERT_TRUE(ReadFileToString(dir + "/out_masked/metrics.json", &metrics).ok());
   EXPECT_DOUBLE_EQ(normal_row_weight(metrics), 2.0);
+  // With masks the distortion stays at the reference's 0.
+  EXPECT_NE(r.output.find("depth distortion: 0 (the reference's: the views have masks or alpha)"),
+            std::string::npos)
+      << r.output;
+  EXPECT_DOUBLE_EQ(row_weight(metrics, "distortion", "mutual"), 0.0) << metrics;
   // With masks the silhouette term is on in both stages (mutual: times w_2d, 0.5).
   EXPECT_NE(r.output.find("silhouette term: 3 in the warm-up, 3 in the mutual stage"),
             std::string::npos)
@@ -749,6 +760,12 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
   EXPECT_EQ(r.output.find("normal weight:"), std::string::npos) << r.output;
   ASSERT_TRUE(ReadFileToString(dir + "/out_given/metrics.json", &metrics).ok());
   EXPECT_DOUBLE_EQ(normal_row_weight(metrics), 0.7);
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
+                          "/out_given_distortion --lambda_distortion 0" + few);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(r.output.find("depth distortion:"), std::string::npos) << r.output;
+  ASSERT_TRUE(ReadFileToString(dir + "/out_given_distortion/metrics.json", &metrics).ok());
+  EXPECT_DOUBLE_EQ(row_weight(metrics, "distortion", "mutual"), 0.0) << metrics;
 }
 
 // The progress line's test PSNR scores the same composite as the final evaluation: at the last
