@@ -71,8 +71,8 @@ struct ReconstructionOptions {
   // reference's 0 where they do. Without masks nothing else keeps surfels in one layer: over a
   // long mutual stage a second layer, each view seeing its own, fits each photo's light (harness
   // indoor_mirror, `paper`: CD x1000 28.97 -> 19.47; docs/geometry.md, "Training longer"). With
-  // masks it moved the harness within the spread between seeds. Off: solver.lambda_distortion
-  // as given.
+  // masks the silhouette does that, and the term moved CD both ways (mirror up, the slot down).
+  // Off: solver.lambda_distortion as given.
   bool distortion_from_scene = false;
   // Sets the depth TVs (both branches') from the scene: off where the background is learnt (a
   // scene in the world: no masks, photos whose borders vary), the reference's weights (solver's
