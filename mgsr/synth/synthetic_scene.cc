@@ -485,6 +485,21 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
   const SyntheticRenderer renderer(s, o);
   const RayCaster& caster = renderer.caster();
   const TriangleMesh& mesh = s.layout.mesh;
+  // A photo as the scene's views get it: with masks the render's RGBA; without, the object over a
+  // plain grey background and no alpha (the constant-light copy alike, so that it can stand in
+  // for images/ and is read as the same kind of scene).
+  auto write_photo = [masks](const std::string& path, const Image& rgba) {
+    if (masks) return WriteImage(path, rgba);
+    constexpr float kBackground = 0.6f;
+    Image rgb(rgba.width(), rgba.height(), 3);
+    for (int c = 0; c < 3; ++c) {
+      for (size_t k = 0; k < rgb.plane_size(); ++k) {
+        const float a = rgba.plane(3)[k];
+        rgb.plane(c)[k] = a * rgba.plane(c)[k] + (1 - a) * kBackground;
+      }
+    }
+    return WriteImage(path, rgb);
+  };
 
   for (size_t i = 0; i < s.cameras.size(); ++i) {
     Image rgba, depth, normal;
@@ -494,21 +509,8 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
     for (size_t k = 0; k < mask.size(); ++k)
       mask.data()[k] = rgba.plane(3)[k] >= 0.5f ? 1.0f : 0.0f;
     const std::string stem = FileStem(s.names[i]);
-    if (masks) {
-      MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "images/" + s.names[i]), rgba));
-      MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "masks/" + stem + ".png"), mask));
-    } else {
-      // A photo without a cut-out: the object over a plain grey background, no alpha.
-      constexpr float kBackground = 0.6f;
-      Image rgb(rgba.width(), rgba.height(), 3);
-      for (int c = 0; c < 3; ++c) {
-        for (size_t k = 0; k < rgb.plane_size(); ++k) {
-          const float a = rgba.plane(3)[k];
-          rgb.plane(c)[k] = a * rgba.plane(c)[k] + (1 - a) * kBackground;
-        }
-      }
-      MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "images/" + s.names[i]), rgb));
-    }
+    MGSR_RETURN_IF_ERROR(write_photo(JoinPath(out, "images/" + s.names[i]), rgba));
+    if (masks) MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "masks/" + stem + ".png"), mask));
     if (!distorted) {
       MGSR_RETURN_IF_ERROR(WritePfm(JoinPath(out, "gt/depth/" + stem + ".pfm"), depth));
       MGSR_RETURN_IF_ERROR(WritePfm(JoinPath(out, "gt/normal/" + stem + ".pfm"), normal));
@@ -516,7 +518,7 @@ Status WriteSyntheticScene(const SynthOptions& o, const std::string& out) {
     if (o.constant_light_copy) {
       renderer.Render(s.cameras[i], FixedLight(), &rgba, &depth, &normal,
                       distorted ? &lenses[i] : nullptr);
-      MGSR_RETURN_IF_ERROR(WriteImage(JoinPath(out, "images_constant/" + s.names[i]), rgba));
+      MGSR_RETURN_IF_ERROR(write_photo(JoinPath(out, "images_constant/" + s.names[i]), rgba));
     }
   }
   MGSR_RETURN_IF_ERROR(WriteTriangleMesh(JoinPath(out, "gt/mesh.ply"), s.layout.ground_truth));

@@ -200,6 +200,21 @@ TEST(SyntheticSceneTest, LightVariesPerViewAndConstantCopyDoesNot) {
     EXPECT_EQ(a, b) << name;
   }
   EXPECT_GT(hi / lo, 2.0);
+  // Without masks the copy is written as the photos are (over grey, no alpha), so it can stand in
+  // for images/: under a fixed light the two are the same files.
+  o.masks = false;
+  ASSERT_TRUE(WriteSyntheticScene(o, dir + "/unmasked").ok());
+  for (int i = 0; i < o.num_views; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "v%03d.png", i);
+    std::string a, b;
+    ASSERT_TRUE(ReadFileToString(dir + "/unmasked/images/" + name, &a).ok());
+    ASSERT_TRUE(ReadFileToString(dir + "/unmasked/images_constant/" + name, &b).ok());
+    EXPECT_EQ(a, b) << name;
+    Image im;
+    ASSERT_TRUE(ReadImage(dir + "/unmasked/images_constant/" + name, &im).ok());
+    EXPECT_EQ(im.channels(), 3) << name;
+  }
 }
 
 // The stress variants of the benchmark suite: noisy recorded poses (images from the true ones) and
