@@ -138,6 +138,7 @@ nlohmann::json NormalConfig(const SolverOptions& o) {
   if (o.normal_edge_weight > 0) c["edge_weight"] = o.normal_edge_weight;
   if (o.normal_robust_scale > 0) c["robust_scale"] = o.normal_robust_scale;
   if (o.normal_one_sided) c["one_sided"] = true;
+  if (o.normal_agreement_floor < 1) c["agreement_floor"] = o.normal_agreement_floor;
   return c;
 }
 

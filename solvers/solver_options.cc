@@ -152,6 +152,8 @@ Status SolverOptions::Validate() const {
   }
   if (auto_stop_window < 2) return Status::Error("--auto_stop_window must be >= 2");
   if (!(lambda_l1 >= 0 && lambda_l1 <= 1)) return Status::Error("--lambda_l1 must be in [0, 1]");
+  if (!(normal_agreement_floor >= 0 && normal_agreement_floor <= 1))
+    return Status::Error("--normal_agreement_floor must be in [0, 1]");
   if (!(mutual_transmitted_weight >= 0 && mutual_transmitted_weight <= 1)) {
     return Status::Error("--mutual_transmitted_weight must be in [0, 1]");
   }
@@ -252,6 +254,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"normal_edge_weight", Text(normal_edge_weight)},
           {"normal_robust_scale", Text(normal_robust_scale)},
           {"normal_one_sided", Text(normal_one_sided)},
+          {"normal_agreement_floor", Text(normal_agreement_floor)},
           {"lambda_distortion", Text(lambda_distortion)},
           {"distortion_from_iteration", Text(distortion_from_iteration)},
           {"lambda_mask", Text(lambda_mask)},

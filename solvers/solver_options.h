@@ -74,6 +74,9 @@ struct SolverOptions {
   double normal_robust_scale = 0;
   // true: the normal consistency's depth normal from one-sided differences (NormalConsistencyLoss).
   bool normal_one_sided = false;
+  // < 1: the normal consistency falls towards this fraction where the neighbouring photos agree
+  // with the rendered plane (NormalConsistencyLoss agreement_floor); 1: off.
+  double normal_agreement_floor = 1;
   // 2DGS depth distortion (method.md 3.4). MGSR leaves it at 0; 2DGS uses 1000 from 3000 on.
   double lambda_distortion = 0.0;
   int distortion_from_iteration = 3000;

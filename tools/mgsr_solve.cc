@@ -192,6 +192,10 @@ DEFINE_bool(
     "At depth steps (one neighbour's jump over 3x the other's) the normal consistency takes "
     "the depth's normal from the one-sided difference towards the closer neighbour (not given: "
     "on where every training view has a mask or alpha).");
+DEFINE_double(normal_agreement_floor, -1,
+              "The normal consistency's weight falls towards this fraction where the neighbouring "
+              "photos agree with the rendered plane (patch NCC), and keeps its full weight where "
+              "they cannot place the surface (1: off; -1: the default of SolverOptions).");
 DEFINE_int32(multiview_neighbours, 2, "Neighbouring views per view for the multi-view terms.");
 DEFINE_double(
     mutual_transmitted_weight, 0.2,
@@ -338,6 +342,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
          "normal_edge_weight",
          "normal_robust_scale",
          "normal_one_sided",
+         "normal_agreement_floor",
          "lambda_normal_mutual",
          "depth_tv_warmup_2d",
          "depth_tv_mutual_2d",
@@ -448,7 +453,9 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
                    "--lambda_multiview_depth"},
         std::tuple{FLAGS_normal_edge_weight, &options.normal_edge_weight, "--normal_edge_weight"},
         std::tuple{FLAGS_normal_robust_scale, &options.normal_robust_scale,
-                   "--normal_robust_scale"}}) {
+                   "--normal_robust_scale"},
+        std::tuple{FLAGS_normal_agreement_floor, &options.normal_agreement_floor,
+                   "--normal_agreement_floor"}}) {
     if (flag >= 0) {
       *value = flag;
     } else if (flag != -1) {

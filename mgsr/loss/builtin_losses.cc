@@ -105,6 +105,9 @@ void RegisterBuiltinLosses(LossRegistry* r) {
                 if (s->ok()) *s = ParseWeight(c, "edge_weight", &o.edge_weight);
                 if (s->ok()) *s = ParseWeight(c, "robust_scale", &o.robust_scale);
                 if (s->ok()) *s = ParseFlag(c, "one_sided", &o.one_sided);
+                if (s->ok()) *s = ParseWeight(c, "agreement_floor", &o.agreement_floor);
+                if (s->ok() && o.agreement_floor > 1)
+                  *s = Status::Error("'agreement_floor' must be in [0, 1]");
                 if (!s->ok()) return nullptr;
                 return std::make_unique<NormalConsistencyLoss>(o);
               });
@@ -164,6 +167,8 @@ void RegisterBuiltinLosses(LossRegistry* r) {
       }
       m.check_occlusion = c["check_occlusion"].get<bool>();
     }
+    *s = ParseFlag(c, "fit_plane", &m.fit_plane);
+    if (!s->ok()) return nullptr;
     if (m.patch_radius < 1 || m.patch_radius > 10 || m.stride < 1 || m.stride > 64 ||
         m.max_centres < 1 || !(m.min_variance >= 0) || !(m.max_reprojection_px > 0) ||
         !(m.max_pair_loss > 0)) {

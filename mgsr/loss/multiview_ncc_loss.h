@@ -29,6 +29,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -52,6 +53,11 @@ struct MultiviewNccConfig {
   // The patch must lie on the centre's plane: every pixel covered (alpha and mask at least
   // min_alpha) and within this many pixel footprints of the plane (<= 0: no test).
   double max_plane_offset_px = 1.0;
+  // true: the patch's rendered points must lie within max_plane_offset_px of the plane fitted to
+  // them (least squares) rather than of the plane of the centre's rendered normal; the test then
+  // asks only whether the patch is one surface (no outline, step or tight curve), not whether the
+  // rendered normal already agrees with the depth, which is what the term is to teach it.
+  bool fit_plane = false;
   // Render each neighbour's depth every step and skip centres occluded there. Off by default: with
   // the outlier test below it changed no mesh by more than the spread between runs, and the two
   // renders cost a quarter of the run (docs/geometry.md, "The normal TV, and the patch term by
@@ -83,7 +89,24 @@ class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
 
   template <typename T>
   double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
-                 RenderGradientsT<T>* grad) const;
+                 RenderGradientsT<T>* grad) const {
+    return Run(in, t, scale, grad, nullptr);
+  }
+
+  // How well the photos agree with the rendered plane at each centre of the grid (Stride(w, h);
+  // the centre of cell (cx, cy) is pixel (cx s, cy s), row-major, ceil(w / s) x ceil(h / s)): the
+  // mean over the neighbours compared of max(0, NCC), outlier pairs included, and 0 where no
+  // neighbour could be compared (no texture, off the plane, outside the frames, background).
+  // Resizes `agreement`; the value of the term is returned as by Compute.
+  template <typename T>
+  double Agreement(const RenderBuffersT<T>& in, const TargetsT<T>& t,
+                   std::vector<double>* agreement) const {
+    const ImageT<T>& D = *in.Get(Buffer::kDepth);
+    const int s = Stride(D.width(), D.height());
+    agreement->assign(static_cast<size_t>((D.width() + s - 1) / s) * ((D.height() + s - 1) / s),
+                      0.0);
+    return Run<T>(in, t, 0.0, nullptr, agreement->data());
+  }
 
   const MultiviewNccConfig& config() const { return c_; }
   // The centres' grid on a w x h image: `stride`, or wider where that grid would hold more than
@@ -96,6 +119,12 @@ class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
   }
 
  private:
+  // The term (and its gradient when `grad` is not null), and each centre's agreement when
+  // `agreement` is not null (Agreement's layout).
+  template <typename T>
+  double Run(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+             RenderGradientsT<T>* grad, double* agreement) const;
+
   // Whether the (2r + 1)^2 patch around (x, y) lies on the plane of the centre (camera-frame unit
   // normal `nc`, z-depth `depth`) in the view's own render: every pixel covered and its rendered
   // point within `tolerance` (scene units) of the plane. A selection, not a weight: the buffers it
@@ -111,8 +140,8 @@ class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
 // --- implementation ---------------------------------------------------------------------------
 
 template <typename T>
-double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
-                                 RenderGradientsT<T>* grad) const {
+double MultiviewNccLoss::Run(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
+                             RenderGradientsT<T>* grad, double* agreement) const {
   const ImageT<T>& D = *in.Get(Buffer::kDepth);
   const ImageT<T>& N = *in.Get(Buffer::kNormal);
   const ImageT<T>& A = *in.Get(Buffer::kAlpha);
@@ -122,6 +151,7 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
   const int r = std::max(0, c_.patch_radius), stride = Stride(w, h);
   const int m = (2 * r + 1) * (2 * r + 1);
   const int rows = (h + stride - 1) / stride;
+  const int cols = (w + stride - 1) / stride;
   // The sampled foreground centres: the normaliser (constant: alpha and the mask are constants).
   const size_t centres = multiview::CountSampledPixels(A, t.mask, stride, c_.min_alpha);
   if (centres == 0 || t.num_neighbours == 0) return 0.0;
@@ -208,6 +238,8 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
       if (std::fabs(s0) < 0.1 * rays[centre].norm()) continue;
       double dL_dD = 0;
       Eigen::Vector3d dL_dnc = Eigen::Vector3d::Zero();
+      double agreement_sum = 0;
+      int compared = 0;
       for (int nbi = 0; nbi < t.num_neighbours; ++nbi) {
         const NeighbourViewT<T>& nb = t.neighbours[nbi];
         const Camera& nc_cam = *nb.camera;
@@ -250,6 +282,8 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
         var_b /= m;
         const double S = std::sqrt(var_a * var_b + 1e-8);
         const double ncc = cov / S;
+        agreement_sum += std::max(0.0, ncc);
+        ++compared;
         if (1.0 - ncc > c_.max_pair_loss) continue;
         sum += 1.0 - ncc;
         if (gD == nullptr) continue;
@@ -263,6 +297,8 @@ double MultiviewNccLoss::Compute(const RenderBuffersT<T>& in, const TargetsT<T>&
           dL_dnc += dL_drho * (rays[k] - (nc.dot(rays[k]) / s0) * rays[centre]) / (depth * s0);
         }
       }
+      if (agreement != nullptr && compared > 0)
+        agreement[static_cast<size_t>(row) * cols + x / stride] = agreement_sum / compared;
       if (gD == nullptr) continue;
       const double gain = scale * inv_count;
       gD[i] += static_cast<T>(gain * dL_dD);
@@ -284,6 +320,30 @@ bool MultiviewNccLoss::PatchOnPlane(const ImageT<T>& D, const ImageT<T>& A, cons
                                     const std::vector<Eigen::Vector3d>& rays,
                                     double tolerance) const {
   const int w = D.width(), side = 2 * r + 1;
+  if (c_.fit_plane) {
+    // The points' centroid and scatter; the plane's normal is the scatter's least eigenvector.
+    const int m = side * side;
+    static thread_local std::vector<Eigen::Vector3d> points;
+    points.resize(m);
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (int dy = -r, k = 0; dy <= r; ++dy) {
+      for (int dx = -r; dx <= r; ++dx, ++k) {
+        const size_t q = static_cast<size_t>(y + dy) * w + (x + dx);
+        if (!multiview::SampledPixel(A, mask, q, c_.min_alpha)) return false;
+        points[k] = static_cast<double>(D.data()[q]) * rays[k];
+        mean += points[k];
+      }
+    }
+    mean /= m;
+    Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+    for (const Eigen::Vector3d& X : points) scatter += (X - mean) * (X - mean).transpose();
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(scatter);
+    const Eigen::Vector3d n_fit = eig.eigenvectors().col(0);
+    for (const Eigen::Vector3d& X : points) {
+      if (!(std::fabs(n_fit.dot(X - mean)) <= tolerance)) return false;
+    }
+    return true;
+  }
   const double plane = depth * nc.dot(rays[side * side / 2]);  // nc . X for X on the plane
   for (int dy = -r, k = 0; dy <= r; ++dy) {
     for (int dx = -r; dx <= r; ++dx, ++k) {

@@ -15,6 +15,7 @@
 
 #include "mgsr/loss/loss_term.h"
 #include "mgsr/loss/loss_util.h"
+#include "mgsr/loss/multiview_ncc_loss.h"
 #include "mgsr/loss/normal_consistency_plane.h"
 #include "mgsr/loss/parallel_pixels.h"
 
@@ -42,6 +43,12 @@ struct NormalConsistencyOptions {
   // one-sided difference towards the closer neighbour, so neither side of the step gets its
   // slanted normal, which would pull their depths together; central differences elsewhere.
   bool one_sided = false;
+  // f < 1: each pixel's term is weighted by 1 - (1 - f) a, a in [0, 1] how well the neighbouring
+  // photos agree with the rendered plane there (MultiviewNccLoss::Agreement, at the nearest centre
+  // of its grid): the prior keeps its full weight where the views cannot place the surface (no
+  // texture, no neighbour, a plane they contradict) and falls to f where they pin it. A constant
+  // of each step, like the mask: no gradient flows through it. 1: off.
+  double agreement_floor = 1;
 };
 
 class NormalConsistencyLoss : public LossTermImpl<NormalConsistencyLoss> {
@@ -50,7 +57,9 @@ class NormalConsistencyLoss : public LossTermImpl<NormalConsistencyLoss> {
       : depth_gradient_(options.depth_gradient),
         edge_weight_(options.edge_weight),
         robust_scale_(options.robust_scale),
-        one_sided_(options.one_sided) {}
+        one_sided_(options.one_sided),
+        agreement_floor_(options.agreement_floor),
+        agreement_(AgreementConfig()) {}
   std::string Name() const override { return "normal_consistency"; }
   std::vector<Buffer> Inputs() const override {
     if (!depth_gradient_) return {Buffer::kNormal};
@@ -60,6 +69,7 @@ class NormalConsistencyLoss : public LossTermImpl<NormalConsistencyLoss> {
     if (!depth_gradient_) return {Buffer::kAlpha, Buffer::kDepth};
     return {Buffer::kAlpha};
   }
+  bool ReadsNeighbours() const override { return agreement_floor_ < 1; }
   Status Check(const RenderBuffers& in, const Targets& t) const override {
     return RequireSurfaceGeometry(Name(), in, t);
   }
@@ -68,11 +78,32 @@ class NormalConsistencyLoss : public LossTermImpl<NormalConsistencyLoss> {
   double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
                  RenderGradientsT<T>* grad) const;
 
+  // Each pixel's weight in the sum (the mask gamma, times the edge and agreement weights when
+  // they are on) into `weight` (w x h); false, and `weight` untouched, when it is just the mask.
+  template <typename T>
+  bool PixelWeights(const RenderBuffersT<T>& in, const TargetsT<T>& t,
+                    std::vector<T>* weight) const;
+
+  // The patch comparison behind the agreement weight: the patch term's, except that a patch
+  // counts where its rendered points lie within 2 pixel footprints of their own fitted plane.
+  // With the term's own test (1 footprint from the plane of the centre's rendered normal) the
+  // weight hardly moved: on the gear's warm-up 9 in 10 foreground centres had no comparison
+  // (docs/geometry.md, "A normal prior that follows the views' agreement"); this one still
+  // leaves out patches across outlines, steps and tight curves.
+  static MultiviewNccConfig AgreementConfig() {
+    MultiviewNccConfig c;
+    c.fit_plane = true;
+    c.max_plane_offset_px = 2.0;
+    return c;
+  }
+
  private:
   bool depth_gradient_ = true;
   double edge_weight_ = 0;
   double robust_scale_ = 0;
   bool one_sided_ = false;
+  double agreement_floor_ = 1;
+  MultiviewNccLoss agreement_;
 };
 
 // --- implementation ---------------------------------------------------------------------------
@@ -139,31 +170,8 @@ double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const Targets
   p.mask = t.mask != nullptr ? t.mask->data() : nullptr;
   p.robust_scale = static_cast<T>(robust_scale_);
   p.one_sided = one_sided_;
-  if (edge_weight_ > 0 && t.image != nullptr && t.image->width() == w && t.image->height() == h) {
-    // gamma x exp(-beta g): a constant of the photo (and the mask), like the mask itself.
-    static thread_local std::vector<T> weight;
-    weight.resize(n);
-    const ImageT<T>& I = *t.image;
-    const int channels = I.channels();
-#pragma omp parallel for schedule(static) if (static_cast <int64_t>(n) >= kParallelPixels)
-    for (int y = 0; y < h; ++y) {
-      const int y0 = y > 0 ? y - 1 : y, y1 = y + 1 < h ? y + 1 : y;
-      for (int x = 0; x < w; ++x) {
-        const int x0 = x > 0 ? x - 1 : x, x1 = x + 1 < w ? x + 1 : x;
-        double g = 0;
-        for (int c = 0; c < channels; ++c) {
-          const T* plane = I.plane(c);
-          g += std::abs(static_cast<double>(plane[y * w + x1] - plane[y * w + x0])) +
-               std::abs(static_cast<double>(plane[y1 * w + x] - plane[y0 * w + x]));
-        }
-        g /= 2.0 * channels;
-        const size_t i = static_cast<size_t>(y) * w + x;
-        const double gamma = p.mask != nullptr ? static_cast<double>(p.mask[i]) : 1.0;
-        weight[i] = static_cast<T>(gamma * std::exp(-edge_weight_ * g));
-      }
-    }
-    p.mask = weight.data();
-  }
+  static thread_local std::vector<T> weight;
+  if (PixelWeights(in, t, &weight)) p.mask = weight.data();
   const internal::Vec3<T> C = cam.Center().template cast<T>();
   for (int k = 0; k < 3; ++k) {
     p.normal[k] = N.plane(k);
@@ -184,6 +192,60 @@ double NormalConsistencyLoss::Compute(const RenderBuffersT<T>& in, const Targets
     p.gain = static_cast<T>(-scale * inv_n);
   }
   return NormalConsistencySum(p) * inv_n;
+}
+
+template <typename T>
+bool NormalConsistencyLoss::PixelWeights(const RenderBuffersT<T>& in, const TargetsT<T>& t,
+                                         std::vector<T>* weight) const {
+  const ImageT<T>& D = *in.Get(Buffer::kDepth);
+  const int w = D.width(), h = D.height();
+  const size_t n = static_cast<size_t>(w) * h;
+  const bool edges =
+      edge_weight_ > 0 && t.image != nullptr && t.image->width() == w && t.image->height() == h;
+  const bool agreement = agreement_floor_ < 1 && t.gray != nullptr && t.num_neighbours > 0;
+  if (!edges && !agreement) return false;
+  weight->resize(n);
+  T* const out = weight->data();
+  const T* const mask = t.mask != nullptr ? t.mask->data() : nullptr;
+  for (size_t i = 0; i < n; ++i) out[i] = mask != nullptr ? mask[i] : T(1);
+  if (edges) {
+    // exp(-beta g): a constant of the photo, like the mask itself.
+    const ImageT<T>& I = *t.image;
+    const int channels = I.channels();
+#pragma omp parallel for schedule(static) if (static_cast <int64_t>(n) >= kParallelPixels)
+    for (int y = 0; y < h; ++y) {
+      const int y0 = y > 0 ? y - 1 : y, y1 = y + 1 < h ? y + 1 : y;
+      for (int x = 0; x < w; ++x) {
+        const int x0 = x > 0 ? x - 1 : x, x1 = x + 1 < w ? x + 1 : x;
+        double g = 0;
+        for (int c = 0; c < channels; ++c) {
+          const T* plane = I.plane(c);
+          g += std::abs(static_cast<double>(plane[y * w + x1] - plane[y * w + x0])) +
+               std::abs(static_cast<double>(plane[y1 * w + x] - plane[y0 * w + x]));
+        }
+        g /= 2.0 * channels;
+        const size_t i = static_cast<size_t>(y) * w + x;
+        out[i] = static_cast<T>(static_cast<double>(out[i]) * std::exp(-edge_weight_ * g));
+      }
+    }
+  }
+  if (agreement) {
+    static thread_local std::vector<double> cells;
+    agreement_.Agreement(in, t, &cells);
+    const int s = agreement_.Stride(w, h);
+    const int cols = (w + s - 1) / s, rows = (h + s - 1) / s;
+    const double drop = 1.0 - agreement_floor_;
+    for (int y = 0; y < h; ++y) {
+      const int cy = std::min(rows - 1, (y + s / 2) / s);
+      for (int x = 0; x < w; ++x) {
+        const int cx = std::min(cols - 1, (x + s / 2) / s);
+        const size_t i = static_cast<size_t>(y) * w + x;
+        const double a = cells[static_cast<size_t>(cy) * cols + cx];
+        out[i] = static_cast<T>(static_cast<double>(out[i]) * (1.0 - drop * a));
+      }
+    }
+  }
+  return true;
 }
 
 }  // namespace mgsr

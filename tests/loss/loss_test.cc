@@ -870,6 +870,14 @@ TEST(LossRegistryTest, CreatesByNameAndReportsBadConfigs) {
   EXPECT_EQ(LossRegistry::Get().Create("normal_consistency", {{"one_sided", 1}}, &s), nullptr);
   EXPECT_NE(s.message().find("'one_sided' must be true or false"), std::string::npos)
       << s.message();
+  s = Status::Ok();
+  auto weighted = LossRegistry::Get().Create("normal_consistency", {{"agreement_floor", 0.3}}, &s);
+  ASSERT_NE(weighted, nullptr) << s.message();
+  EXPECT_TRUE(weighted->ReadsNeighbours());
+  EXPECT_EQ(LossRegistry::Get().Create("normal_consistency", {{"agreement_floor", 1.5}}, &s),
+            nullptr);
+  EXPECT_NE(s.message().find("'agreement_floor' must be in [0, 1]"), std::string::npos)
+      << s.message();
   EXPECT_EQ(LossRegistry::Get().Create("tv", {{"on_geometry", "yes"}}, &s), nullptr);
   EXPECT_NE(s.message().find("'on_geometry' must be true or false"), std::string::npos)
       << s.message();

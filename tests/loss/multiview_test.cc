@@ -13,6 +13,7 @@
 #include "mgsr/loss/multiview_depth_loss.h"
 #include "mgsr/loss/multiview_geometry.h"
 #include "mgsr/loss/multiview_ncc_loss.h"
+#include "mgsr/loss/normal_consistency_loss.h"
 #include "mgsr/loss/parallel_pixels.h"
 #include "test_util.h"
 
@@ -244,6 +245,50 @@ TEST(MultiviewNccTest, OnlyPatchesOnTheCentresPlaneCount) {
   EXPECT_NE(g_hole.Get(Buffer::kDepth).at(0, 21, 18), 0.0);
 }
 
+// The fitted-plane test (fit_plane): it asks whether the patch is one surface, not whether the
+// rendered normal agrees with the depth. On the exact plane's depth with rendered normals tilted
+// 20 degrees, the centre-normal test skips every patch and the fitted one none (its value is that
+// of no test); across a step of 10% in depth the fitted test still skips the centres that reach
+// over it.
+TEST(MultiviewNccTest, FittedPlaneTestKeepsTiltedNormalsAndSkipsSteps) {
+  TwoViewScene s;
+  MultiviewNccConfig centre, fitted, none;
+  centre.check_occlusion = fitted.check_occlusion = none.check_occlusion = false;
+  centre.max_pair_loss = fitted.max_pair_loss = none.max_pair_loss = 2;
+  fitted.fit_plane = true;
+  none.max_plane_offset_px = 0;
+  const MultiviewNccLoss by_centre(centre), by_fit(fitted), without(none);
+  const Eigen::Vector3d axis = s.n.cross(Eigen::Vector3d::UnitZ()).normalized();
+  const Eigen::Vector3d tilted_n = Eigen::AngleAxisd(20.0 * M_PI / 180.0, axis) * s.n;
+  ImageD tilted = s.view.normal;
+  for (int y = 0; y < tilted.height(); ++y) {
+    for (int x = 0; x < tilted.width(); ++x) {
+      const double sign = tilted.at(0, y, x) * s.n.x() + tilted.at(1, y, x) * s.n.y() +
+                                      tilted.at(2, y, x) * s.n.z() >
+                                  0
+                              ? 1.0
+                              : -1.0;
+      for (int c = 0; c < 3; ++c) tilted.at(c, y, x) = sign * tilted_n[c];
+    }
+  }
+  s.in.Set(Buffer::kNormal, &tilted);
+  EXPECT_EQ(by_centre.Evaluate(s.in, s.targets, 1.0, nullptr), 0.0);
+  const double v_fit = by_fit.Evaluate(s.in, s.targets, 1.0, nullptr);
+  EXPECT_GT(v_fit, 0.0);
+  EXPECT_EQ(v_fit, without.Evaluate(s.in, s.targets, 1.0, nullptr));
+
+  ImageD step = s.view.depth;
+  for (int y = 0; y < step.height(); ++y)
+    for (int x = 33; x < step.width(); ++x) step.at(0, y, x) *= 1.1;
+  s.in.Set(Buffer::kDepth, &step);
+  RenderGradientsD g_fit;
+  by_fit.Evaluate(s.in, s.targets, 1.0, &g_fit);
+  const int y = 21;
+  for (int x : {30, 33}) EXPECT_EQ(g_fit.Get(Buffer::kDepth).at(0, y, x), 0.0) << x;
+  EXPECT_NE(g_fit.Get(Buffer::kDepth).at(0, y, 27), 0.0);
+  EXPECT_NE(g_fit.Get(Buffer::kDepth).at(0, y, 36), 0.0);
+}
+
 // Outliers: a pair whose patches do not correlate (here the first neighbour's photo is the
 // negative of the truth, NCC = -1, as where a highlight covers the texture in one view only) is
 // left out by default and counted with max_pair_loss = 2. What is left is the second neighbour's
@@ -323,6 +368,116 @@ TEST(MultiviewNccTest, LargeImagesSampleAtMostMaxCentres) {
     } else {
       EXPECT_GT(pulled, 16384);
     }
+  }
+}
+
+// The agreement map: near 1 at the centres of the exact plane whose patch fits in the frame, 0
+// where no neighbour could be compared (the frame's border), lower on a plane 10% too far, and 0
+// where both neighbours see the negative of the texture. Its value is the term's.
+TEST(MultiviewNccTest, AgreementIsHighOnTheExactPlaneAndLowOffIt) {
+  TwoViewScene s;
+  const MultiviewNccLoss ncc;
+  std::vector<double> exact;
+  EXPECT_EQ(ncc.Agreement(s.in, s.targets, &exact), ncc.Evaluate(s.in, s.targets, 1.0, nullptr));
+  const int stride = ncc.Stride(64, 48), cols = (64 + stride - 1) / stride;
+  ASSERT_EQ(exact.size(), static_cast<size_t>(cols) * ((48 + stride - 1) / stride));
+  int agreeing = 0;
+  double mean_exact = 0;
+  for (size_t c = 0; c < exact.size(); ++c) {
+    const int x = static_cast<int>(c % cols) * stride, y = static_cast<int>(c / cols) * stride;
+    const int r = ncc.config().patch_radius;
+    if (x < r || y < r || x + r >= 64 || y + r >= 48) {
+      EXPECT_EQ(exact[c], 0.0) << x << " " << y;  // the patch leaves the frame
+      continue;
+    }
+    EXPECT_LE(exact[c], 1.0);
+    agreeing += exact[c] > 0.95;
+    mean_exact += exact[c];
+  }
+  EXPECT_GT(agreeing, 100);
+  mean_exact /= exact.size();
+  const PlaneView far = RenderPlane(s.ref, s.origin, s.n, 1.1);
+  s.in.Set(Buffer::kDepth, &far.depth);
+  std::vector<double> wrong;
+  ncc.Agreement(s.in, s.targets, &wrong);
+  double mean_wrong = 0;
+  for (double a : wrong) mean_wrong += a;
+  mean_wrong /= wrong.size();
+  EXPECT_LT(mean_wrong, 0.7 * mean_exact);
+  s.in.Set(Buffer::kDepth, &s.view.depth);
+  std::array<ImageD, 2> negative{s.nb_view[0].gray, s.nb_view[1].gray};
+  for (int k = 0; k < 2; ++k) {
+    for (size_t i = 0; i < negative[k].size(); ++i)
+      negative[k].data()[i] = 1.0 - negative[k].data()[i];
+    s.targets.neighbours[k].gray = &negative[k];
+  }
+  std::vector<double> contradicted;
+  ncc.Agreement(s.in, s.targets, &contradicted);
+  for (double a : contradicted) EXPECT_LT(a, 0.05);
+}
+
+// The normal consistency weighted by agreement: each pixel's weight is mask x (1 - (1 - f) a) with
+// a the agreement at the nearest centre of the grid; off at f = 1 and where the view has no
+// neighbours. The weight is a constant of the step: value and gradient are those of the plain
+// term with the weight as its mask (whose gradient loss_test checks against numeric
+// differentiation), on normals that disagree with the depth.
+TEST(NormalConsistencyAgreementTest, WeightFallsToTheFloorWhereTheViewsAgree) {
+  TwoViewScene s;
+  ImageD mask(64, 48, 1);
+  Rng rng(7);
+  for (size_t i = 0; i < mask.size(); ++i) mask.data()[i] = 0.5 + 0.5 * rng.Uniform();
+  s.targets.mask = &mask;
+  NormalConsistencyOptions o;
+  EXPECT_EQ(o.agreement_floor, 1.0);
+  std::vector<double> weight;
+  EXPECT_FALSE(NormalConsistencyLoss(o).ReadsNeighbours());
+  EXPECT_FALSE(NormalConsistencyLoss(o).PixelWeights(s.in, s.targets, &weight));
+  o.agreement_floor = 0.2;
+  const NormalConsistencyLoss term(o);
+  EXPECT_TRUE(term.ReadsNeighbours());
+  TargetsD alone = s.targets;
+  alone.num_neighbours = 0;
+  EXPECT_FALSE(term.PixelWeights(s.in, alone, &weight));
+  ASSERT_TRUE(term.PixelWeights(s.in, s.targets, &weight));
+  const MultiviewNccLoss ncc(NormalConsistencyLoss::AgreementConfig());
+  EXPECT_TRUE(ncc.config().fit_plane);
+  std::vector<double> agreement;
+  ncc.Agreement(s.in, s.targets, &agreement);
+  const int stride = ncc.Stride(64, 48), cols = (64 + stride - 1) / stride;
+  int at_floor = 0, full = 0;
+  for (int y = 0; y < 48; ++y) {
+    for (int x = 0; x < 64; ++x) {
+      const size_t i = static_cast<size_t>(y) * 64 + x;
+      const int cx = std::min(cols - 1, (x + stride / 2) / stride);
+      const int cy = std::min((48 + stride - 1) / stride - 1, (y + stride / 2) / stride);
+      const double a = agreement[static_cast<size_t>(cy) * cols + cx];
+      EXPECT_NEAR(weight[i], mask.data()[i] * (1.0 - 0.8 * a), 1e-15);
+      at_floor += weight[i] < 0.25 * mask.data()[i];
+      full += weight[i] == mask.data()[i];
+    }
+  }
+  EXPECT_GT(at_floor, 1000);  // the exact plane's interior
+  EXPECT_GT(full, 100);       // the border, where no patch is compared
+  // Normals tilted away from the depth's: the term is not zero and pulls both.
+  ImageD tilted = s.view.normal;
+  for (size_t i = 0; i < 64 * 48; ++i) tilted.plane(0)[i] += 0.3 * rng.Uniform();
+  s.in.Set(Buffer::kNormal, &tilted);
+  ASSERT_TRUE(term.PixelWeights(s.in, s.targets, &weight));
+  ImageD as_mask(64, 48, 1);
+  for (size_t i = 0; i < as_mask.size(); ++i) as_mask.data()[i] = weight[i];
+  TargetsD masked = s.targets;
+  masked.mask = &as_mask;
+  masked.num_neighbours = 0;
+  RenderGradientsD g_term, g_plain;
+  const double v_term = term.Evaluate(s.in, s.targets, 1.0, &g_term);
+  const double v_plain = NormalConsistencyLoss().Evaluate(s.in, masked, 1.0, &g_plain);
+  EXPECT_GT(v_term, 0);
+  EXPECT_EQ(v_term, v_plain);
+  for (Buffer b : {Buffer::kDepth, Buffer::kNormal}) {
+    const ImageD& a = g_term.Get(b);
+    const ImageD& c = g_plain.Get(b);
+    ASSERT_EQ(a.size(), c.size());
+    for (size_t i = 0; i < a.size(); ++i) ASSERT_EQ(a.data()[i], c.data()[i]) << i;
   }
 }
 

@@ -657,11 +657,13 @@ TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
 
   // Written before an option existed: accepted when the run has the value runs had before it
   // (the coarse start: none; the warm-up's own silhouette weight and the 2DGS branch's own
-  // position decay: none, -1; the surfels' shape decay: off), refused otherwise.
+  // position decay: none, -1; the surfels' shape decay and the agreement-weighted normal prior:
+  // off), refused otherwise.
   {
     std::string old_body = Body(data);
-    for (const std::string line : {"coarse = none\n", "lambda_mask_warmup = -1\n",
-                                   "position_lr_max_steps_2d = -1\n", "surfel_shape_decay = 0\n"}) {
+    for (const std::string line :
+         {"coarse = none\n", "lambda_mask_warmup = -1\n", "position_lr_max_steps_2d = -1\n",
+          "surfel_shape_decay = 0\n", "normal_agreement_floor = 1\n"}) {
       const size_t at = old_body.find(line);
       ASSERT_NE(at, std::string::npos) << line;
       old_body.erase(at, line.size());
@@ -684,6 +686,11 @@ TEST(CheckpointTest, MismatchedAndDamagedCheckpointsAreRefused) {
     MutualBoostedSolver sd(with_shape_decay, scene);
     ExpectRefused(&sd, bad, Reseal(old_body),
                   "the checkpoint does not record option surfel_shape_decay");
+    SolverOptions with_agreement = o;
+    with_agreement.normal_agreement_floor = 0.25;
+    MutualBoostedSolver ag(with_agreement, scene);
+    ExpectRefused(&ag, bad, Reseal(old_body),
+                  "the checkpoint does not record option normal_agreement_floor");
   }
   // Finished in the warm-up; then the random generator's state 0 (stage, next iteration and
   // finished flag, the SH degree, the summary's mutual count and three times, then the state).
