@@ -90,7 +90,7 @@ class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
   template <typename T>
   double Compute(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
                  RenderGradientsT<T>* grad) const {
-    return Run(in, t, scale, grad, nullptr);
+    return Run<T, false>(in, t, scale, grad, nullptr);
   }
 
   // How well the photos agree with the rendered plane at each centre of the grid (Stride(w, h);
@@ -105,7 +105,7 @@ class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
     const int s = Stride(D.width(), D.height());
     agreement->assign(static_cast<size_t>((D.width() + s - 1) / s) * ((D.height() + s - 1) / s),
                       0.0);
-    return Run<T>(in, t, 0.0, nullptr, agreement->data());
+    return Run<T, true>(in, t, 0.0, nullptr, agreement->data());
   }
 
   const MultiviewNccConfig& config() const { return c_; }
@@ -119,9 +119,10 @@ class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
   }
 
  private:
-  // The term (and its gradient when `grad` is not null), and each centre's agreement when
-  // `agreement` is not null (Agreement's layout).
-  template <typename T>
+  // The term (and its gradient when `grad` is not null), and with kAgreement each centre's
+  // agreement into `agreement` (Agreement's layout; the term's own evaluation is compiled
+  // without it).
+  template <typename T, bool kAgreement>
   double Run(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
              RenderGradientsT<T>* grad, double* agreement) const;
 
@@ -134,12 +135,19 @@ class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
                     int r, double depth, const Eigen::Vector3d& nc,
                     const std::vector<Eigen::Vector3d>& rays, double tolerance) const;
 
+  // fit_plane's test: every pixel covered and its rendered point within `tolerance` of the
+  // least-squares plane of the patch's points.
+  template <typename T>
+  bool PatchOnFittedPlane(const ImageT<T>& D, const ImageT<T>& A, const ImageT<T>* mask, int x,
+                          int y, int r, const std::vector<Eigen::Vector3d>& rays,
+                          double tolerance) const;
+
   MultiviewNccConfig c_;
 };
 
 // --- implementation ---------------------------------------------------------------------------
 
-template <typename T>
+template <typename T, bool kAgreement>
 double MultiviewNccLoss::Run(const RenderBuffersT<T>& in, const TargetsT<T>& t, double scale,
                              RenderGradientsT<T>* grad, double* agreement) const {
   const ImageT<T>& D = *in.Get(Buffer::kDepth);
@@ -282,8 +290,10 @@ double MultiviewNccLoss::Run(const RenderBuffersT<T>& in, const TargetsT<T>& t, 
         var_b /= m;
         const double S = std::sqrt(var_a * var_b + 1e-8);
         const double ncc = cov / S;
-        agreement_sum += std::max(0.0, ncc);
-        ++compared;
+        if constexpr (kAgreement) {
+          agreement_sum += std::max(0.0, ncc);
+          ++compared;
+        }
         if (1.0 - ncc > c_.max_pair_loss) continue;
         sum += 1.0 - ncc;
         if (gD == nullptr) continue;
@@ -297,7 +307,7 @@ double MultiviewNccLoss::Run(const RenderBuffersT<T>& in, const TargetsT<T>& t, 
           dL_dnc += dL_drho * (rays[k] - (nc.dot(rays[k]) / s0) * rays[centre]) / (depth * s0);
         }
       }
-      if (agreement != nullptr && compared > 0)
+      if (kAgreement && compared > 0)
         agreement[static_cast<size_t>(row) * cols + x / stride] = agreement_sum / compared;
       if (gD == nullptr) continue;
       const double gain = scale * inv_count;
@@ -320,30 +330,7 @@ bool MultiviewNccLoss::PatchOnPlane(const ImageT<T>& D, const ImageT<T>& A, cons
                                     const std::vector<Eigen::Vector3d>& rays,
                                     double tolerance) const {
   const int w = D.width(), side = 2 * r + 1;
-  if (c_.fit_plane) {
-    // The points' centroid and scatter; the plane's normal is the scatter's least eigenvector.
-    const int m = side * side;
-    static thread_local std::vector<Eigen::Vector3d> points;
-    points.resize(m);
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    for (int dy = -r, k = 0; dy <= r; ++dy) {
-      for (int dx = -r; dx <= r; ++dx, ++k) {
-        const size_t q = static_cast<size_t>(y + dy) * w + (x + dx);
-        if (!multiview::SampledPixel(A, mask, q, c_.min_alpha)) return false;
-        points[k] = static_cast<double>(D.data()[q]) * rays[k];
-        mean += points[k];
-      }
-    }
-    mean /= m;
-    Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-    for (const Eigen::Vector3d& X : points) scatter += (X - mean) * (X - mean).transpose();
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(scatter);
-    const Eigen::Vector3d n_fit = eig.eigenvectors().col(0);
-    for (const Eigen::Vector3d& X : points) {
-      if (!(std::fabs(n_fit.dot(X - mean)) <= tolerance)) return false;
-    }
-    return true;
-  }
+  if (c_.fit_plane) return PatchOnFittedPlane(D, A, mask, x, y, r, rays, tolerance);
   const double plane = depth * nc.dot(rays[side * side / 2]);  // nc . X for X on the plane
   for (int dy = -r, k = 0; dy <= r; ++dy) {
     for (int dx = -r; dx <= r; ++dx, ++k) {
@@ -352,6 +339,36 @@ bool MultiviewNccLoss::PatchOnPlane(const ImageT<T>& D, const ImageT<T>& A, cons
       if (!(std::fabs(static_cast<double>(D.data()[q]) * nc.dot(rays[k]) - plane) <= tolerance))
         return false;
     }
+  }
+  return true;
+}
+
+template <typename T>
+bool MultiviewNccLoss::PatchOnFittedPlane(const ImageT<T>& D, const ImageT<T>& A,
+                                          const ImageT<T>* mask, int x, int y, int r,
+                                          const std::vector<Eigen::Vector3d>& rays,
+                                          double tolerance) const {
+  const int w = D.width(), side = 2 * r + 1;
+  // The points' centroid and scatter; the plane's normal is the scatter's least eigenvector.
+  const int m = side * side;
+  static thread_local std::vector<Eigen::Vector3d> points;
+  points.resize(m);
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (int dy = -r, k = 0; dy <= r; ++dy) {
+    for (int dx = -r; dx <= r; ++dx, ++k) {
+      const size_t q = static_cast<size_t>(y + dy) * w + (x + dx);
+      if (!multiview::SampledPixel(A, mask, q, c_.min_alpha)) return false;
+      points[k] = static_cast<double>(D.data()[q]) * rays[k];
+      mean += points[k];
+    }
+  }
+  mean /= m;
+  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+  for (const Eigen::Vector3d& X : points) scatter += (X - mean) * (X - mean).transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(scatter);
+  const Eigen::Vector3d n_fit = eig.eigenvectors().col(0);
+  for (const Eigen::Vector3d& X : points) {
+    if (!(std::fabs(n_fit.dot(X - mean)) <= tolerance)) return false;
   }
   return true;
 }
