@@ -87,7 +87,7 @@ class NormalConsistencyLoss : public LossTermImpl<NormalConsistencyLoss> {
   // The patch comparison behind the agreement weight: the patch term's, except that a patch
   // counts where its rendered points lie within 2 pixel footprints of their own fitted plane.
   // With the term's own test (1 footprint from the plane of the centre's rendered normal) the
-  // weight hardly moved: on the gear's warm-up 8 to 9 in 10 foreground cells had no comparison
+  // weight hardly moved: on the gear's warm-up 6 to 9 in 10 foreground cells had no comparison
   // (docs/geometry.md, "A normal prior that follows the views' agreement"); this one still
   // leaves out patches across outlines, steps and tight curves.
   static MultiviewNccConfig AgreementConfig() {
