@@ -233,7 +233,7 @@ bool NormalConsistencyLoss::PixelWeights(const RenderBuffersT<T>& in, const Targ
     static thread_local std::vector<double> cells;
     agreement_.Agreement(in, t, &cells);
     const int s = agreement_.Stride(w, h);
-    const int cols = (w + s - 1) / s, rows = (h + s - 1) / s;
+    const int cols = MultiviewNccLoss::Cells(w, s), rows = MultiviewNccLoss::Cells(h, s);
     const double drop = 1.0 - agreement_floor_;
     for (int y = 0; y < h; ++y) {
       const int cy = std::min(rows - 1, (y + s / 2) / s);
