@@ -130,8 +130,9 @@ class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
 
   // Whether the (2r + 1)^2 patch around (x, y) lies on the plane of the centre (camera-frame unit
   // normal `nc`, z-depth `depth`) in the view's own render: every pixel covered and its rendered
-  // point within `tolerance` (scene units) of the plane. A selection, not a weight: the buffers it
-  // reads are not differentiated through it.
+  // point within `tolerance` (scene units) of the plane (with fit_plane, of the patch's own fitted
+  // plane: PatchOnFittedPlane). A selection, not a weight: the buffers it reads are not
+  // differentiated through it.
   template <typename T>
   bool PatchOnPlane(const ImageT<T>& D, const ImageT<T>& A, const ImageT<T>* mask, int x, int y,
                     int r, double depth, const Eigen::Vector3d& nc,
@@ -331,8 +332,8 @@ bool MultiviewNccLoss::PatchOnPlane(const ImageT<T>& D, const ImageT<T>& A, cons
                                     int x, int y, int r, double depth, const Eigen::Vector3d& nc,
                                     const std::vector<Eigen::Vector3d>& rays,
                                     double tolerance) const {
-  const int w = D.width(), side = 2 * r + 1;
   if (c_.fit_plane) return PatchOnFittedPlane(D, A, mask, x, y, r, rays, tolerance);
+  const int w = D.width(), side = 2 * r + 1;
   const double plane = depth * nc.dot(rays[side * side / 2]);  // nc . X for X on the plane
   for (int dy = -r, k = 0; dy <= r; ++dy) {
     for (int dx = -r; dx <= r; ++dx, ++k) {
