@@ -61,7 +61,7 @@ class MultiviewDepthLoss : public LossTermImpl<MultiviewDepthLoss> {
     const ImageT<T>& A = *in.Get(Buffer::kAlpha);
     const Camera& cam = *in.camera;
     const int w = D.width(), h = D.height(), stride = std::max(1, c_.stride);
-    const int rows = (h + stride - 1) / stride;
+    const int rows = multiview::GridCells(h, stride);
     const size_t centres = multiview::CountSampledPixels(A, t.mask, stride, c_.min_alpha);
     if (centres == 0 || t.num_neighbours == 0) return 0.0;
     const double inv_count = 1.0 / (static_cast<double>(centres) * t.num_neighbours);

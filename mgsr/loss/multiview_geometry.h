@@ -19,6 +19,8 @@ template <typename T>
 bool SampledPixel(const ImageT<T>& alpha, const ImageT<T>* mask, size_t i, double min_alpha) {
   return alpha.data()[i] >= min_alpha && (mask == nullptr || mask->data()[i] >= 0.5);
 }
+// Grid centres along a side of n pixels at the grid's stride s: 0, s, 2 s, ... below n.
+inline int GridCells(int n, int s) { return (n + s - 1) / s; }
 template <typename T>
 size_t CountSampledPixels(const ImageT<T>& alpha, const ImageT<T>* mask, int stride,
                           double min_alpha) {

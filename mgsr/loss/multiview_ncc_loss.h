@@ -103,12 +103,11 @@ class MultiviewNccLoss : public LossTermImpl<MultiviewNccLoss> {
                    std::vector<double>* agreement) const {
     const ImageT<T>& D = *in.Get(Buffer::kDepth);
     const int s = Stride(D.width(), D.height());
-    agreement->assign(static_cast<size_t>(Cells(D.width(), s)) * Cells(D.height(), s), 0.0);
+    agreement->assign(static_cast<size_t>(multiview::GridCells(D.width(), s)) *
+                          multiview::GridCells(D.height(), s),
+                      0.0);
     return Run<T, true>(in, t, 0.0, nullptr, agreement->data());
   }
-
-  // Grid centres along a side of n pixels at the grid's stride s: 0, s, 2 s, ... below n.
-  static int Cells(int n, int s) { return (n + s - 1) / s; }
 
   const MultiviewNccConfig& config() const { return c_; }
   // The centres' grid on a w x h image: `stride`, or wider where that grid would hold more than
@@ -161,8 +160,8 @@ double MultiviewNccLoss::Run(const RenderBuffersT<T>& in, const TargetsT<T>& t, 
   const int w = D.width(), h = D.height();
   const int r = std::max(0, c_.patch_radius), stride = Stride(w, h);
   const int m = (2 * r + 1) * (2 * r + 1);
-  const int rows = Cells(h, stride);
-  const int cols = Cells(w, stride);
+  const int rows = multiview::GridCells(h, stride);
+  const int cols = multiview::GridCells(w, stride);
   // The sampled foreground centres: the normaliser (constant: alpha and the mask are constants).
   const size_t centres = multiview::CountSampledPixels(A, t.mask, stride, c_.min_alpha);
   if (centres == 0 || t.num_neighbours == 0) return 0.0;

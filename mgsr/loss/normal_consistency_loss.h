@@ -15,6 +15,7 @@
 
 #include "mgsr/loss/loss_term.h"
 #include "mgsr/loss/loss_util.h"
+#include "mgsr/loss/multiview_geometry.h"
 #include "mgsr/loss/multiview_ncc_loss.h"
 #include "mgsr/loss/normal_consistency_plane.h"
 #include "mgsr/loss/parallel_pixels.h"
@@ -233,7 +234,7 @@ bool NormalConsistencyLoss::PixelWeights(const RenderBuffersT<T>& in, const Targ
     static thread_local std::vector<double> cells;
     agreement_.Agreement(in, t, &cells);
     const int s = agreement_.Stride(w, h);
-    const int cols = MultiviewNccLoss::Cells(w, s), rows = MultiviewNccLoss::Cells(h, s);
+    const int cols = multiview::GridCells(w, s), rows = multiview::GridCells(h, s);
     const double drop = 1.0 - agreement_floor_;
     for (int y = 0; y < h; ++y) {
       const int cy = std::min(rows - 1, (y + s / 2) / s);
