@@ -210,6 +210,11 @@ class BranchTrainer {
     keep_step_buffer_ = true;
     kept_buffer_ = buffer;
   }
+  // Keeps none from now on and forgets those kept (StepBuffer returns null).
+  void StopKeepingStepBuffer() {
+    keep_step_buffer_ = false;
+    for (KeptBuffer& k : kept_) k.view = -1;
+  }
   // The kept buffer of batch position `position` of this branch's last step, if that step
   // rendered view `view` there; else null.
   const Image* StepBuffer(int position, int view) const;

@@ -127,6 +127,7 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
     static const std::map<std::string, std::string> kBefore = {{"coarse", "none"},
                                                                {"lambda_mask_warmup", "-1"},
                                                                {"lambda_normal_tv", "0.05"},
+                                                               {"mutual_iterations_2d", "-1"},
                                                                {"normal_agreement_floor", "1"},
                                                                {"position_lr_max_steps_2d", "-1"},
                                                                {"surfel_shape_decay", "0"}};
@@ -146,6 +147,10 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
             "--max_size, --max_width, --budget or the photos change?)";
       else if (name == "lambda_normal" || name == "lambda_mask")
         hint = " (derived from whether the views have masks, unless --" + name + " is given)";
+      else if (name == "mutual_iterations_2d" || name == "schedule_2d")
+        hint =
+            " (derived from whether the views have masks and the mutual stage's length, unless "
+            "--mutual_iterations_2d is given)";
       else if (name == "coarse")
         hint = " (derived from --coarse_max_size and the photos' size, with --coarse_fraction)";
       else if (name == "background_2d" || name == "background_3d" || name == "environment")

@@ -555,11 +555,17 @@ Status MutualBoostedSolver::Run() {
   // depth of: that step takes the depth from the 2DGS step's render (made before its update,
   // as in the authors' code) instead of rendering the 2DGS branch again. Not with
   // bidirectional supervision (its gradient needs a held render).
-  if (both && !o.bidirectional)
+  // Past `mutual_iterations_2d` the 2DGS branch is held: it no longer steps, and each 3DGS step
+  // renders it (what a kept buffer holds would be from before its last update).
+  const auto steps_2d = [&o](int it) {
+    return o.mutual_iterations_2d < 0 || it <= o.mutual_iterations_2d;
+  };
+  if (both && !o.bidirectional && steps_2d(next_iteration_))
     surfels_->KeepStepBuffer(SupervisionFor(Branch::kGaussians3D).buffer);
   while (both && next_iteration_ <= o.mutual_iterations) {
     const int it = next_iteration_;
     const bool joint = o.mutual_mode == "joint";
+    if (!steps_2d(it)) surfels_->StopKeepingStepBuffer();
     UseLevel(o.CoarseLevelAt(Stage::kMutual, it));
     NextBatch();
     // In alternate mode a round (the 2DGS step, then the 3DGS step) takes one batch, as the
@@ -572,7 +578,7 @@ Status MutualBoostedSolver::Run() {
     // alternate mode the 2DGS branch steps on odd counts only, so it takes the count of the round
     // it opens: events on even counts then reach both branches, in the same round.
     const int schedule_it = joint ? it : it + it % 2;
-    if (joint || it % 2 == 1)
+    if ((joint || it % 2 == 1) && steps_2d(it))
       MGSR_RETURN_IF_ERROR(MutualStep(surfels_.get(), gaussians_.get(), it, schedule_it));
     if (joint || it % 2 == 0)
       MGSR_RETURN_IF_ERROR(MutualStep(gaussians_.get(), surfels_.get(), it, schedule_it));

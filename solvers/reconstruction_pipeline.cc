@@ -718,6 +718,12 @@ Status ReconstructionPipeline::ChooseSceneSettings(RunState* st) {
                 foreground ? "the reference's: the views have masks or alpha"
                            : "no masks or alpha: keeps the surfels in one layer");
   }
+  if (foreground && o.geometry_hold_from_scene && SolverOptions::HoldGeometryAtFast(&options)) {
+    std::printf(
+        "geometry: the 2DGS branch trains for the first %d of %d mutual iterations, then is held "
+        "while the 3DGS branch trains on (the views have masks or alpha)\n",
+        options.mutual_iterations_2d, options.mutual_iterations);
+  }
   if (foreground && (o.mask_from_scene || o.one_sided_from_scene)) {
     if (o.mask_from_scene) options.lambda_mask = kMaskWeightWithForeground;
     if (o.one_sided_from_scene) options.normal_one_sided = true;

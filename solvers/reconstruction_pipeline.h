@@ -74,6 +74,13 @@ struct ReconstructionOptions {
   // masks the silhouette does that, and the term moved CD both ways (mirror up, the slot down).
   // Off: solver.lambda_distortion as given.
   bool distortion_from_scene = false;
+  // Where every training view has a mask or alpha and the mutual stage is longer than `fast`'s:
+  // SolverOptions::HoldGeometryAtFast (the 2DGS branch trains for `fast`'s mutual iterations on
+  // its density schedule, then is held while the 3DGS branch trains on). Under the strong normal
+  // prior of such scenes the longer stage fills concavities (docs/geometry.md, "Training
+  // longer"). Without masks the whole stage trains both: there the long stage with the depth
+  // distortion lowers CD. Off: solver.mutual_iterations_2d as given.
+  bool geometry_hold_from_scene = false;
   // Sets the depth TVs (both branches') from the scene: off where the background is learnt (a
   // scene in the world: no masks, photos whose borders vary), the reference's weights (solver's
   // depth_tv_* as given) otherwise. In a scene-level capture every silhouette, horizon and

@@ -15,11 +15,18 @@ int Scaled(int value, double factor) {
 
 }  // namespace
 
+// fast: 20,000 -> 1,500 iterations per stage; every schedule keeps its place in the run.
+constexpr double kFastScale = 0.075;
+// fast's density control: the reference's intervals (they set how long opacities have to recover
+// from a reset before the next prune), ending at two thirds of the warm-up cap, like the
+// reference.
+constexpr BranchSchedule kFastSchedule2D{100, 1000, 100, 500, 0.05f};
+constexpr BranchSchedule kFastSchedule3D{50, 1000, 20, 500, 0.005f};
+
 bool SolverOptions::FromPreset(const std::string& name, SolverOptions* o) {
   *o = SolverOptions();
   if (name != "paper" && name != "fast") return false;
-  // fast: 20,000 -> 1,500 iterations per stage; every schedule keeps its place in the run.
-  const double f = 0.075;
+  const double f = kFastScale;
   // Both presets shape the surface on fast's schedule: the 2DGS position rate decays over 2,250
   // iterations of each stage, and the normal and patch terms start after warm-up iteration 525
   // (the reference's 30,000 and 7,000, scaled). `paper`'s longer stages do not stretch them: in
@@ -45,13 +52,19 @@ bool SolverOptions::FromPreset(const std::string& name, SolverOptions* o) {
   o->position_lr_max_steps = Scaled(o->position_lr_max_steps, f);  // both branches
   o->sh_interval = Scaled(o->sh_interval, f);
   o->auto_stop_window = 50;
-  // Density control keeps the reference's intervals (they set how long opacities have to recover
-  // from a reset before the next prune) and ends at two thirds of the warm-up cap, like the
-  // reference.
-  o->schedule_2d = {100, 1000, 100, 500, 0.05f};
-  o->schedule_3d = {50, 1000, 20, 500, 0.005f};
+  o->schedule_2d = kFastSchedule2D;
+  o->schedule_3d = kFastSchedule3D;
   // Fewer, larger steps need a little more room per step to move.
   o->max_init_points = 20000;
+  return true;
+}
+
+bool SolverOptions::HoldGeometryAtFast(SolverOptions* o) {
+  const int fast_mutual = Scaled(SolverOptions().mutual_iterations, kFastScale);
+  if (!o->train_2d || !o->train_3d || o->bidirectional || o->mutual_iterations <= fast_mutual)
+    return false;
+  o->schedule_2d = kFastSchedule2D;
+  o->mutual_iterations_2d = fast_mutual;
   return true;
 }
 
@@ -67,6 +80,7 @@ void SolverOptions::ScaleIterationsForBatch(int views) {
                  &position_lr_max_steps, &sh_interval})
     scale(v);
   if (position_lr_max_steps_2d > 0) scale(&position_lr_max_steps_2d);
+  if (mutual_iterations_2d > 0) scale(&mutual_iterations_2d);
   auto_stop_window = std::max(2, Scaled(auto_stop_window, f));
   for (BranchSchedule* b : {&schedule_2d, &schedule_3d}) {
     for (int* v :
@@ -147,6 +161,12 @@ Status SolverOptions::Validate() const {
     return Status::Error("--warmup_min_iterations must be in [0, --warmup_max_iterations]");
   }
   if (mutual_iterations < 0) return Status::Error("--mutual_iterations must be >= 0");
+  if (mutual_iterations_2d < -1)
+    return Status::Error("--mutual_iterations_2d must be >= 0 (or -1: the whole mutual stage)");
+  if (mutual_iterations_2d >= 0 && bidirectional)
+    return Status::Error(
+        "--mutual_iterations_2d: a held 2DGS branch cannot take --bidirectional's "
+        "gradient");
   if (mutual_mode != "alternate" && mutual_mode != "joint") {
     return Status::Error("--mutual_mode must be alternate or joint, not '" + mutual_mode + "'");
   }
@@ -240,6 +260,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"auto_stop_window", Text(auto_stop_window)},
           {"auto_stop_range", Text(auto_stop_range)},
           {"mutual_iterations", Text(mutual_iterations)},
+          {"mutual_iterations_2d", Text(mutual_iterations_2d)},
           {"mutual_mode", mutual_mode},
           {"bidirectional", Text(bidirectional)},
           {"train_2d", Text(train_2d)},

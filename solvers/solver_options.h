@@ -40,6 +40,10 @@ struct SolverOptions {
   double auto_stop_range = 0.01;
   // Mutual stage.
   int mutual_iterations = 20000;
+  // The 2DGS branch (the geometry) steps in the first `mutual_iterations_2d` mutual iterations
+  // only (-1: in all of them). After them it is held: it renders the depth that supervises the
+  // 3DGS branch, which trains on to the end of the stage. HoldGeometryAtFast sets it.
+  int mutual_iterations_2d = -1;
   std::string mutual_mode = "alternate";  // alternate | joint
   // Ablation K: the supervising branch also receives the gradient of the supervision (through the
   // 3DGS transmitted image for the 2DGS render loss, through the 2DGS depth for the depth loss) and
@@ -236,6 +240,11 @@ struct SolverOptions {
   // and fast's schedule for what shapes the surface (the 2DGS position rate's decay, the start of
   // the normal and patch terms); "fast": every iteration count scaled to minutes on a laptop CPU.
   static bool FromPreset(const std::string& name, SolverOptions* options);
+  // Where the views have masks (ReconstructionOptions::geometry_hold_from_scene): a mutual stage
+  // longer than `fast`'s trains the 2DGS branch on `fast`'s density schedule for `fast`'s mutual
+  // iterations and then holds it. Under the strong normal prior of such scenes the longer stage
+  // fills concavities (docs/geometry.md, "Training longer"). True if it changed anything.
+  static bool HoldGeometryAtFast(SolverOptions* options);
   // Sets train_2d / train_3d / reflection for "mgsr", "2dgs" (ablation B), "3dgs" (plain, no
   // reflection) or "3dgs-ref" (ablation A). A single branch gets the warm-up cap plus the mutual
   // iterations as its own cap (auto-stop still applies) and no mutual stage.

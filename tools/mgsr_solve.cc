@@ -78,6 +78,10 @@ DEFINE_string(surfel_init, "neighbours",
 DEFINE_int32(warmup_max_iterations, -1, "Cap of warm-up iterations per branch (-1: preset).");
 DEFINE_int32(warmup_min_iterations, -1, "Auto-stop only after this iteration (-1: preset).");
 DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");
+DEFINE_int32(mutual_iterations_2d, -2,
+             "The 2DGS branch steps in the first N mutual iterations only, then is held while the "
+             "3DGS branch trains on (-1: the whole stage; default: fast's 1,500 where the views "
+             "have masks and the stage is longer, else the whole stage).");
 DEFINE_int32(position_lr_max_steps, -1,
              "The position learning rate decays over this many iterations of each stage: the "
              "3DGS branch's, and the 2DGS branch's unless --position_lr_max_steps_2d (-1: "
@@ -322,9 +326,10 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
          "profile"}},
        {"Method and schedule",
         {"preset", "method", "mutual_mode", "warmup_max_iterations", "warmup_min_iterations",
-         "mutual_iterations", "position_lr_max_steps", "position_lr_max_steps_2d",
-         "surfel_shape_decay", "auto_stop", "auto_stop_window", "auto_stop_range", "bidirectional",
-         "coarse_max_size", "coarse_fraction", "coarse_levels", "seed"}},
+         "mutual_iterations", "mutual_iterations_2d", "position_lr_max_steps",
+         "position_lr_max_steps_2d", "surfel_shape_decay", "auto_stop", "auto_stop_window",
+         "auto_stop_range", "bidirectional", "coarse_max_size", "coarse_fraction", "coarse_levels",
+         "seed"}},
        {"Batches and MPI", {"batch_views", "batch_sqrt_lr", "batch_keep_iterations"}},
        {"Losses",
         {"loss_config",
@@ -408,6 +413,8 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   if (FLAGS_warmup_max_iterations >= 0) options.warmup_max_iterations = FLAGS_warmup_max_iterations;
   if (FLAGS_warmup_min_iterations >= 0) options.warmup_min_iterations = FLAGS_warmup_min_iterations;
   if (FLAGS_mutual_iterations >= 0) options.mutual_iterations = FLAGS_mutual_iterations;
+  ro.geometry_hold_from_scene = FLAGS_mutual_iterations_2d == -2;
+  if (FLAGS_mutual_iterations_2d != -2) options.mutual_iterations_2d = FLAGS_mutual_iterations_2d;
   if (FLAGS_position_lr_max_steps > 0) options.position_lr_max_steps = FLAGS_position_lr_max_steps;
   if (FLAGS_position_lr_max_steps_2d > 0)
     options.position_lr_max_steps_2d = FLAGS_position_lr_max_steps_2d;

@@ -1270,3 +1270,104 @@ TEST(CheckpointTest, CheckpointCallbackWritesResumableStates) {
 
 }  // namespace
 }  // namespace mgsr
+
+namespace mgsr {
+namespace {
+
+// The surfels' blocks only (the 2DGS branch's model).
+void ExpectSameSurfels(const MutualBoostedSolver& a, const MutualBoostedSolver& b) {
+  SurfelModel sa = a.surfels(), sb = b.surfels();
+  ASSERT_EQ(sa.size(), sb.size());
+  const auto ca = sa.Blocks(), cb = sb.Blocks();
+  for (size_t k = 0; k < ca.size(); ++k) EXPECT_EQ(*ca[k].data, *cb[k].data) << ca[k].name;
+}
+
+// Past mutual_iterations_2d the 2DGS branch is where a run that ended there left it, and the
+// 3DGS branch trains on; a run stopped and resumed on either side of that point continues exactly.
+TEST(MutualBoostedSolverTest, AHeldGeometryBranchStaysWhereItsShareEnded) {
+  const std::string dir = testing::ScratchDir();
+  const Scene scene = TinyScene(dir + "/scene");
+  for (const char* mode : {"alternate", "joint"}) {
+    SCOPED_TRACE(mode);
+    SolverOptions shorter = TinyOptions();
+    shorter.warmup_max_iterations = 40;
+    shorter.mutual_mode = mode;
+    shorter.mutual_iterations = 8;
+    SolverOptions held = shorter;
+    held.mutual_iterations = 16;
+    held.mutual_iterations_2d = 8;
+    ASSERT_TRUE(held.Validate().ok()) << held.Validate().message();
+    MutualBoostedSolver a(shorter, scene), b(held, scene);
+    Snapshots snap(&b);
+    b.AddCallback(&snap);
+    SolveSummary sa, sb;
+    ASSERT_TRUE(a.Solve(&sa).ok());
+    ASSERT_TRUE(b.Solve(&sb).ok());
+    EXPECT_EQ(sb.mutual_iterations, 16);
+    ExpectSameSurfels(a, b);
+    EXPECT_NE(a.gaussians().means, b.gaussians().means);  // it trained on
+    // No 2DGS step notified past the hold.
+    const size_t steps_2d =
+        std::count(snap.branches.begin(), snap.branches.end(), Branch::kSurfels2D);
+    EXPECT_EQ(steps_2d, std::string(mode) == "joint" ? 8u : 4u);
+    for (int at : {6, 12}) {
+      SCOPED_TRACE(at);
+      MutualBoostedSolver first(held, scene);
+      StopAt stop(&first, Stage::kMutual, at);
+      first.AddCallback(&stop);
+      SolveSummary s1;
+      ASSERT_TRUE(first.Solve(&s1).ok());
+      ASSERT_EQ(s1.termination_type, TerminationType::kInterrupted);
+      const std::string ckpt = dir + "/held.ckpt";
+      ASSERT_TRUE(first.SaveCheckpoint(ckpt).ok());
+      MutualBoostedSolver second(held, scene);
+      ASSERT_TRUE(second.LoadCheckpoint(ckpt).ok());
+      SolveSummary s2;
+      ASSERT_TRUE(second.Solve(&s2).ok());
+      ExpectSameModels(b, second);
+    }
+  }
+  SolverOptions both_ways = TinyOptions();
+  both_ways.mutual_iterations_2d = 4;
+  both_ways.bidirectional = true;
+  EXPECT_EQ(both_ways.Validate().message(),
+            "--mutual_iterations_2d: a held 2DGS branch cannot take --bidirectional's gradient");
+  both_ways.bidirectional = false;
+  both_ways.mutual_iterations_2d = -2;
+  EXPECT_EQ(both_ways.Validate().message(),
+            "--mutual_iterations_2d must be >= 0 (or -1: the whole mutual stage)");
+}
+
+// Where the views have masks, a mutual stage longer than fast's holds the 2DGS branch after fast's
+// mutual iterations, on fast's 2DGS density schedule; fast itself, a single branch or
+// bidirectional supervision are left as they are.
+TEST(SolverOptionsTest, HoldGeometryAtFastOnlyLengthensTheAppearanceBranch) {
+  SolverOptions paper, fast;
+  ASSERT_TRUE(SolverOptions::FromPreset("paper", &paper));
+  ASSERT_TRUE(SolverOptions::FromPreset("fast", &fast));
+  EXPECT_EQ(paper.mutual_iterations_2d, -1);
+  SolverOptions held = paper;
+  ASSERT_TRUE(SolverOptions::HoldGeometryAtFast(&held));
+  EXPECT_EQ(held.mutual_iterations_2d, fast.mutual_iterations);
+  EXPECT_EQ(held.mutual_iterations, 20000);
+  EXPECT_EQ(held.schedule_2d.densify_until, fast.schedule_2d.densify_until);
+  EXPECT_EQ(held.schedule_2d.opacity_reset_interval, fast.schedule_2d.opacity_reset_interval);
+  EXPECT_EQ(held.schedule_3d.densify_until, paper.schedule_3d.densify_until);  // untouched
+  EXPECT_TRUE(held.Validate().ok()) << held.Validate().message();
+  SolverOptions o = fast;
+  EXPECT_FALSE(SolverOptions::HoldGeometryAtFast(&o));
+  EXPECT_EQ(o.mutual_iterations_2d, -1);
+  o = paper;
+  o.bidirectional = true;
+  EXPECT_FALSE(SolverOptions::HoldGeometryAtFast(&o));
+  o = paper;
+  ASSERT_TRUE(SolverOptions::ApplyMethod("2dgs", &o));
+  EXPECT_FALSE(SolverOptions::HoldGeometryAtFast(&o));
+  // Scaled for batches like the stage it belongs to.
+  held.ScaleIterationsForBatch(4);
+  EXPECT_EQ(held.mutual_iterations_2d, 375);
+  EXPECT_EQ(held.mutual_iterations, 5000);
+}
+
+}  // namespace
+}  // namespace mgsr
