@@ -1151,7 +1151,11 @@ nlohmann::json ReconstructionPipeline::MetricsJson(const RunState& st) const {
         {"warmup_3d", summary.branch(Branch::kGaussians3D).warmup_iterations},
         {"auto_stopped_2d", summary.branch(Branch::kSurfels2D).auto_stopped},
         {"auto_stopped_3d", summary.branch(Branch::kGaussians3D).auto_stopped},
-        {"mutual", summary.mutual_iterations}}},
+        {"mutual", summary.mutual_iterations},
+        // Of those, the ones the 2DGS branch stepped in (SolverOptions::mutual_iterations_2d).
+        {"mutual_2d", options.mutual_iterations_2d < 0
+                          ? summary.mutual_iterations
+                          : std::min(summary.mutual_iterations, options.mutual_iterations_2d)}}},
       {"counts",
        {{"gaussians", options.train_3d ? summary.branch(Branch::kGaussians3D).primitives : 0},
         {"surfels", options.train_2d ? summary.branch(Branch::kSurfels2D).primitives : 0}}},

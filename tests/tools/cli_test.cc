@@ -738,6 +738,35 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
       << r.output;
   EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "warmup"), 3.0);
   EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "mutual"), 1.5);
+  // A mutual stage no longer than fast's trains the 2DGS branch throughout.
+  EXPECT_EQ(r.output.find("geometry:"), std::string::npos) << r.output;
+  EXPECT_EQ(nlohmann::json::parse(metrics)["iterations"]["mutual_2d"], 4) << metrics;
+  // A longer one, with masks, holds it after fast's 1,500; given, the flag decides, with or
+  // without masks.
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
+                          "/out_long --warmup_max_iterations 10 --warmup_min_iterations 0 "
+                          "--mutual_iterations 1502 --log_every 2000 --eval_every 0");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("geometry: the 2DGS branch trains for the first 1500 of 1502 mutual "
+                          "iterations, then is held"),
+            std::string::npos)
+      << r.output;
+  ASSERT_TRUE(ReadFileToString(dir + "/out_long/metrics.json", &metrics).ok());
+  EXPECT_EQ(nlohmann::json::parse(metrics)["iterations"]["mutual_2d"], 1500) << metrics;
+  for (const std::string& workspace : {base_, dir}) {
+    r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + workspace + " --output " + dir +
+                            "/out_held --mutual_iterations_2d 2 --overwrite" + few);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_EQ(r.output.find("geometry:"), std::string::npos) << r.output;
+    ASSERT_TRUE(ReadFileToString(dir + "/out_held/metrics.json", &metrics).ok());
+    EXPECT_EQ(nlohmann::json::parse(metrics)["iterations"]["mutual_2d"], 2) << metrics;
+  }
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
+                          "/out_held_bad --mutual_iterations_2d -3" + few);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("--mutual_iterations_2d must be >= 0 (or -1: the whole mutual stage)"),
+            std::string::npos)
+      << r.output;
   // A weight given for the term holds in both stages; the warm-up's can be given apart.
   for (const auto& [flag, warmup, mutual] : {std::make_tuple("--lambda_mask 2", 2.0, 1.0),
                                              std::make_tuple("--lambda_mask_warmup 4", 4.0, 1.5)}) {
