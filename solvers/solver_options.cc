@@ -60,11 +60,25 @@ bool SolverOptions::FromPreset(const std::string& name, SolverOptions* o) {
 }
 
 bool SolverOptions::HoldGeometryAtFast(SolverOptions* o) {
-  const int fast_mutual = Scaled(SolverOptions().mutual_iterations, kFastScale);
-  if (!o->train_2d || !o->train_3d || o->bidirectional || o->mutual_iterations <= fast_mutual)
+  SolverOptions paper, fast;
+  FromPreset("paper", &paper);
+  FromPreset("fast", &fast);
+  if (!o->train_2d || !o->train_3d || o->bidirectional ||
+      o->mutual_iterations <= fast.mutual_iterations)
     return false;
-  o->schedule_2d = kFastSchedule2D;
-  o->mutual_iterations_2d = fast_mutual;
+  // A value the command line changed stays.
+  const auto take = [](auto* field, const auto& paper_value, const auto& fast_value) {
+    if (*field == paper_value) *field = fast_value;
+  };
+  take(&o->schedule_2d, paper.schedule_2d, fast.schedule_2d);
+  take(&o->schedule_3d, paper.schedule_3d, fast.schedule_3d);
+  take(&o->position_lr_max_steps, paper.position_lr_max_steps, fast.position_lr_max_steps);
+  take(&o->sh_interval, paper.sh_interval, fast.sh_interval);
+  take(&o->auto_stop_window, paper.auto_stop_window, fast.auto_stop_window);
+  take(&o->max_init_points, paper.max_init_points, fast.max_init_points);
+  take(&o->distortion_from_iteration, paper.distortion_from_iteration,
+       fast.distortion_from_iteration);
+  o->mutual_iterations_2d = fast.mutual_iterations;
   return true;
 }
 

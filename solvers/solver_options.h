@@ -19,6 +19,11 @@ struct BranchSchedule {
   int densify_from = 500, densify_until = 15000, densify_interval = 100;
   int opacity_reset_interval = 3000;  // resets while densifying
   float min_opacity = 0.05f;          // prune threshold
+  bool operator==(const BranchSchedule& o) const {
+    return densify_from == o.densify_from && densify_until == o.densify_until &&
+           densify_interval == o.densify_interval &&
+           opacity_reset_interval == o.opacity_reset_interval && min_opacity == o.min_opacity;
+  }
 };
 
 // The 2DGS normal-consistency weight: the reference's, and this project's default for objects
@@ -241,9 +246,13 @@ struct SolverOptions {
   // the normal and patch terms); "fast": every iteration count scaled to minutes on a laptop CPU.
   static bool FromPreset(const std::string& name, SolverOptions* options);
   // Where the views have masks (ReconstructionOptions::geometry_hold_from_scene): a mutual stage
-  // longer than `fast`'s trains the 2DGS branch on `fast`'s density schedule for `fast`'s mutual
-  // iterations and then holds it. Under the strong normal prior of such scenes the longer stage
-  // fills concavities (docs/geometry.md, "Training longer"). True if it changed anything.
+  // longer than `fast`'s runs `fast` first (the schedules still at `paper`'s values take `fast`'s:
+  // both branches' density schedules and position decay, the SH growth, the auto-stop window, the
+  // initial points), holds the 2DGS branch after `fast`'s mutual iterations, and trains the 3DGS
+  // branch on. Under the strong normal prior of such scenes the longer stage filled concavities,
+  // and `paper`'s schedules before that point moved the mesh by about the spread between seeds,
+  // on some scenes worse at every seed (docs/geometry.md, "The geometry branch held after
+  // `fast`'s mutual stage"). True if it changed anything.
   static bool HoldGeometryAtFast(SolverOptions* options);
   // Sets train_2d / train_3d / reflection for "mgsr", "2dgs" (ablation B), "3dgs" (plain, no
   // reflection) or "3dgs-ref" (ablation A). A single branch gets the warm-up cap plus the mutual

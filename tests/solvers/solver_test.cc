@@ -1338,9 +1338,10 @@ TEST(MutualBoostedSolverTest, AHeldGeometryBranchStaysWhereItsShareEnded) {
             "--mutual_iterations_2d must be >= 0 (or -1: the whole mutual stage)");
 }
 
-// Where the views have masks, a mutual stage longer than fast's holds the 2DGS branch after fast's
-// mutual iterations, on fast's 2DGS density schedule; fast itself, a single branch or
-// bidirectional supervision are left as they are.
+// Where the views have masks, a mutual stage longer than fast's runs fast first and then trains
+// the 3DGS branch alone: the held options differ from fast's only in the stage's length and the
+// 2DGS branch's share of it. A schedule the command line changed stays; fast itself, a single
+// branch or bidirectional supervision are left as they are.
 TEST(SolverOptionsTest, HoldGeometryAtFastOnlyLengthensTheAppearanceBranch) {
   SolverOptions paper, fast;
   ASSERT_TRUE(SolverOptions::FromPreset("paper", &paper));
@@ -1350,10 +1351,24 @@ TEST(SolverOptionsTest, HoldGeometryAtFastOnlyLengthensTheAppearanceBranch) {
   ASSERT_TRUE(SolverOptions::HoldGeometryAtFast(&held));
   EXPECT_EQ(held.mutual_iterations_2d, fast.mutual_iterations);
   EXPECT_EQ(held.mutual_iterations, 20000);
-  EXPECT_EQ(held.schedule_2d.densify_until, fast.schedule_2d.densify_until);
-  EXPECT_EQ(held.schedule_2d.opacity_reset_interval, fast.schedule_2d.opacity_reset_interval);
-  EXPECT_EQ(held.schedule_3d.densify_until, paper.schedule_3d.densify_until);  // untouched
   EXPECT_TRUE(held.Validate().ok()) << held.Validate().message();
+  const auto fast_settings = fast.Settings();
+  const auto held_settings = held.Settings();
+  ASSERT_EQ(fast_settings.size(), held_settings.size());
+  for (size_t i = 0; i < fast_settings.size(); ++i) {
+    const std::string& name = fast_settings[i].first;
+    if (name == "mutual_iterations" || name == "mutual_iterations_2d") continue;
+    if (name == "position_lr_max_steps_2d") {  // 2,250 given, or -1: position_lr_max_steps
+      EXPECT_EQ(held.PositionDecaySteps(Branch::kSurfels2D),
+                fast.PositionDecaySteps(Branch::kSurfels2D));
+      continue;
+    }
+    EXPECT_EQ(held_settings[i].second, fast_settings[i].second) << name;
+  }
+  SolverOptions given = paper;
+  given.sh_interval = 300;
+  ASSERT_TRUE(SolverOptions::HoldGeometryAtFast(&given));
+  EXPECT_EQ(given.sh_interval, 300);
   SolverOptions o = fast;
   EXPECT_FALSE(SolverOptions::HoldGeometryAtFast(&o));
   EXPECT_EQ(o.mutual_iterations_2d, -1);
