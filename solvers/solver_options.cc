@@ -33,6 +33,7 @@ bool SolverOptions::FromPreset(const std::string& name, SolverOptions* o) {
   // the thousands of iterations at a high rate or without the normal terms, each step's one
   // view, lit its own way, bends the surfels to explain its light (docs/geometry.md, "Training
   // longer"). The 3DGS branch keeps the reference's decay in `paper`: its appearance gains from it.
+  // (Where the views have masks, HoldGeometryAtFast gives both branches fast's schedules.)
   o->normal_from_iteration = Scaled(o->normal_from_iteration, f);
   o->multiview_from_iteration = Scaled(o->multiview_from_iteration, f);
   // Both presets warm up for fast's 1,125-1,500 iterations. The reference's 15,000-iteration
