@@ -721,7 +721,8 @@ Status ReconstructionPipeline::ChooseSceneSettings(RunState* st) {
   if (foreground && o.geometry_hold_from_scene && SolverOptions::HoldGeometryAtFast(&options)) {
     std::printf(
         "geometry: the 2DGS branch trains for the first %d of %d mutual iterations, then is held "
-        "while the 3DGS branch trains on (the views have masks or alpha)\n",
+        "while the 3DGS branch trains on, both on fast's schedules (the views have masks or "
+        "alpha)\n",
         options.mutual_iterations_2d, options.mutual_iterations);
   }
   if (foreground && (o.mask_from_scene || o.one_sided_from_scene)) {

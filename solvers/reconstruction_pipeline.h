@@ -75,9 +75,9 @@ struct ReconstructionOptions {
   // Off: solver.lambda_distortion as given.
   bool distortion_from_scene = false;
   // Where every training view has a mask or alpha and the mutual stage is longer than `fast`'s:
-  // SolverOptions::HoldGeometryAtFast (the 2DGS branch trains for `fast`'s mutual iterations on
-  // its density schedule, then is held while the 3DGS branch trains on). Under the strong normal
-  // prior of such scenes the longer stage fills concavities (docs/geometry.md, "Training
+  // SolverOptions::HoldGeometryAtFast (both branches on `fast`'s schedules; the 2DGS branch trains
+  // for `fast`'s mutual iterations, then is held while the 3DGS branch trains on). Under the strong
+  // normal prior of such scenes the longer stage fills concavities (docs/geometry.md, "Training
   // longer"). Without masks the whole stage trains both: there the long stage with the depth
   // distortion lowers CD. Off: solver.mutual_iterations_2d as given.
   bool geometry_hold_from_scene = false;
