@@ -130,6 +130,7 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
                                                                {"mutual_iterations_2d", "-1"},
                                                                {"normal_agreement_floor", "1"},
                                                                {"position_lr_max_steps_2d", "-1"},
+                                                               {"spread_initial_surfels", "0"},
                                                                {"surfel_shape_decay", "0"}};
     const auto before = kBefore.find(name);
     if (it == recorded.end() && before != kBefore.end() && before->second == value) continue;

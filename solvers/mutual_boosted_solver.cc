@@ -122,6 +122,8 @@ MutualBoostedSolver::MutualBoostedSolver(const SolverOptions& options, const Sce
   GaussianModel gaussians;
   SurfelModel surfels;
   InitGaussiansFromPoints(points, colors, options.sh_degree, &gaussians);
+  if (options.spread_initial_surfels)
+    SpreadPointsOverTheirSurfaces(options.max_surfels, options.seed + 2, &points, &colors);
   InitSurfelsFromPoints(points, colors, options.sh_degree, options.seed + 1, &surfels,
                         options.surfel_orientation_from_points ? SurfelOrientation::kNeighbourhood
                                                                : SurfelOrientation::kRandom);

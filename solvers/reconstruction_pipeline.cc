@@ -725,6 +725,13 @@ Status ReconstructionPipeline::ChooseSceneSettings(RunState* st) {
         "alpha)\n",
         options.mutual_iterations_2d, options.mutual_iterations);
   }
+  if (o.spread_from_scene) {
+    options.spread_initial_surfels = foreground;
+    if (foreground)
+      std::printf(
+          "initial disks: spread over the points' surfaces to the 2DGS budget (the views have "
+          "masks or alpha)\n");
+  }
   if (foreground && (o.mask_from_scene || o.one_sided_from_scene)) {
     if (o.mask_from_scene) options.lambda_mask = kMaskWeightWithForeground;
     if (o.one_sided_from_scene) options.normal_one_sided = true;
@@ -1186,7 +1193,8 @@ nlohmann::json ReconstructionPipeline::MetricsJson(const RunState& st) const {
                        {"mode", st.budget_mode},
                        {"why", st.budget_why},
                        {"density", options.density},
-                       {"density_config", options.density_config}};
+                       {"density_config", options.density_config},
+                       {"spread_initial_surfels", options.spread_initial_surfels}};
   // The coarse start (factor 1: none): the last coarse iteration of each stage.
   metrics["coarse"] = {{"factor", options.coarse_factor},
                        {"levels", options.coarse_factor > 1 ? options.coarse_levels : 0},

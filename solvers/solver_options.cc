@@ -336,6 +336,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"surfel_area_preserving_low_pass", Text(surfel_area_preserving_low_pass)},
           {"surfel_filter_sigma", Text(surfel_filter_sigma)},
           {"surfel_orientation_from_points", Text(surfel_orientation_from_points)},
+          {"spread_initial_surfels", Text(spread_initial_surfels)},
           {"exposure", ExposureModeName(exposure)},
           {"exposure_lr", Text(exposure_lr)},
           {"exposure_prior", Text(exposure_prior)},

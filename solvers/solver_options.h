@@ -184,6 +184,13 @@ struct SolverOptions {
   // so a random start leaves many tilted, and a tilted disk must sit deeper for its near edge not
   // to stand out of the surface: docs/geometry.md.
   bool surfel_orientation_from_points = true;
+  // Spread the initial points over their own surfaces until the 2DGS branch has max_surfels disks
+  // (SpreadPointsOverTheirSurfaces; the 3DGS branch keeps one Gaussian per point). A disk starts
+  // as wide as the gap to its neighbours, and from a sparse cloud that spans the grooves and slots
+  // of a detailed object, which the fit then keeps; smaller first disks recover them, but on flat
+  // and mirror-like faces they follow the photos' prints and reflections: docs/geometry.md, "How
+  // large the first disks are". Off by default for that reason.
+  bool spread_initial_surfels = false;
   // Per-view exposure compensation (mgsr/loss/exposure_compensation.h): an affine colour model per
   // training view in front of every comparison with a photo, learned at its own rate with a weak
   // prior towards identity, re-fitted (Huber, solvers/exposure_fit.h) against the warmed-up render

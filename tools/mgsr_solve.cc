@@ -75,6 +75,12 @@ DEFINE_double(surfel_filter_sigma, 0.29,
 DEFINE_string(surfel_init, "neighbours",
               "Initial 2DGS disk orientation: neighbours (in the plane of each initial point's 16 "
               "nearest points) | random (the reference).");
+DEFINE_string(
+    surfel_spread, "off",
+    "Initial 2DGS disks: off (one per initial point, the reference) | on (the points "
+    "spread over their own surfaces to the 2DGS budget: smaller first disks, which "
+    "recover grooves and slots of detailed objects but follow reflections and prints "
+    "on flat ones; docs/geometry.md) | masked (on where every view has a mask or alpha).");
 DEFINE_int32(warmup_max_iterations, -1, "Cap of warm-up iterations per branch (-1: preset).");
 DEFINE_int32(warmup_min_iterations, -1, "Auto-stop only after this iteration (-1: preset).");
 DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");
@@ -362,7 +368,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
          "exposure_mean_prior", "exposure_per_branch", "exposure_fit"}},
        {"Primitives",
         {"density", "density_config", "budget", "prune_contribution", "max_gaussians",
-         "max_surfels", "surfel_low_pass", "surfel_filter_sigma", "surfel_init"}},
+         "max_surfels", "surfel_low_pass", "surfel_filter_sigma", "surfel_init", "surfel_spread"}},
        {"Models", {"export"}},
        {"Mesh",
         {"mesh_depth", "mesh_color", "voxel_size", "mesh_resolution_scale", "tsdf_truncation",
@@ -395,6 +401,11 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   if (FLAGS_surfel_init != "neighbours" && FLAGS_surfel_init != "random")
     return Fail("--surfel_init must be neighbours or random");
   options.surfel_orientation_from_points = FLAGS_surfel_init == "neighbours";
+  if (FLAGS_surfel_spread != "masked" && FLAGS_surfel_spread != "on" &&
+      FLAGS_surfel_spread != "off")
+    return Fail("--surfel_spread must be off, on or masked");
+  ro.spread_from_scene = FLAGS_surfel_spread == "masked";
+  options.spread_initial_surfels = FLAGS_surfel_spread == "on";
   // -1 means "the preset's"; any other negative count is a typo, not a request.
   for (const auto& [value, name] :
        {std::pair{FLAGS_warmup_max_iterations, "--warmup_max_iterations"},

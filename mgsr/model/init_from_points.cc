@@ -124,6 +124,42 @@ std::vector<float> NeighbourhoodRotations(const std::vector<Eigen::Vector3f>& po
   return out;
 }
 
+void SpreadPointsOverTheirSurfaces(size_t target, uint64_t seed,
+                                   std::vector<Eigen::Vector3f>* points,
+                                   std::vector<Eigen::Vector3f>* colors, int k) {
+  CHECK_EQ(points->size(), colors->size());
+  const size_t n = points->size();
+  if (target <= n || n < 3) return;
+  const std::vector<float> d2 = MeanSquaredNeighbourDistance(*points, 3);
+  const std::vector<float> rotations = NeighbourhoodRotations(*points, k);
+  std::vector<Eigen::Vector3f> spread, spread_colors;
+  spread.reserve(target);
+  spread_colors.reserve(target);
+  Rng rng(seed);
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Matrix3f r = Eigen::Quaternionf(rotations[4 * i], rotations[4 * i + 1],
+                                                 rotations[4 * i + 2], rotations[4 * i + 3])
+                                  .toRotationMatrix();
+    const float radius = 0.5f * std::sqrt(d2[i]);
+    // Point i's share of the target: the first (i + 1) n-ths minus the first i, so they sum to it.
+    const size_t share = target * (i + 1) / n - target * i / n;
+    spread.push_back((*points)[i]);
+    spread_colors.push_back((*colors)[i]);
+    for (size_t c = 1; c < share; ++c) {
+      double u, v;
+      do {  // uniform in the unit disk by rejection
+        u = 2 * rng.Uniform() - 1;
+        v = 2 * rng.Uniform() - 1;
+      } while (u * u + v * v > 1);
+      spread.push_back((*points)[i] + radius * (static_cast<float>(u) * r.col(0) +
+                                                static_cast<float>(v) * r.col(1)));
+      spread_colors.push_back((*colors)[i]);
+    }
+  }
+  points->swap(spread);
+  colors->swap(spread_colors);
+}
+
 void InitSurfelsFromPoints(const std::vector<Eigen::Vector3f>& points,
                            const std::vector<Eigen::Vector3f>& colors, int max_sh_degree,
                            uint64_t seed, SurfelModel* m, SurfelOrientation orientation) {

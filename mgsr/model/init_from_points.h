@@ -32,6 +32,17 @@ void InitGaussiansFromPoints(const std::vector<Eigen::Vector3f>& points,
 // points: identity.
 std::vector<float> NeighbourhoodRotations(const std::vector<Eigen::Vector3f>& points, int k = 16);
 
+// Spreads the points over their own surfaces until there are `target` of them: each point stays
+// and gains copies (its colour) uniformly in a disk of half its root-mean-square distance to its 3
+// nearest neighbours, in the plane of its k nearest (NeighbourhoodRotations). Copies are shared
+// out evenly, so every point has floor or ceil of target / n of them in all. Does nothing when
+// target <= n or there are fewer than 3 points. Seeded; the order is each point followed by its
+// copies. Why: a disk starts as wide as the gap to its neighbours, and from a sparse cloud that
+// is wide enough to span a groove or a slot, which the fit then keeps (docs/geometry.md).
+void SpreadPointsOverTheirSurfaces(size_t target, uint64_t seed,
+                                   std::vector<Eigen::Vector3f>* points,
+                                   std::vector<Eigen::Vector3f>* colors, int k = 16);
+
 enum class SurfelOrientation {
   kRandom,         // the reference: U(0,1)^4, seeded
   kNeighbourhood,  // disk in the plane of the point's 16 nearest neighbours

@@ -111,6 +111,69 @@ TEST(InitFromPointsTest, NeighbourhoodOrientationLaysDisksInTheSurface) {
   EXPECT_EQ(two, (std::vector<float>{1, 0, 0, 0, 1, 0, 0, 0}));
 }
 
+// Points on a tilted plane spread to 7 times as many (an uneven share: 2801 over 400): each point
+// kept, followed by its copies, every copy in the plane, within half its source's RMS 3-neighbour
+// distance, in its colour; copies fill the disk (not all at the centre); seeded.
+TEST(InitFromPointsTest, SpreadKeepsEachPointAndFillsItsDiskInItsSurface) {
+  Rng rng(5);
+  const Eigen::Vector3d normal = Eigen::Vector3d(0.3, -0.5, 1.0).normalized();
+  const Eigen::Vector3d a = normal.unitOrthogonal(), b = normal.cross(a);
+  std::vector<Eigen::Vector3f> points, colors;
+  for (int i = 0; i < 400; ++i) {
+    points.push_back((rng.Uniform() * a + rng.Uniform() * b + 0.2 * normal).cast<float>());
+    colors.emplace_back(i / 400.0f, 0.5f, 1.0f - i / 400.0f);
+  }
+  const std::vector<float> d2 = MeanSquaredNeighbourDistance(points, 3);
+  const size_t target = 2801;
+  std::vector<Eigen::Vector3f> spread = points, spread_colors = colors;
+  SpreadPointsOverTheirSurfaces(target, 9, &spread, &spread_colors);
+  ASSERT_EQ(spread.size(), target);
+  ASSERT_EQ(spread_colors.size(), target);
+  size_t next = 0;
+  double mean_r2 = 0;  // of the copies, in units of the disk radius squared
+  size_t copies = 0;
+  for (size_t i = 0; i < points.size(); ++i) {
+    ASSERT_EQ(spread[next], points[i]) << "point " << i << " kept, in order";
+    const size_t share = target * (i + 1) / points.size() - target * i / points.size();
+    EXPECT_TRUE(share == 7 || share == 8);
+    const double radius = 0.5 * std::sqrt(d2[i]);
+    for (size_t c = 0; c < share; ++c, ++next) {
+      EXPECT_EQ(spread_colors[next], colors[i]);
+      const Eigen::Vector3d offset = (spread[next] - points[i]).cast<double>();
+      EXPECT_NEAR(offset.dot(normal), 0.0, 1e-5) << "in the plane";
+      EXPECT_LE(offset.norm(), radius * (1 + 1e-5));
+      if (c > 0) {
+        mean_r2 += offset.squaredNorm() / (radius * radius);
+        ++copies;
+      }
+    }
+  }
+  EXPECT_EQ(next, target);
+  // Uniform in a disk: E[r^2] = R^2 / 2.
+  EXPECT_NEAR(mean_r2 / copies, 0.5, 0.03);
+  std::vector<Eigen::Vector3f> again = points, again_colors = colors, other = points,
+                               other_colors = colors;
+  SpreadPointsOverTheirSurfaces(target, 9, &again, &again_colors);
+  SpreadPointsOverTheirSurfaces(target, 10, &other, &other_colors);
+  EXPECT_EQ(again, spread);
+  EXPECT_NE(other, spread);
+}
+
+TEST(InitFromPointsTest, SpreadLeavesPointsAloneWhenThereAreEnoughOrTooFew) {
+  const auto grid = Grid(3, 0.1f);
+  const std::vector<Eigen::Vector3f> grid_colors(grid.size(), Eigen::Vector3f(0.5f, 0.5f, 0.5f));
+  for (const size_t target : {size_t{0}, grid.size() - 1, grid.size()}) {
+    std::vector<Eigen::Vector3f> p = grid, c = grid_colors;
+    SpreadPointsOverTheirSurfaces(target, 1, &p, &c);
+    EXPECT_EQ(p, grid) << target;
+    EXPECT_EQ(c, grid_colors) << target;
+  }
+  std::vector<Eigen::Vector3f> two = {grid[0], grid[1]},
+                               two_colors = {grid_colors[0], grid_colors[1]};
+  SpreadPointsOverTheirSurfaces(100, 1, &two, &two_colors);
+  EXPECT_EQ(two.size(), 2u);
+}
+
 TEST(ParamBlockTest, BlocksCoverEveryFieldWithMatchingSizes) {
   GaussianModel g;
   g.max_sh_degree = 2;

@@ -416,6 +416,31 @@ TEST(MutualBoostedSolverTest, SingleBranchMethods) {
   EXPECT_FALSE(SolverOptions::ApplyMethod("nerf", &o));
 }
 
+// spread_initial_surfels: the 2DGS branch starts with its whole budget of disks, the 3DGS branch
+// with one Gaussian per point either way; without a budget (0) nothing is spread.
+TEST(MutualBoostedSolverTest, SpreadInitialSurfelsFillsTheTwoDBudgetOnly) {
+  const Scene scene = TinyScene(testing::ScratchDir());
+  SolverOptions o = TinyOptions();
+  o.max_surfels = 3 * scene.points.size() + 1;
+  o.max_gaussians = 5 * scene.points.size();
+  const MutualBoostedSolver one_each(o, scene);
+  EXPECT_EQ(one_each.surfels().size(), scene.points.size());
+  o.spread_initial_surfels = true;
+  const MutualBoostedSolver spread(o, scene);
+  EXPECT_EQ(spread.surfels().size(), o.max_surfels);
+  EXPECT_EQ(spread.gaussians().size(), scene.points.size());
+  EXPECT_EQ(spread.gaussians().means, one_each.gaussians().means);
+  // Closer disks, smaller ones: the mean log scale falls by about log sqrt(3).
+  const auto mean_log_scale = [](const SurfelModel& m) {
+    double sum = 0;
+    for (float v : m.log_scales) sum += v;
+    return sum / m.log_scales.size();
+  };
+  EXPECT_LT(mean_log_scale(spread.surfels()), mean_log_scale(one_each.surfels()) - 0.3);
+  o.max_surfels = 0;
+  EXPECT_EQ(MutualBoostedSolver(o, scene).surfels().size(), scene.points.size());
+}
+
 TEST(MutualBoostedSolverTest, InvalidOptionsAreRejected) {
   const Scene scene = TinyScene(testing::ScratchDir());
   SolverOptions o = TinyOptions();

@@ -706,6 +706,9 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
   EXPECT_DOUBLE_EQ(row_weight(metrics, "distortion", "mutual"), 500.0) << metrics;
   // An object before a uniform backdrop keeps the reference's depth TVs.
   EXPECT_EQ(r.output.find("depth TVs: off"), std::string::npos) << r.output;
+  // Without masks one disk per initial point.
+  EXPECT_EQ(r.output.find("initial disks:"), std::string::npos) << r.output;
+  EXPECT_EQ(nlohmann::json::parse(metrics)["budget"]["spread_initial_surfels"], false) << metrics;
   // A loss configuration edits the table the scene chose: its row changes, the scene's normal
   // weight stays (it was once applied to the defaults' table, 2.0, before the scene was read).
   ASSERT_TRUE(WriteStringToFileAtomic(dir + "/l1.json",
@@ -738,6 +741,9 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
       << r.output;
   EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "warmup"), 3.0);
   EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "mutual"), 1.5);
+  // By default one disk per initial point, masks or not.
+  EXPECT_EQ(r.output.find("initial disks:"), std::string::npos) << r.output;
+  EXPECT_EQ(nlohmann::json::parse(metrics)["budget"]["spread_initial_surfels"], false) << metrics;
   // A mutual stage no longer than fast's trains the 2DGS branch throughout.
   EXPECT_EQ(r.output.find("geometry:"), std::string::npos) << r.output;
   EXPECT_EQ(nlohmann::json::parse(metrics)["iterations"]["mutual_2d"], 4) << metrics;
@@ -782,6 +788,28 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
                           "/out_mask_bad --lambda_mask_warmup -3" + few);
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_NE(r.output.find("--lambda_mask_warmup must be >= 0"), std::string::npos) << r.output;
+  // --surfel_spread: masked spreads where the views have masks (and says so), on and off decide
+  // with or without masks.
+  for (const auto& [workspace, value, spread] :
+       {std::make_tuple(base_, "masked", true), std::make_tuple(dir, "masked", false),
+        std::make_tuple(dir, "on", true), std::make_tuple(base_, "off", false)}) {
+    SCOPED_TRACE(workspace + " " + value);
+    r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + workspace + " --output " + dir +
+                            "/out_spread --overwrite --surfel_spread " + value + few);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_EQ(r.output.find("initial disks: spread over the points' surfaces to the 2DGS budget "
+                            "(the views have masks or alpha)") != std::string::npos,
+              spread && std::string(value) == "masked")
+        << r.output;
+    ASSERT_TRUE(ReadFileToString(dir + "/out_spread/metrics.json", &metrics).ok());
+    EXPECT_EQ(nlohmann::json::parse(metrics)["budget"]["spread_initial_surfels"], spread)
+        << metrics;
+  }
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
+                          "/out_spread_bad --surfel_spread all" + few);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("--surfel_spread must be off, on or masked"), std::string::npos)
+      << r.output;
   // Given on the command line, the weight is kept as given.
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + dir + " --output " + dir +
                           "/out_given --lambda_normal 0.7" + few);
