@@ -92,11 +92,10 @@ struct ReconstructionOptions {
   // 2DGS one is needed: off there, the harness's no_masks scene drops from NC 93.8 to 80.3.
   bool depth_tv_from_scene = false;
   // Where every training view has a mask or alpha: solver.spread_initial_surfels (mgsr_solve
-  // --surfel_spread masked). Without masks the small first disks leave the backdrop's surfels free
-  // to drift into layers (harness no_masks NC 95.2 -> 93.9, outdoor 94.8 -> 90.3), so this is the
-  // only automatic choice offered; it is not the default, since on flat and reflective objects
-  // the spread costs CD (docs/geometry.md, "How large the first disks are"). Off:
-  // solver.spread_initial_surfels as given.
+  // --surfel_spread masked). Without masks nothing holds a backdrop's small first disks in one
+  // layer and the mesh loses NC, so this is the only automatic choice offered; it is not the
+  // default, since on flat and reflective objects the spread costs CD (docs/geometry.md, "How
+  // large the first disks are"). Off: solver.spread_initial_surfels as given.
   bool spread_from_scene = false;
   // A JSON file of loss-table edits (ApplyLossConfigFile), applied to solver's table once the
   // weights chosen from the scene (above) are set, so its rows change those, not the defaults.
