@@ -3,7 +3,8 @@
 # (build_sanitize, -O1 -g1, -DMGSR_SANITIZE=ON, generic x86-64 so Eigen's alignment matches the
 # packaged Ceres' for the whole build) of the libraries and the test binary, then every test
 # that runs in-process (renderers and their gradients, losses, I/O parsers, metrics, fusion,
-# checkpoints, short solves), in two processes side by side. The slow end-to-end and command-line
+# checkpoints, short solves), in two processes side by side. (The test files themselves are built
+# with AddressSanitizer alone: tests/CMakeLists.txt.) The slow end-to-end and command-line
 # tests run in the normal build. (-g1: line tables, all a sanitizer's report needs, and a quarter
 # less compile time than -g for the test files.)
 set -euo pipefail
