@@ -60,6 +60,33 @@ void BranchTrainer::AddLossRow(const LossSpec& row, std::unique_ptr<LossTerm> te
   sp.reads.push_back(reads);
 }
 
+Status BranchTrainer::AddPriorRow(const LossSpec& row, std::unique_ptr<PrimitivePrior> prior) {
+  const Status s = prior->Check(rows_->blocks());
+  if (!s.ok())
+    return s.WithContext("loss row " + LossSpecId(row) + " (" + row.term + ") on the " + name() +
+                         " model: ");
+  StageProblem& sp = ProblemFor(row.stage);
+  sp.prior_rows.push_back(row);
+  sp.priors.push_back(std::move(prior));
+  return Status::Ok();
+}
+
+double BranchTrainer::EvaluatePriors(Stage stage, int iteration, int count,
+                                     const std::vector<ParamBlock>& gradients) {
+  StageProblem& sp = ProblemFor(stage);
+  active_priors_ = 0;
+  double total = 0;
+  for (size_t i = 0; i < sp.priors.size(); ++i) {
+    const LossSpec& row = sp.prior_rows[i];
+    const double weight = RowWeightAt(row, iteration);
+    if (weight == 0) continue;
+    const double value = sp.priors[i]->Evaluate(rows_->blocks(), weight * count, &gradients);
+    Problem::SetTermValue(&prior_terms_, active_priors_++, row.name, weight, value);
+    total += weight * value;
+  }
+  return total;
+}
+
 double BranchTrainer::RowWeightAt(const LossSpec& row, int iteration) {
   return iteration >= row.first_iteration ? row.weight : 0.0;
 }

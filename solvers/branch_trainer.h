@@ -44,6 +44,7 @@
 #include "solvers/exposure_model.h"
 #include "solvers/learning_rates.h"
 #include "solvers/loss_table.h"
+#include "solvers/primitive_prior.h"
 #include "solvers/solver_options.h"
 #include "solvers/view_group.h"
 
@@ -142,6 +143,9 @@ class BranchTrainer {
   // --- The loss: one Problem per stage, built from the loss table's rows of this branch.
   // `behind_exposure`: the row compares through the view's colour transform.
   void AddLossRow(const LossSpec& row, std::unique_ptr<LossTerm> term, bool behind_exposure);
+  // A row whose term is a prior on the primitives (PriorRegistry); an error naming the row when
+  // the branch's model lacks a block the prior reads.
+  Status AddPriorRow(const LossSpec& row, std::unique_ptr<PrimitivePrior> prior);
   // The buffers the stage's rows active at `iteration` read (weight not 0): what a step's render
   // must produce (a primitive type may skip the rest, e.g. the 2DGS distortion).
   BufferSet StageReads(Stage stage, int iteration) const;
@@ -246,6 +250,11 @@ class BranchTrainer {
   // Sets step_error_ on a failed exchange.
   void ShareStepBuffers(const BatchView* views, int count, ViewGroup* group);
   double FinishViews(Stage stage, const BatchView* views, int count, ViewGroup* group);
+  // The stage's prior rows active at `iteration`, on the current model: adds each one's gradient,
+  // weighted per view for a batch of `count` views, into `gradients` (the batch's summed view
+  // gradients) and returns the sum of their weighted values (what they add to the mean loss).
+  double EvaluatePriors(Stage stage, int iteration, int count,
+                        const std::vector<ParamBlock>& gradients);
   // After the backward passes: the density strategy's statistics (the batch's sum, or null) and
   // regulariser, Adam, then its row operations on the model's rows (BindRows).
   std::string OptimizeAndControlDensity(const std::vector<float>* statistics, int views,
@@ -293,6 +302,9 @@ class BranchTrainer {
     // Active rows when their inputs and targets were last checked against a render (rows only
     // switch on, so a change of count is a change of set).
     size_t checked_active = static_cast<size_t>(-1);
+    // The rows that are priors on the primitives (evaluated on the model once per step).
+    std::vector<LossSpec> prior_rows;
+    std::vector<std::unique_ptr<PrimitivePrior>> priors;
   };
   // A row's weight at `iteration`: 0 before its first iteration (what EvaluateLoss sets and
   // StageReads reads).
@@ -311,6 +323,9 @@ class BranchTrainer {
     size_t n = 0;
     for (const Problem::TermValue& t : loss_terms_)
       Problem::SetTermValue(&last_terms_, n++, t.name, t.weight, t.value);
+    for (size_t i = 0; i < active_priors_; ++i)
+      Problem::SetTermValue(&last_terms_, n++, prior_terms_[i].name, prior_terms_[i].weight,
+                            prior_terms_[i].value);
     static const std::string kRegulariser = "density_regulariser";
     if (regulariser != 0) Problem::SetTermValue(&last_terms_, n++, kRegulariser, 1.0, regulariser);
     last_terms_.resize(n);
@@ -318,6 +333,9 @@ class BranchTrainer {
 
  private:
   std::vector<Problem::TermValue> loss_terms_, last_terms_;
+  // The active prior rows' values of the last step (the first active_priors_ entries).
+  std::vector<Problem::TermValue> prior_terms_;
+  size_t active_priors_ = 0;
   std::vector<float> position_rates_;   // scratch of OptimizeAndControlDensity
   ColorTransform exposure_gradient_{};  // of the last EvaluateLoss
   // Per batch position: loss, the colour transform's gradient, the term values.
@@ -411,8 +429,12 @@ class PrimitiveTrainer : public BranchTrainer {
       SumOverGroup(group, &sum);
       ShareStepBuffers(views, count, group);
     }
-    const double loss = FinishViews(stage, views, count, group);
+    double loss = FinishViews(stage, views, count, group);
     if (!step_error_.ok()) return loss;
+    {
+      ProfileScope scope("priors");
+      loss += EvaluatePriors(stage, iteration, count, sum.blocks);
+    }
     nonfinite_block_ = OptimizeAndControlDensity(statistics_width > 0 ? &sum.statistics : nullptr,
                                                  count, sum.blocks, iteration);
     if constexpr (HasLearntBackground<P>::value) {

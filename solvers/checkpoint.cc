@@ -127,6 +127,7 @@ Status MutualBoostedSolver::LoadCheckpoint(const std::string& path) {
     static const std::map<std::string, std::string> kBefore = {{"coarse", "none"},
                                                                {"lambda_mask_warmup", "-1"},
                                                                {"lambda_normal_tv", "0.05"},
+                                                               {"lambda_surfel_layer", "0"},
                                                                {"mutual_iterations_2d", "-1"},
                                                                {"normal_agreement_floor", "1"},
                                                                {"position_lr_max_steps_2d", "-1"},

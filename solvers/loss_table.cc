@@ -5,6 +5,7 @@
 
 #include "mgsr/io/file_util.h"
 #include "mgsr/loss/loss_registry.h"
+#include "solvers/primitive_prior.h"
 #include "solvers/solver_options.h"
 
 namespace mgsr {
@@ -160,7 +161,7 @@ std::vector<LossSpec> PaperLossTable(const SolverOptions& o) {
   const double disp_s = o.tv_disparity_scale;
   // Row order is the order the gradients are summed in: keep it when editing (results are
   // reproducible bit for bit only in the same order).
-  return {
+  std::vector<LossSpec> table = {
       // 2DGS warm-up (method.md 1.3): render loss, edge-aware depth TV, normal consistency and
       // normal TV (from normal_from_iteration), depth distortion (from distortion_from_iteration).
       Row(b2, warm, "photo", "render", RenderConfig("image", o.lambda_l1), 1.0, 0, true),
@@ -205,6 +206,15 @@ std::vector<LossSpec> PaperLossTable(const SolverOptions& o) {
       Row(b3, mutual, "photo", "render", RenderConfig("image", o.lambda_l1), o.w_3d, 0, true),
       Row(b3, mutual, "mutual_depth", "mutual_depth", {{"masked", false}}, o.w_depth),
   };
+  // The surfel layer prior (solvers/surfel_layer_prior.h) on the 2DGS model, the same weight in
+  // both stages (as measured: docs/geometry.md, "A layer of disks"). Its rows exist only when it
+  // is on, so the default table, and the checkpoints that record it, stay as they were.
+  if (o.lambda_surfel_layer > 0) {
+    for (Stage stage : {warm, mutual})
+      table.push_back(Row(b2, stage, "surfel_layer", "surfel_layer", nlohmann::json::object(),
+                          o.lambda_surfel_layer));
+  }
+  return table;
 }
 
 Status CheckLossTable(const std::vector<LossSpec>& table) {
@@ -216,9 +226,12 @@ Status CheckLossTable(const std::vector<LossSpec>& table) {
       return Status::Error("loss row " + id + ": the weight must be finite and >= 0");
     if (!s.config.is_object())
       return Status::Error("loss row " + id + ": config must be an object");
+    // A term is a render term (LossRegistry) or a prior on the primitives (PriorRegistry).
     Status status;
-    if (LossRegistry::Get().Create(s.term, s.config, &status) == nullptr)
-      return status.WithContext("loss row " + id + ": ");
+    const bool created = PriorRegistry::Get().Has(s.term)
+                             ? PriorRegistry::Get().Create(s.term, s.config, &status) != nullptr
+                             : LossRegistry::Get().Create(s.term, s.config, &status) != nullptr;
+    if (!created) return status.WithContext("loss row " + id + ": ");
   }
   return Status::Ok();
 }

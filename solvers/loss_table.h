@@ -37,7 +37,7 @@ struct LossSpec {
   Branch branch = Branch::kSurfels2D;
   Stage stage = Stage::kWarmup;
   std::string name;  // unique within (branch, stage); the log's label
-  std::string term;  // LossRegistry name
+  std::string term;  // LossRegistry name, or PriorRegistry name (solvers/primitive_prior.h)
   nlohmann::json config = nlohmann::json::object();
   double weight = 0;
   int first_iteration = 0;  // active from this iteration of the stage on (0 and 1: from the start)

@@ -185,6 +185,13 @@ Status MutualBoostedSolver::BuildProblems() {
   if (problems_built_) return Status::Ok();
   for (const LossSpec& row : options_.LossTable()) {
     Status status;
+    if (PriorRegistry::Get().Has(row.term)) {
+      std::unique_ptr<PrimitivePrior> prior =
+          PriorRegistry::Get().Create(row.term, row.config, &status);
+      if (prior == nullptr) return status.WithContext("loss row " + LossSpecId(row) + ": ");
+      MGSR_RETURN_IF_ERROR(trainer(row.branch).AddPriorRow(row, std::move(prior)));
+      continue;
+    }
     std::unique_ptr<LossTerm> term = LossRegistry::Get().Create(row.term, row.config, &status);
     if (term == nullptr) return status.WithContext("loss row " + LossSpecId(row) + ": ");
     if (term->ReadsNeighbours() && row.weight != 0) PrepareNeighbours(row.branch);

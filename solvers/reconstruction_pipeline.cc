@@ -732,6 +732,13 @@ Status ReconstructionPipeline::ChooseSceneSettings(RunState* st) {
           "initial disks: spread over the points' surfaces to the 2DGS budget (the views have "
           "masks or alpha)\n");
   }
+  if (o.surfel_layer_from_spread) {
+    options.lambda_surfel_layer =
+        options.spread_initial_surfels ? SolverOptions::kSurfelLayerWeightWithSpread : 0.0;
+    if (options.spread_initial_surfels)
+      std::printf("surfel layer prior: %g (the initial disks are spread)\n",
+                  options.lambda_surfel_layer);
+  }
   if (foreground && (o.mask_from_scene || o.one_sided_from_scene)) {
     if (o.mask_from_scene) options.lambda_mask = kMaskWeightWithForeground;
     if (o.one_sided_from_scene) options.normal_one_sided = true;

@@ -97,6 +97,11 @@ struct ReconstructionOptions {
   // default, since on flat and reflective objects the spread costs CD (docs/geometry.md, "How
   // large the first disks are"). Off: solver.spread_initial_surfels as given.
   bool spread_from_scene = false;
+  // solver.lambda_surfel_layer = SolverOptions::kSurfelLayerWeightWithSpread where the initial
+  // disks are spread (solver.spread_initial_surfels, as given or chosen above), else 0 (mgsr_solve
+  // --lambda_surfel_layer -1): the prior thins the layer the small first disks form on a slot's
+  // walls, and costs NC where the first disks are wide (docs/geometry.md, "A layer of disks").
+  bool surfel_layer_from_spread = false;
   // A JSON file of loss-table edits (ApplyLossConfigFile), applied to solver's table once the
   // weights chosen from the scene (above) are set, so its rows change those, not the defaults.
   std::string loss_config;

@@ -204,9 +204,10 @@ Status SolverOptions::Validate() const {
         "--position_lr_max_steps_2d must be >= 1 (or -1: --position_lr_max_steps)");
   if (!(surfel_filter_sigma >= 0.01f && surfel_filter_sigma <= 2.0f))
     return Status::Error("--surfel_filter_sigma must be in [0.01, 2] pixels");
-  for (double w : {w_2d, w_3d, w_depth, lambda_normal, lambda_normal_tv, lambda_distortion,
-                   depth_tv_warmup_2d, depth_tv_mutual_2d, transmitted_tv_3d, depth_tv_3d,
-                   lambda_multiview_ncc, lambda_multiview_depth, lambda_mask}) {
+  for (double w :
+       {w_2d, w_3d, w_depth, lambda_normal, lambda_normal_tv, lambda_distortion, depth_tv_warmup_2d,
+        depth_tv_mutual_2d, transmitted_tv_3d, depth_tv_3d, lambda_multiview_ncc,
+        lambda_multiview_depth, lambda_mask, lambda_surfel_layer}) {
     if (!(w >= 0) || !std::isfinite(w))
       return Status::Error("loss weights must be finite and >= 0");
   }
@@ -297,6 +298,7 @@ std::vector<std::pair<std::string, std::string>> SolverOptions::Settings() const
           {"lambda_mask_warmup", Text(lambda_mask_warmup)},
           {"lambda_multiview_ncc", Text(lambda_multiview_ncc)},
           {"lambda_multiview_depth", Text(lambda_multiview_depth)},
+          {"lambda_surfel_layer", Text(lambda_surfel_layer)},
           {"multiview_from_iteration", Text(multiview_from_iteration)},
           {"multiview_neighbours", Text(multiview_neighbours)},
           {"depth_tv_warmup_2d", Text(depth_tv_warmup_2d)},

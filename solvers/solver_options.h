@@ -107,6 +107,13 @@ struct SolverOptions {
   // The depth term stays off: it pulls a groove towards the tooth a neighbour sees in front of it.
   double lambda_multiview_ncc = 0.15;
   double lambda_multiview_depth = 0.0;
+  // The surfel layer prior's weight (solvers/surfel_layer_prior.h), per view, both stages; 0: no
+  // rows. It thins the layer of disks a slot's walls form, with the spread first disks; without
+  // them, and on printed planes, it costs NC (docs/geometry.md, "A layer of disks"), so it is off
+  // by default. kSurfelLayerWeightWithSpread: the weight mgsr_solve gives it where the initial
+  // disks are spread (--lambda_surfel_layer -1).
+  double lambda_surfel_layer = 0.0;
+  static constexpr double kSurfelLayerWeightWithSpread = 3.0;
   int multiview_from_iteration = 7000;
   int multiview_neighbours = 2;
   double depth_tv_warmup_2d = 1.0;

@@ -32,6 +32,7 @@
 #include "solvers/checkpoint_callback.h"
 #include "solvers/density_control.h"
 #include "solvers/mutual_boosted_solver.h"
+#include "solvers/primitive_prior.h"
 #include "solvers/reconstruction_pipeline.h"
 #include "solvers/surface_extraction.h"
 #include "solvers/trained_views.h"
@@ -184,6 +185,10 @@ DEFINE_double(lambda_multiview_ncc, -1,
 DEFINE_double(lambda_multiview_depth, -1,
               "Weight of the 2DGS multi-view forward-backward depth reprojection (-1: the "
               "default).");
+DEFINE_double(lambda_surfel_layer, -1,
+              "Weight of the surfel layer prior: overlapping 2DGS disks that face the same way "
+              "pulled onto one sheet (solvers/surfel_layer_prior.h). -1: 3 where the initial disks "
+              "are spread (--surfel_spread), else 0 (docs/geometry.md, \"A layer of disks\").");
 DEFINE_double(
     lambda_normal_mutual, -1,
     "Weight of the normal consistency in the mutual stage (before w_2d); -1: --lambda_normal's.");
@@ -305,6 +310,10 @@ void PrintLosses(const mgsr::SolverOptions& options) {
     std::printf("  %-20s%s%s\n", name.c_str(), inputs.c_str(),
                 constants.empty() ? "" : (" [" + constants.substr(1) + "]").c_str());
   }
+  std::printf(
+      "\nRegistered priors on the primitives (rows evaluated on the model, not a render):\n");
+  for (const std::string& name : mgsr::PriorRegistry::Get().Names())
+    std::printf("  %s\n", name.c_str());
   std::printf("\nThe loss table of these options (--loss_config FILE changes or adds rows):\n");
   std::printf("  %-6s %-7s %-20s %-19s %10s %6s  %s\n", "branch", "stage", "name", "term", "weight",
               "from", "config");
@@ -349,6 +358,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
          "lambda_multiview_ncc",
          "lambda_multiview_depth",
          "multiview_neighbours",
+         "lambda_surfel_layer",
          "normal_depth_gradient",
          "normal_edge_weight",
          "normal_robust_scale",
@@ -456,6 +466,7 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
   }
   ro.mask_from_scene = FLAGS_lambda_mask == -1;
   ro.distortion_from_scene = FLAGS_lambda_distortion == -1;
+  ro.surfel_layer_from_spread = FLAGS_lambda_surfel_layer == -1;
   ro.one_sided_from_scene = gflags::GetCommandLineFlagInfoOrDie("normal_one_sided").is_default;
   ro.depth_tv_from_scene = FLAGS_depth_tv_warmup_2d == -1 && FLAGS_depth_tv_mutual_2d == -1;
   // Weights whose -1 means "the default" (some chosen from the scene by the pipeline).
@@ -469,6 +480,8 @@ int Main(int argc, char** argv, mgsr::ViewGroup* group) {
                    "--lambda_multiview_ncc"},
         std::tuple{FLAGS_lambda_multiview_depth, &options.lambda_multiview_depth,
                    "--lambda_multiview_depth"},
+        std::tuple{FLAGS_lambda_surfel_layer, &options.lambda_surfel_layer,
+                   "--lambda_surfel_layer"},
         std::tuple{FLAGS_normal_edge_weight, &options.normal_edge_weight, "--normal_edge_weight"},
         std::tuple{FLAGS_normal_robust_scale, &options.normal_robust_scale,
                    "--normal_robust_scale"},

@@ -462,5 +462,75 @@ TEST(BranchTrainerTest, ARowSwitchedOnLaterIsCheckedThen) {
       << t->StepStatus().message();
 }
 
+// A prior that pulls every colour towards 0.9: the mean over entries of (c - 0.9)^2.
+class PullColourPrior : public PrimitivePrior {
+ public:
+  Status Check(const std::vector<ParamBlock>& params) const override {
+    return CheckParamBlock(params, "colour", 3);
+  }
+  double Evaluate(const std::vector<ParamBlock>& params, double scale,
+                  const std::vector<ParamBlock>* gradients) override {
+    const std::vector<float>& c = *FindParamBlock(params, "colour")->data;
+    std::vector<float>* g =
+        gradients != nullptr ? FindParamBlock(*gradients, "colour")->data : nullptr;
+    double e = 0;
+    for (size_t i = 0; i < c.size(); ++i) {
+      e += (c[i] - 0.9) * (c[i] - 0.9);
+      if (g != nullptr) (*g)[i] += static_cast<float>(scale * 2 * (c[i] - 0.9) / c.size());
+    }
+    ++evaluations;
+    last_scale = scale;
+    return e / c.size();
+  }
+  int evaluations = 0;
+  double last_scale = 0;
+};
+
+class NeedsMeansPrior : public PullColourPrior {
+ public:
+  Status Check(const std::vector<ParamBlock>& params) const override {
+    return CheckParamBlock(params, "means", 3);
+  }
+};
+
+TEST(BranchTrainerTest, APriorRowPullsTheModelFromItsFirstIterationAndIsReported) {
+  BandView v;
+  Rng rng(7);
+  std::unique_ptr<BandTrainer> t = MakeTrainer(&v.exposure, &rng);
+  LossSpec row;
+  row.branch = Branch::kGaussians3D;
+  row.stage = Stage::kWarmup;
+  row.name = "pull";
+  row.term = "pull_colour";
+  row.weight = 100;
+  row.first_iteration = 20;
+  auto owned = std::make_unique<PullColourPrior>();
+  PullColourPrior* prior = owned.get();
+  ASSERT_TRUE(t->AddPriorRow(row, std::move(owned)).ok());
+  int it = 1;
+  for (; it < 20; ++it) t->Step(Stage::kWarmup, 0, v.camera, it, v.targets);
+  EXPECT_EQ(prior->evaluations, 0);
+  ASSERT_EQ(t->LastTerms().size(), 1u);
+  double loss = 0;
+  for (; it <= 120; ++it) loss = t->Step(Stage::kWarmup, 0, v.camera, it, v.targets);
+  ASSERT_TRUE(t->StepStatus().ok()) << t->StepStatus().message();
+  EXPECT_EQ(prior->evaluations, 101);
+  EXPECT_EQ(prior->last_scale, 100.0);  // the row's weight, once per view of the batch
+  ASSERT_EQ(t->LastTerms().size(), 2u);
+  EXPECT_EQ(t->LastTerms()[1].name, "pull");
+  EXPECT_EQ(t->LastTerms()[1].weight, 100.0);
+  // The step's loss is the photo's plus the weighted prior.
+  EXPECT_NEAR(loss, t->LastTerms()[0].value + 100.0 * t->LastTerms()[1].value, 1e-9);
+  // The heavy prior holds every band above its photo's grey (0.2 .. 0.8).
+  for (float c : t->model().colour) EXPECT_GT(c, 0.85f);
+
+  // A prior that reads a block the model does not have is refused, naming the row and block.
+  row.name = "needs_means";
+  const Status s = t->AddPriorRow(row, std::make_unique<NeedsMeansPrior>());
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("3d/warmup/needs_means"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("\"means\""), std::string::npos) << s.message();
+}
+
 }  // namespace
 }  // namespace mgsr

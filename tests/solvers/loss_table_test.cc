@@ -115,6 +115,32 @@ TEST(LossTableTest, AConfigChangesRowsAddsRowsOrReplacesTheTable) {
   EXPECT_EQ(t.size(), 1u);
 }
 
+TEST(LossTableTest, TheSurfelLayerPriorHasRowsOnlyWhenItIsOn) {
+  SolverOptions o;
+  const std::vector<LossSpec> off = PaperLossTable(o);
+  EXPECT_EQ(Find(off, Branch::kSurfels2D, Stage::kWarmup, "surfel_layer"), nullptr);
+  o.lambda_surfel_layer = 2.5;
+  const std::vector<LossSpec> on = PaperLossTable(o);
+  EXPECT_EQ(on.size(), off.size() + 2);
+  for (Stage s : {Stage::kWarmup, Stage::kMutual}) {
+    const LossSpec* r = Find(on, Branch::kSurfels2D, s, "surfel_layer");
+    ASSERT_NE(r, nullptr);
+    EXPECT_EQ(r->term, "surfel_layer");
+    EXPECT_EQ(r->weight, 2.5);
+  }
+  EXPECT_TRUE(CheckLossTable(on).ok());
+  EXPECT_TRUE(o.Validate().ok());
+  o.lambda_surfel_layer = -1;
+  EXPECT_FALSE(o.Validate().ok());
+  // A JSON row turns it on with its own config, as any row.
+  std::vector<LossSpec> t = off;
+  ASSERT_TRUE(ApplyLossConfig(nlohmann::json::parse(R"({"losses": [{"branch": "2d", "stage":
+      "mutual", "name": "layer", "term": "surfel_layer", "config": {"tau": 0.3}, "weight": 1}]})"),
+                              "c.json", &t)
+                  .ok());
+  EXPECT_EQ(t.size(), off.size() + 1);
+}
+
 TEST(LossTableTest, BadConfigsAreRefusedWithTheRowAndTheProblem) {
   const std::vector<std::pair<std::string, std::string>> cases = {
       {R"({"losses": [{"branch": "2d", "stage": "warmup", "name": "x", "term": "nope",
@@ -133,6 +159,9 @@ TEST(LossTableTest, BadConfigsAreRefusedWithTheRowAndTheProblem) {
           "config": {"buffer": "colour"}, "weight": 1}]})",
        "unknown buffer 'colour'"},
       {R"({"loses": []})", "c.json: expected an object with a \"losses\" array"},
+      {R"({"losses": [{"branch": "2d", "stage": "both", "name": "layer", "term": "surfel_layer",
+          "config": {"neighbours": 40}, "weight": 1}]})",
+       "c.json: loss row 2d/warmup/layer: prior \"surfel_layer\": \"neighbours\" must be"},
   };
   for (const auto& [text, expected] : cases) {
     std::vector<LossSpec> t = PaperLossTable(SolverOptions());

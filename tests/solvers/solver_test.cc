@@ -528,16 +528,20 @@ TEST(CheckpointTest, InterruptedAndResumedRunEqualsAnUninterruptedOne) {
     ExposureMode exposure;
     const char* density;
     bool environment;
+    double surfel_layer = 0;  // a prior row (stateless: nothing of it in the checkpoint)
   };
   for (const Variant& variant :
        {Variant{ExposureMode::kOff, "reference", false},
         Variant{ExposureMode::kAffine, "reference", false},
-        Variant{ExposureMode::kOff, "mcmc", false}, Variant{ExposureMode::kAffine, "mcmc", true}}) {
+        Variant{ExposureMode::kOff, "mcmc", false}, Variant{ExposureMode::kAffine, "mcmc", true},
+        Variant{ExposureMode::kAffine, "reference", false, 3.0}}) {
     const ExposureMode exposure = variant.exposure;
     SCOPED_TRACE(std::string(ExposureModeName(exposure)) + " " + variant.density +
-                 (variant.environment ? " environment" : ""));
+                 (variant.environment ? " environment" : "") +
+                 (variant.surfel_layer > 0 ? " surfel layer" : ""));
     SolverOptions o = TinyOptions();
     o.exposure = exposure;
+    o.lambda_surfel_layer = variant.surfel_layer;
     o.density = variant.density;
     o.environment = variant.environment;
     o.max_gaussians = 400;  // MCMC's caps (the reference stays below them here)
@@ -577,6 +581,44 @@ TEST(CheckpointTest, InterruptedAndResumedRunEqualsAnUninterruptedOne) {
       }
     }
   }
+}
+
+TEST(MutualBoostedSolverTest, ASurfelLayerRowMovesTheDisksAndIsRefusedOnTheGaussians) {
+  const std::string dir = testing::ScratchDir();
+  const Scene scene = TinyScene(dir + "/scene");
+  SolverOptions o = TinyOptions();
+  o.warmup_max_iterations = 30;
+  o.mutual_iterations = 4;
+  MutualBoostedSolver without(o, scene);
+  SolveSummary s;
+  ASSERT_TRUE(without.Solve(&s).ok()) << s.message;
+  o.lambda_surfel_layer = 3;
+  MutualBoostedSolver with(o, scene);
+  Recorder record;
+  with.AddCallback(&record);
+  ASSERT_TRUE(with.Solve(&s).ok()) << s.message;
+  ASSERT_FALSE(record.calls.empty());
+  bool reported = false;
+  for (const IterationInfo& i : record.calls)
+    for (const auto& term : i.terms) reported |= term.name == "surfel_layer" && term.value > 0;
+  EXPECT_TRUE(reported);
+  EXPECT_NE(without.surfels().means, with.surfels().means);
+
+  // The prior reads disks: a row on the 3DGS branch stops the run before it starts.
+  o.lambda_surfel_layer = 0;
+  o.losses = PaperLossTable(o);
+  LossSpec row;
+  row.branch = Branch::kGaussians3D;
+  row.stage = Stage::kMutual;
+  row.name = "layer";
+  row.term = "surfel_layer";
+  row.weight = 1;
+  o.losses.push_back(row);
+  MutualBoostedSolver refused(o, scene);
+  const Status status = refused.Solve(&s);
+  ASSERT_FALSE(status.ok());
+  EXPECT_NE(status.message().find("3d/mutual/layer"), std::string::npos) << status.message();
+  EXPECT_NE(status.message().find("log_scales"), std::string::npos) << status.message();
 }
 
 TEST(CheckpointTest, BadCheckpointsAreRefused) {
