@@ -1,5 +1,7 @@
 #include "solvers/surfel_layer_prior.h"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -9,22 +11,37 @@
 namespace mgsr {
 namespace {
 
-// Grid cells are packed 21 bits per axis, x lowest, so the three cells along x at a (y, z) are one
-// run of keys; coordinates are clamped one cell inside the range so a neighbour cell exists.
-constexpr int kCellBits = 21;
-constexpr int64_t kCellOffset = int64_t{1} << (kCellBits - 1);
-constexpr int64_t kCellMax = (int64_t{1} << kCellBits) - 2;
+// Grid cell coordinates are clamped to +-2^20 cells around the origin (a disk farther out shares a
+// border cell: its candidates are then farther, its distances still exact).
+constexpr int64_t kCellLimit = int64_t{1} << 20;
 
 int64_t CellCoordinate(double x, double inv_cell) {
   const double c = std::floor(x * inv_cell);
-  if (!(c > -static_cast<double>(kCellOffset))) return 1;
-  if (!(c < static_cast<double>(kCellOffset))) return kCellMax;
-  return std::clamp(static_cast<int64_t>(c) + kCellOffset, int64_t{1}, kCellMax);
+  if (!(c > -static_cast<double>(kCellLimit))) return -kCellLimit;
+  if (!(c < static_cast<double>(kCellLimit))) return kCellLimit;
+  return static_cast<int64_t>(c);
 }
 
-uint64_t CellKey(int64_t x, int64_t y, int64_t z) {
-  return (static_cast<uint64_t>(z) << (2 * kCellBits)) | (static_cast<uint64_t>(y) << kCellBits) |
-         static_cast<uint64_t>(x);
+// Stable LSD radix sort of (key, disk) pairs by key, 16 bits a pass, as many passes as `max_key`
+// has digits: pairs that start in disk order end sorted by (key, disk).
+void RadixSortByKey(uint64_t max_key, std::vector<std::pair<uint64_t, int>>* pairs,
+                    std::vector<std::pair<uint64_t, int>>* scratch, std::vector<size_t>* counts) {
+  constexpr int kDigitBits = 16;
+  constexpr size_t kDigits = size_t{1} << kDigitBits;
+  scratch->resize(pairs->size());
+  counts->resize(kDigits);
+  for (int shift = 0; shift < 64 && (max_key >> shift) != 0; shift += kDigitBits) {
+    std::fill(counts->begin(), counts->end(), 0);
+    for (const auto& e : *pairs) ++(*counts)[(e.first >> shift) & (kDigits - 1)];
+    size_t total = 0;
+    for (size_t& c : *counts) {
+      const size_t here = c;
+      c = total;
+      total += here;
+    }
+    for (const auto& e : *pairs) (*scratch)[(*counts)[(e.first >> shift) & (kDigits - 1)]++] = e;
+    pairs->swap(*scratch);
+  }
 }
 
 // The disk's normal, the rotation's third column, of the normalised quaternion (w, x, y, z).
@@ -164,48 +181,98 @@ void SurfelLayerPrior::FindNeighbours() {
   const double cell = options_.cell_scales * scale_scratch_[n_ / 2];
   if (!(cell > 0) || !std::isfinite(cell)) return;
   const double inv_cell = 1.0 / cell;
+  // Cells numbered x fastest, then y, then z, over the disks' bounding box grown by one cell on
+  // every side (so the cells around a disk exist and their numbers do not wrap).
+  cell_coordinates_.resize(3 * n_);
+  int64_t lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = kCellLimit;
+    hi[a] = -kCellLimit;
+  }
+  for (size_t i = 0; i < n_; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      const int64_t c = CellCoordinate(centres_[3 * i + a], inv_cell);
+      cell_coordinates_[3 * i + a] = c;
+      lo[a] = std::min(lo[a], c);
+      hi[a] = std::max(hi[a], c);
+    }
+  }
+  const uint64_t nx = static_cast<uint64_t>(hi[0] - lo[0] + 3),
+                 ny = static_cast<uint64_t>(hi[1] - lo[1] + 3);
+  const uint64_t nz = static_cast<uint64_t>(hi[2] - lo[2] + 3);
   cells_.resize(n_);
   for (size_t i = 0; i < n_; ++i) {
-    const double* c = &centres_[3 * i];
-    cells_[i] = {CellKey(CellCoordinate(c[0], inv_cell), CellCoordinate(c[1], inv_cell),
-                         CellCoordinate(c[2], inv_cell)),
-                 static_cast<int>(i)};
+    const int64_t* c = &cell_coordinates_[3 * i];
+    const uint64_t x = static_cast<uint64_t>(c[0] - lo[0] + 1),
+                   y = static_cast<uint64_t>(c[1] - lo[1] + 1),
+                   z = static_cast<uint64_t>(c[2] - lo[2] + 1);
+    cells_[i] = {(z * ny + y) * nx + x, static_cast<int>(i)};
   }
-  std::sort(cells_.begin(), cells_.end());
-  const auto key_less = [](const std::pair<uint64_t, int>& a, uint64_t key) {
-    return a.first < key;
-  };
+  RadixSortByKey(nx * ny * nz - 1, &cells_, &cells_scratch_, &radix_counts_);
+  // The keys and centres in cell order, contiguous: a disk's candidates are a few runs of these,
+  // and disks visited in cell order share them (the search is bound by memory, not arithmetic).
+  sorted_keys_.resize(n_);
+  sorted_centres_.resize(3 * n_);
+  for (size_t p = 0; p < n_; ++p) {
+    sorted_keys_[p] = cells_[p].first;
+    for (int c = 0; c < 3; ++c) sorted_centres_[3 * p + c] = centres_[3 * cells_[p].second + c];
+  }
+  // The disks in cell order, in one contiguous part per thread. The 9 runs of 3 cells around a
+  // disk start at its key + (-1 + dy nx + dz nx ny) (the cell x - 1, y + dy, z + dz), which grows
+  // with the key: each run's start is a cursor that only moves forward, found by one binary
+  // search at the part's first disk.
   const int64_t n = static_cast<int64_t>(n_);
-#pragma omp parallel for schedule(static)
-  for (int64_t i = 0; i < n; ++i) {
-    const double* c = &centres_[3 * i];
-    const int64_t x = CellCoordinate(c[0], inv_cell), y = CellCoordinate(c[1], inv_cell),
-                  z = CellCoordinate(c[2], inv_cell);
-    int* best = &neighbours_[i * k];
-    double* best_d2 = &neighbour_dist2_[i * k];
-    for (int64_t dz = -1; dz <= 1; ++dz) {
-      for (int64_t dy = -1; dy <= 1; ++dy) {
-        auto it = std::lower_bound(cells_.begin(), cells_.end(), CellKey(x - 1, y + dy, z + dz),
-                                   key_less);
-        const uint64_t last = CellKey(x + 1, y + dy, z + dz);
-        for (; it != cells_.end() && it->first <= last; ++it) {
-          const int j = it->second;
-          if (j == i) continue;
-          const double* cj = &centres_[3 * j];
-          const double d2 = (cj[0] - c[0]) * (cj[0] - c[0]) + (cj[1] - c[1]) * (cj[1] - c[1]) +
-                            (cj[2] - c[2]) * (cj[2] - c[2]);
-          // Ties go to the lower index, so the lists do not depend on the visiting order.
-          if (d2 > best_d2[k - 1] || (d2 == best_d2[k - 1] && j > best[k - 1] && best[k - 1] >= 0))
-            continue;
-          int slot = k - 1;
-          while (slot > 0 &&
-                 (best_d2[slot - 1] > d2 || (best_d2[slot - 1] == d2 && best[slot - 1] > j))) {
-            best_d2[slot] = best_d2[slot - 1];
-            best[slot] = best[slot - 1];
-            --slot;
+#pragma omp parallel
+  {
+    const int64_t threads = omp_get_num_threads(), thread = omp_get_thread_num();
+    const int64_t begin = n * thread / threads, end = n * (thread + 1) / threads;
+    int64_t cursor[9];
+    uint64_t cursor_key = 0;
+    for (int64_t p = begin; p < end; ++p) {
+      const int i = cells_[p].second;
+      const double* c = &sorted_centres_[3 * p];
+      const uint64_t key = sorted_keys_[p];
+      int run = 0;
+      for (int64_t dz = -1; dz <= 1; ++dz) {
+        for (int64_t dy = -1; dy <= 1; ++dy, ++run) {
+          const uint64_t first_key =
+              key - 1 + static_cast<uint64_t>(dy) * nx + static_cast<uint64_t>(dz) * nx * ny;
+          if (p == begin) {
+            cursor[run] = std::lower_bound(sorted_keys_.begin(), sorted_keys_.end(), first_key) -
+                          sorted_keys_.begin();
+          } else if (key != cursor_key) {
+            while (cursor[run] < n && sorted_keys_[cursor[run]] < first_key) ++cursor[run];
           }
-          best_d2[slot] = d2;
-          best[slot] = j;
+        }
+      }
+      cursor_key = key;
+      int* best = &neighbours_[static_cast<size_t>(i) * k];
+      double* best_d2 = &neighbour_dist2_[static_cast<size_t>(i) * k];
+      run = 0;
+      for (int64_t dz = -1; dz <= 1; ++dz) {
+        for (int64_t dy = -1; dy <= 1; ++dy, ++run) {
+          const uint64_t last_key =
+              key + 1 + static_cast<uint64_t>(dy) * nx + static_cast<uint64_t>(dz) * nx * ny;
+          for (int64_t q = cursor[run]; q < n && sorted_keys_[q] <= last_key; ++q) {
+            const int j = cells_[q].second;
+            if (j == i) continue;
+            const double* cj = &sorted_centres_[3 * q];
+            const double d2 = (cj[0] - c[0]) * (cj[0] - c[0]) + (cj[1] - c[1]) * (cj[1] - c[1]) +
+                              (cj[2] - c[2]) * (cj[2] - c[2]);
+            // Ties go to the lower index, so the lists do not depend on the visiting order.
+            if (d2 > best_d2[k - 1] ||
+                (d2 == best_d2[k - 1] && j > best[k - 1] && best[k - 1] >= 0))
+              continue;
+            int slot = k - 1;
+            while (slot > 0 &&
+                   (best_d2[slot - 1] > d2 || (best_d2[slot - 1] == d2 && best[slot - 1] > j))) {
+              best_d2[slot] = best_d2[slot - 1];
+              best[slot] = best[slot - 1];
+              --slot;
+            }
+            best_d2[slot] = d2;
+            best[slot] = j;
+          }
         }
       }
     }

@@ -72,12 +72,17 @@ class SurfelLayerPrior : public PrimitivePrior {
   // Scratch, grown only: per disk centre (3), normal (3), 1 / largest scale, opacity.
   std::vector<double> centres_, normals_, inv_scales_, opacities_;
   std::vector<double> scale_scratch_;
+  std::vector<int64_t> cell_coordinates_;        // n_ x 3
   std::vector<std::pair<uint64_t, int>> cells_;  // (cell key, disk), sorted
-  std::vector<int> neighbours_;                  // n_ x k, -1 where fewer were found
-  std::vector<double> neighbour_dist2_;          // n_ x k
-  std::vector<double> pair_weights_;             // n_ x k, 0 for pairs that do not count
-  std::vector<double> pair_inv_scales_;          // n_ x 1: 1 / s_i of the step
-  std::vector<double> d_centres_, d_normals_;    // per disk gradient, before the quaternion
+  std::vector<std::pair<uint64_t, int>> cells_scratch_;
+  std::vector<size_t> radix_counts_;
+  std::vector<uint64_t> sorted_keys_;          // cells_' keys
+  std::vector<double> sorted_centres_;         // the centres in cells_' order
+  std::vector<int> neighbours_;                // n_ x k, -1 where fewer were found
+  std::vector<double> neighbour_dist2_;        // n_ x k
+  std::vector<double> pair_weights_;           // n_ x k, 0 for pairs that do not count
+  std::vector<double> pair_inv_scales_;        // n_ x 1: 1 / s_i of the step
+  std::vector<double> d_centres_, d_normals_;  // per disk gradient, before the quaternion
 };
 
 // Registers the prior as "surfel_layer" (solvers/builtin_priors.cc calls it).
