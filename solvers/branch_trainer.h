@@ -431,10 +431,7 @@ class PrimitiveTrainer : public BranchTrainer {
     }
     double loss = FinishViews(stage, views, count, group);
     if (!step_error_.ok()) return loss;
-    {
-      ProfileScope scope("priors");
-      loss += EvaluatePriors(stage, iteration, count, sum.blocks);
-    }
+    loss += EvaluatePriors(stage, iteration, count, sum.blocks);  // each prior has its scope
     nonfinite_block_ = OptimizeAndControlDensity(statistics_width > 0 ? &sum.statistics : nullptr,
                                                  count, sum.blocks, iteration);
     if constexpr (HasLearntBackground<P>::value) {

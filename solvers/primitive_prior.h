@@ -9,7 +9,8 @@
 //
 // A prior keeps no state from step to step that a checkpoint would have to carry: the step's value
 // and gradient are a function of the parameters alone (scratch storage may persist, to allocate
-// nothing in steady steps).
+// nothing in steady steps). A prior opens its own ProfileScope (mgsr/core/profiler.h), so --profile
+// shows its time by name.
 #pragma once
 
 #include <functional>
