@@ -113,7 +113,7 @@ struct SolverOptions {
   // by default. kSurfelLayerWeightWithSpread: the weight mgsr_solve gives it where the initial
   // disks are spread (--lambda_surfel_layer -1).
   double lambda_surfel_layer = 0.0;
-  static constexpr double kSurfelLayerWeightWithSpread = 3.0;
+  static constexpr double kSurfelLayerWeightWithSpread = 10.0;
   int multiview_from_iteration = 7000;
   int multiview_neighbours = 2;
   double depth_tv_warmup_2d = 1.0;

@@ -185,10 +185,11 @@ DEFINE_double(lambda_multiview_ncc, -1,
 DEFINE_double(lambda_multiview_depth, -1,
               "Weight of the 2DGS multi-view forward-backward depth reprojection (-1: the "
               "default).");
-DEFINE_double(lambda_surfel_layer, -1,
-              "Weight of the surfel layer prior: overlapping 2DGS disks that face the same way "
-              "pulled onto one sheet (solvers/surfel_layer_prior.h). -1: 3 where the initial disks "
-              "are spread (--surfel_spread), else 0 (docs/geometry.md, \"A layer of disks\").");
+DEFINE_double(
+    lambda_surfel_layer, -1,
+    "Weight of the surfel layer prior: overlapping 2DGS disks that face the same way "
+    "pulled onto one sheet (solvers/surfel_layer_prior.h). -1: 10 where the initial disks "
+    "are spread (--surfel_spread), else 0 (docs/geometry.md, \"A layer of disks\").");
 DEFINE_double(
     lambda_normal_mutual, -1,
     "Weight of the normal consistency in the mutual stage (before w_2d); -1: --lambda_normal's.");

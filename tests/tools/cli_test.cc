@@ -22,6 +22,7 @@
 #include "mgsr/io/output_folder.h"
 #include "mgsr/io/ply.h"
 #include "mgsr/io/splat_formats.h"
+#include "solvers/solver_options.h"
 #include "test_util.h"
 
 namespace mgsr {
@@ -804,7 +805,27 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
     ASSERT_TRUE(ReadFileToString(dir + "/out_spread/metrics.json", &metrics).ok());
     EXPECT_EQ(nlohmann::json::parse(metrics)["budget"]["spread_initial_surfels"], spread)
         << metrics;
+    // The surfel layer prior follows the spread (--lambda_surfel_layer -1); no rows without it.
+    for (const char* stage : {"warmup", "mutual"}) {
+      EXPECT_DOUBLE_EQ(row_weight(metrics, "surfel_layer", stage),
+                       spread ? SolverOptions::kSurfelLayerWeightWithSpread : -1.0)
+          << metrics;
+    }
   }
+  // Given, its weight is kept: 0 with the spread, 2 without.
+  for (const auto& [flags, weight] :
+       {std::make_pair(std::string(" --surfel_spread on --lambda_surfel_layer 0"), -1.0),
+        std::make_pair(std::string(" --lambda_surfel_layer 2"), 2.0)}) {
+    r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
+                            "/out_layer --overwrite" + flags + few);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    ASSERT_TRUE(ReadFileToString(dir + "/out_layer/metrics.json", &metrics).ok());
+    EXPECT_DOUBLE_EQ(row_weight(metrics, "surfel_layer", "mutual"), weight) << flags;
+  }
+  r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
+                          "/out_layer_bad --lambda_surfel_layer -2" + few);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("--lambda_surfel_layer must be >= 0"), std::string::npos) << r.output;
   r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
                           "/out_spread_bad --surfel_spread all" + few);
   EXPECT_EQ(r.exit_code, 1) << r.output;
