@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "mgsr/core/camera.h"
+#include "mgsr/core/named_registry.h"
 #include "mgsr/core/rng.h"
 #include "mgsr/core/status.h"
 #include "mgsr/io/binary_stream.h"
@@ -86,22 +87,12 @@ class DensityStrategy {
   virtual void CommitRead() = 0;
 };
 
-class DensityStrategyRegistry {
+class DensityStrategyRegistry
+    : public NamedRegistry<DensityStrategy, const DensityContext&, const nlohmann::json&> {
  public:
-  using Factory = std::function<std::unique_ptr<DensityStrategy>(
-      const DensityContext& context, const nlohmann::json& config, Status* status)>;
-
+  DensityStrategyRegistry() : NamedRegistry("density strategy", '"') {}
   // The process-wide registry, with the built-in strategies registered.
   static DensityStrategyRegistry& Get();
-
-  void Register(const std::string& name, Factory factory);
-  // nullptr and a message naming the strategy and the problem when the name or config is bad.
-  std::unique_ptr<DensityStrategy> Create(const std::string& name, const DensityContext& context,
-                                          const nlohmann::json& config, Status* status) const;
-  std::vector<std::string> Names() const;
-
- private:
-  std::map<std::string, Factory> factories_;
 };
 
 // Registers "reference" (solvers/density_reference.cc) and "mcmc" (solvers/density_mcmc.cc).

@@ -11,34 +11,6 @@ PriorRegistry& PriorRegistry::Get() {
   return *registry;
 }
 
-void PriorRegistry::Register(const std::string& name, Factory factory) {
-  factories_[name] = std::move(factory);
-}
-
-std::unique_ptr<PrimitivePrior> PriorRegistry::Create(const std::string& name,
-                                                      const nlohmann::json& config,
-                                                      Status* status) const {
-  auto it = factories_.find(name);
-  if (it == factories_.end()) {
-    std::string known;
-    for (const std::string& n : Names()) known += (known.empty() ? "" : ", ") + n;
-    *status = Status::Error("unknown prior \"" + name + "\" (known: " + known + ")");
-    return nullptr;
-  }
-  *status = Status::Ok();
-  std::unique_ptr<PrimitivePrior> p = it->second(config, status);
-  if (p == nullptr && status->ok())
-    *status = Status::Error("prior \"" + name + "\" could not be created");
-  if (!status->ok()) *status = status->WithContext("prior \"" + name + "\": ");
-  return status->ok() ? std::move(p) : nullptr;
-}
-
-std::vector<std::string> PriorRegistry::Names() const {
-  std::vector<std::string> names;
-  for (const auto& [name, factory] : factories_) names.push_back(name);
-  return names;
-}
-
 const ParamBlock* FindParamBlock(const std::vector<ParamBlock>& blocks, const std::string& name) {
   for (const ParamBlock& b : blocks)
     if (b.name == name) return &b;

@@ -20,6 +20,7 @@
 #include <string>
 #include <vector>
 
+#include "mgsr/core/named_registry.h"
 #include "mgsr/core/status.h"
 #include "mgsr/model/param_block.h"
 
@@ -37,23 +38,11 @@ class PrimitivePrior {
                           const std::vector<ParamBlock>* gradients) = 0;
 };
 
-class PriorRegistry {
+class PriorRegistry : public NamedRegistry<PrimitivePrior, const nlohmann::json&> {
  public:
-  using Factory =
-      std::function<std::unique_ptr<PrimitivePrior>(const nlohmann::json& config, Status* status)>;
-
+  PriorRegistry() : NamedRegistry("prior", '"') {}
   // The process-wide registry, with the built-in priors registered.
   static PriorRegistry& Get();
-
-  void Register(const std::string& name, Factory factory);
-  bool Has(const std::string& name) const { return factories_.count(name) != 0; }
-  // nullptr and a message naming the prior and the problem when the name or config is bad.
-  std::unique_ptr<PrimitivePrior> Create(const std::string& name, const nlohmann::json& config,
-                                         Status* status) const;
-  std::vector<std::string> Names() const;
-
- private:
-  std::map<std::string, Factory> factories_;
 };
 
 // Registers "surfel_layer" (solvers/surfel_layer_prior.cc).

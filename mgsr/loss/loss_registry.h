@@ -13,27 +13,17 @@
 #include <string>
 #include <vector>
 
+#include "mgsr/core/named_registry.h"
 #include "mgsr/core/status.h"
 #include "mgsr/loss/loss_term.h"
 
 namespace mgsr {
 
-class LossRegistry {
+class LossRegistry : public NamedRegistry<LossTerm, const nlohmann::json&> {
  public:
-  using Factory =
-      std::function<std::unique_ptr<LossTerm>(const nlohmann::json& config, Status* status)>;
-
+  LossRegistry() : NamedRegistry("loss term", '\'') {}
   // The process-wide registry, with the built-in terms registered.
   static LossRegistry& Get();
-
-  void Register(const std::string& name, Factory factory);
-  // nullptr and a message naming the term and the problem when the name or the config is bad.
-  std::unique_ptr<LossTerm> Create(const std::string& name, const nlohmann::json& config,
-                                   Status* status) const;
-  std::vector<std::string> Names() const;
-
- private:
-  std::map<std::string, Factory> factories_;
 };
 
 // Registers l1, dssim, render, mutual_render, tv, normal_consistency, mutual_depth, distortion.
