@@ -76,12 +76,12 @@ DEFINE_double(surfel_filter_sigma, 0.29,
 DEFINE_string(surfel_init, "neighbours",
               "Initial 2DGS disk orientation: neighbours (in the plane of each initial point's 16 "
               "nearest points) | random (the reference).");
-DEFINE_string(
-    surfel_spread, "off",
-    "Initial 2DGS disks: off (one per initial point, the reference) | on (the points "
-    "spread over their own surfaces to the 2DGS budget: smaller first disks, which "
-    "recover grooves and slots of detailed objects but follow reflections and prints "
-    "on flat ones; docs/geometry.md) | masked (on where every view has a mask or alpha).");
+DEFINE_string(surfel_spread, "masked",
+              "Initial 2DGS disks: masked (the default: on where every view has a mask or alpha, "
+              "off otherwise) | on (the points spread over their own surfaces to the 2DGS budget: "
+              "smaller first disks, which recover grooves and slots of detailed objects; without "
+              "masks a backdrop's small disks scatter, docs/geometry.md) | off (one per initial "
+              "point, the reference).");
 DEFINE_int32(warmup_max_iterations, -1, "Cap of warm-up iterations per branch (-1: preset).");
 DEFINE_int32(warmup_min_iterations, -1, "Auto-stop only after this iteration (-1: preset).");
 DEFINE_int32(mutual_iterations, -1, "Mutual-stage iterations (-1: preset).");

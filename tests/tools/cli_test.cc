@@ -395,7 +395,7 @@ TEST_F(CliTest, SolveThatCannotWriteLeavesNoResult) {
   const std::string args = " --workspace " + base_ +
                            " --warmup_max_iterations 10 --warmup_min_iterations 0 "
                            "--mutual_iterations 4 --log_every 100 --eval_every 0 "
-                           "--checkpoint_every 0 --output " +
+                           "--checkpoint_every 0 --surfel_spread off --output " +
                            dir + "/full";
   // 80 kB: the models (26 and 48 kB) and renders are written, the mesh (~100 kB) is not.
   auto r = testing::RunCommand("bash -c \"trap '' XFSZ; ulimit -f 80; " + kTools + "/mgsr_solve" +
@@ -742,9 +742,12 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
       << r.output;
   EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "warmup"), 3.0);
   EXPECT_DOUBLE_EQ(row_weight(metrics, "mask", "mutual"), 1.5);
-  // By default one disk per initial point, masks or not.
-  EXPECT_EQ(r.output.find("initial disks:"), std::string::npos) << r.output;
-  EXPECT_EQ(nlohmann::json::parse(metrics)["budget"]["spread_initial_surfels"], false) << metrics;
+  // With masks the initial points are spread to the 2DGS budget, and the layer prior is on.
+  EXPECT_NE(r.output.find("initial disks: spread over the points' surfaces"), std::string::npos)
+      << r.output;
+  EXPECT_EQ(nlohmann::json::parse(metrics)["budget"]["spread_initial_surfels"], true) << metrics;
+  EXPECT_DOUBLE_EQ(row_weight(metrics, "surfel_layer", "mutual"),
+                   SolverOptions::kSurfelLayerWeightWithSpread);
   // A mutual stage no longer than fast's trains the 2DGS branch throughout.
   EXPECT_EQ(r.output.find("geometry:"), std::string::npos) << r.output;
   EXPECT_EQ(nlohmann::json::parse(metrics)["iterations"]["mutual_2d"], 4) << metrics;
@@ -789,18 +792,20 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
                           "/out_mask_bad --lambda_mask_warmup -3" + few);
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_NE(r.output.find("--lambda_mask_warmup must be >= 0"), std::string::npos) << r.output;
-  // --surfel_spread: masked spreads where the views have masks (and says so), on and off decide
-  // with or without masks.
+  // --surfel_spread: masked (also when not given) spreads where the views have masks (and says
+  // so), on and off decide with or without masks.
   for (const auto& [workspace, value, spread] :
-       {std::make_tuple(base_, "masked", true), std::make_tuple(dir, "masked", false),
+       {std::make_tuple(base_, "", true), std::make_tuple(dir, "", false),
+        std::make_tuple(base_, "masked", true), std::make_tuple(dir, "masked", false),
         std::make_tuple(dir, "on", true), std::make_tuple(base_, "off", false)}) {
-    SCOPED_TRACE(workspace + " " + value);
+    SCOPED_TRACE(workspace + " '" + value + "'");
+    const std::string flag = *value ? std::string(" --surfel_spread ") + value : std::string();
     r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + workspace + " --output " + dir +
-                            "/out_spread --overwrite --surfel_spread " + value + few);
+                            "/out_spread --overwrite" + flag + few);
     ASSERT_EQ(r.exit_code, 0) << r.output;
     EXPECT_EQ(r.output.find("initial disks: spread over the points' surfaces to the 2DGS budget "
                             "(the views have masks or alpha)") != std::string::npos,
-              spread && std::string(value) == "masked")
+              spread && std::string(value) != "on")
         << r.output;
     ASSERT_TRUE(ReadFileToString(dir + "/out_spread/metrics.json", &metrics).ok());
     EXPECT_EQ(nlohmann::json::parse(metrics)["budget"]["spread_initial_surfels"], spread)
@@ -815,7 +820,7 @@ TEST_F(CliTest, BackgroundAutoFollowsTheBackdropOfUnmaskedPhotos) {
   // Given, its weight is kept: 0 with the spread, 2 without.
   for (const auto& [flags, weight] :
        {std::make_pair(std::string(" --surfel_spread on --lambda_surfel_layer 0"), -1.0),
-        std::make_pair(std::string(" --lambda_surfel_layer 2"), 2.0)}) {
+        std::make_pair(std::string(" --surfel_spread off --lambda_surfel_layer 2"), 2.0)}) {
     r = testing::RunCommand(kTools + "/mgsr_solve --workspace " + base_ + " --output " + dir +
                             "/out_layer --overwrite" + flags + few);
     ASSERT_EQ(r.exit_code, 0) << r.output;
@@ -1077,7 +1082,8 @@ TEST_F(CliTest, LossConfigChangesTheTableAndTheLogShowsEachRow) {
   ASSERT_TRUE(ReadFileToString(dir + "/out/metrics.json", &metrics).ok());
   const nlohmann::json m = nlohmann::json::parse(metrics);
   ASSERT_TRUE(m["losses"].is_array());
-  EXPECT_EQ(m["losses"].size(), 23u);  // the default 22 rows and the new one
+  // The default 22 rows, the surfel layer prior's two (the views have masks) and the new one.
+  EXPECT_EQ(m["losses"].size(), 25u);
 }
 
 }  // namespace
