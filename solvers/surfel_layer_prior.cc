@@ -161,7 +161,9 @@ void SurfelLayerPrior::Prepare(const std::vector<ParamBlock>& params) {
   inv_scales_.resize(n_);
   opacities_.resize(n_);
   scale_scratch_.resize(n_);
-  for (size_t i = 0; i < n_; ++i) {
+  const int64_t n = static_cast<int64_t>(n_);
+#pragma omp parallel for schedule(static)
+  for (int64_t i = 0; i < n; ++i) {
     for (int k = 0; k < 3; ++k) centres_[3 * i + k] = means[3 * i + k];
     QuaternionNormal(&quats[4 * i], &normals_[3 * i]);
     const double scale =
@@ -221,7 +223,13 @@ void SurfelLayerPrior::FindNeighbours() {
   // disk start at its key + (-1 + dy nx + dz nx ny) (the cell x - 1, y + dy, z + dz), which grows
   // with the key: each run's start is a cursor that only moves forward, found by one binary
   // search at the part's first disk.
+  //
+  // Runs are read own row first, then the four rows that share a face with it, then the four
+  // corner rows; once a disk has k candidates, a row whose nearest point lies farther than the
+  // k-th is skipped (nothing in it could enter the list, so the lists are those of reading every
+  // row). Most of the 27 cells lie beyond a disk's k nearest.
   const int64_t n = static_cast<int64_t>(n_);
+  static constexpr int kRunOrder[9] = {4, 1, 3, 5, 7, 0, 2, 6, 8};
 #pragma omp parallel
   {
     const int64_t threads = omp_get_num_threads(), thread = omp_get_thread_num();
@@ -248,31 +256,45 @@ void SurfelLayerPrior::FindNeighbours() {
       cursor_key = key;
       int* best = &neighbours_[static_cast<size_t>(i) * k];
       double* best_d2 = &neighbour_dist2_[static_cast<size_t>(i) * k];
-      run = 0;
-      for (int64_t dz = -1; dz <= 1; ++dz) {
-        for (int64_t dy = -1; dy <= 1; ++dy, ++run) {
-          const uint64_t last_key =
-              key + 1 + static_cast<uint64_t>(dy) * nx + static_cast<uint64_t>(dz) * nx * ny;
-          for (int64_t q = cursor[run]; q < n && sorted_keys_[q] <= last_key; ++q) {
-            const int j = cells_[q].second;
-            if (j == i) continue;
-            const double* cj = &sorted_centres_[3 * q];
-            const double d2 = (cj[0] - c[0]) * (cj[0] - c[0]) + (cj[1] - c[1]) * (cj[1] - c[1]) +
-                              (cj[2] - c[2]) * (cj[2] - c[2]);
-            // Ties go to the lower index, so the lists do not depend on the visiting order.
-            if (d2 > best_d2[k - 1] ||
-                (d2 == best_d2[k - 1] && j > best[k - 1] && best[k - 1] >= 0))
-              continue;
-            int slot = k - 1;
-            while (slot > 0 &&
-                   (best_d2[slot - 1] > d2 || (best_d2[slot - 1] == d2 && best[slot - 1] > j))) {
-              best_d2[slot] = best_d2[slot - 1];
-              best[slot] = best[slot - 1];
-              --slot;
-            }
-            best_d2[slot] = d2;
-            best[slot] = j;
+      // The distance from the centre to the rows below and above its own in y and in z (0 in a
+      // border cell, whose extent the clamp changed); shortened by a rounding margin, so a row
+      // is skipped only when it is surely too far.
+      double gap[2][2] = {{0, 0}, {0, 0}};
+      for (int a = 1; a < 3; ++a) {
+        const int64_t cc = cell_coordinates_[3 * static_cast<size_t>(i) + a];
+        if (cc <= -kCellLimit || cc >= kCellLimit) continue;
+        const double x = c[a], margin = 1e-9 * (std::abs(x) + cell);
+        gap[a - 1][0] = std::max(0.0, x - static_cast<double>(cc) * cell - margin);
+        gap[a - 1][1] = std::max(0.0, static_cast<double>(cc + 1) * cell - x - margin);
+      }
+      for (const int run_index : kRunOrder) {
+        const int64_t dz = run_index / 3 - 1, dy = run_index % 3 - 1;
+        if (best[k - 1] >= 0) {
+          const double gy = dy == 0 ? 0.0 : gap[0][dy > 0];
+          const double gz = dz == 0 ? 0.0 : gap[1][dz > 0];
+          if (gy * gy + gz * gz > best_d2[k - 1]) continue;
+        }
+        const uint64_t last_key =
+            key + 1 + static_cast<uint64_t>(dy) * nx + static_cast<uint64_t>(dz) * nx * ny;
+        for (int64_t q = cursor[run_index]; q < n && sorted_keys_[q] <= last_key; ++q) {
+          if (q == p) continue;
+          const double* cj = &sorted_centres_[3 * q];
+          const double d2 = (cj[0] - c[0]) * (cj[0] - c[0]) + (cj[1] - c[1]) * (cj[1] - c[1]) +
+                            (cj[2] - c[2]) * (cj[2] - c[2]);
+          // Most candidates end here, before their index is read.
+          if (d2 > best_d2[k - 1]) continue;
+          const int j = cells_[q].second;
+          // Ties go to the lower index, so the lists do not depend on the visiting order.
+          if (d2 == best_d2[k - 1] && j > best[k - 1] && best[k - 1] >= 0) continue;
+          int slot = k - 1;
+          while (slot > 0 &&
+                 (best_d2[slot - 1] > d2 || (best_d2[slot - 1] == d2 && best[slot - 1] > j))) {
+            best_d2[slot] = best_d2[slot - 1];
+            best[slot] = best[slot - 1];
+            --slot;
           }
+          best_d2[slot] = d2;
+          best[slot] = j;
         }
       }
     }
@@ -284,7 +306,9 @@ void SurfelLayerPrior::WeighPairs() {
   const double ramp = 1.0 / (1.0 - options_.min_cos);
   pair_weights_.assign(n_ * k, 0.0);
   pair_inv_scales_.assign(inv_scales_.begin(), inv_scales_.begin() + n_);
-  for (size_t i = 0; i < n_; ++i) {
+  const int64_t n = static_cast<int64_t>(n_);
+#pragma omp parallel for schedule(static)
+  for (int64_t i = 0; i < n; ++i) {
     const double* ni = &normals_[3 * i];
     const double inv_s = inv_scales_[i];
     for (int slot = 0; slot < k; ++slot) {
@@ -343,7 +367,9 @@ double SurfelLayerPrior::Evaluate(const std::vector<ParamBlock>& params, double 
     std::vector<float>& d_quats = *quats_block->data;
     const std::vector<float>& quats = *FindParamBlock(params, "quats")->data;
     const double f = scale / static_cast<double>(n_);
-    for (size_t i = 0; i < n_; ++i) {
+    const int64_t n = static_cast<int64_t>(n_);
+#pragma omp parallel for schedule(static)
+    for (int64_t i = 0; i < n; ++i) {
       for (int c = 0; c < 3; ++c)
         d_means[3 * i + c] += static_cast<float>(f * d_centres_[3 * i + c]);
       double dq[4];

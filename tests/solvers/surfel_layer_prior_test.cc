@@ -126,6 +126,62 @@ TEST(SurfelLayerPriorTest, NeighboursAreTheNearestDisksWithinTheSearchedCells) {
   EXPECT_GT(full_lists, static_cast<int>(n) / 2);  // the test saw real lists
 }
 
+// The search reads the 27 cells around a disk's, skipping rows that lie beyond the k-th
+// candidate found: its lists must be the k nearest of every disk in those 27 cells (ties to the
+// lower index), also where they reach past a cell. Sparse and dense parts, so they do.
+TEST(SurfelLayerPriorTest, NeighboursAreTheNearestOfTheTwentySevenCells) {
+  SurfelModel m;
+  m.max_sh_degree = 0;
+  const size_t n = 800;
+  m.Resize(n);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (size_t i = 0; i < n; ++i) {
+    // A quarter spread thinly over a larger box, the rest dense in a corner of it.
+    const double spread = i % 4 == 0 ? 2.0 : 0.5;
+    const double c[3] = {spread * u(rng), spread * u(rng), 0.5 * spread * u(rng)},
+                 nz[3] = {0, 0, 1};
+    SetDisk(&m, i, c, nz, 0.02 + 0.03 * u(rng), 0.8);
+  }
+  SurfelLayerOptions o;
+  SurfelLayerPrior prior(o);
+  prior.Evaluate(m.Blocks(), 1.0, nullptr);
+  std::vector<double> scales;
+  for (size_t i = 0; i < n; ++i)
+    scales.push_back(std::exp(static_cast<double>(m.log_scales[2 * i])));
+  std::nth_element(scales.begin(), scales.begin() + n / 2, scales.end());
+  const double inv_cell = 1.0 / (o.cell_scales * scales[n / 2]);
+  auto cell_of = [&](size_t i, int a) {
+    return static_cast<int64_t>(std::floor(static_cast<double>(m.means[3 * i + a]) * inv_cell));
+  };
+  int beyond_own_cell = 0;
+  for (size_t i = 0; i < n; ++i) {
+    std::vector<std::pair<double, int>> near;
+    for (size_t j = 0; j < n; ++j) {
+      bool adjacent = j != i;
+      for (int a = 0; a < 3 && adjacent; ++a)
+        adjacent = std::abs(cell_of(j, a) - cell_of(i, a)) <= 1;
+      if (!adjacent) continue;
+      double d2 = 0;
+      for (int a = 0; a < 3; ++a) {
+        const double d = static_cast<double>(m.means[3 * j + a]) - m.means[3 * i + a];
+        d2 += d * d;
+      }
+      near.push_back({d2, static_cast<int>(j)});
+    }
+    std::sort(near.begin(), near.end());
+    const int* found = prior.Neighbours(i);
+    for (int s = 0; s < o.neighbours; ++s) {
+      const int expected = s < static_cast<int>(near.size()) ? near[s].second : -1;
+      ASSERT_EQ(found[s], expected) << "disk " << i << " slot " << s;
+    }
+    if (near.size() >= static_cast<size_t>(o.neighbours) &&
+        near[o.neighbours - 1].first * inv_cell * inv_cell > 0.25)
+      ++beyond_own_cell;
+  }
+  EXPECT_GT(beyond_own_cell, 20);  // lists that reach half a cell and more: rows were read
+}
+
 TEST(SurfelLayerPriorTest, ZeroOnASphereAndPositiveOnALayer) {
   SurfelModel sphere = SphereDisks(800);
   SurfelLayerPrior prior{SurfelLayerOptions()};
