@@ -92,10 +92,10 @@ struct ReconstructionOptions {
   // 2DGS one is needed: off there, the harness's no_masks scene drops from NC 93.8 to 80.3.
   bool depth_tv_from_scene = false;
   // Where every training view has a mask or alpha: solver.spread_initial_surfels (mgsr_solve
-  // --surfel_spread masked). Without masks nothing holds a backdrop's small first disks in one
-  // layer and the mesh loses NC, so this is the only automatic choice offered; it is not the
-  // default, since on flat and reflective objects the spread costs CD (docs/geometry.md, "How
-  // large the first disks are"). Off: solver.spread_initial_surfels as given.
+  // --surfel_spread masked, its default). Without masks nothing holds a backdrop's small first
+  // disks in one layer and the mesh loses NC, so without them the disks stay one per point
+  // (docs/geometry.md, "How large the first disks are", "The spread by default"). Off:
+  // solver.spread_initial_surfels as given.
   bool spread_from_scene = false;
   // solver.lambda_surfel_layer = SolverOptions::kSurfelLayerWeightWithSpread where the initial
   // disks are spread (solver.spread_initial_surfels, as given or chosen above), else 0 (mgsr_solve

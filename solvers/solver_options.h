@@ -110,8 +110,8 @@ struct SolverOptions {
   // The surfel layer prior's weight (solvers/surfel_layer_prior.h), per view, both stages; 0: no
   // rows. It thins the layer of disks a slot's walls form, with the spread first disks; without
   // them, and on printed planes, it costs NC (docs/geometry.md, "A layer of disks"), so it is off
-  // by default. kSurfelLayerWeightWithSpread: the weight mgsr_solve gives it where the initial
-  // disks are spread (--lambda_surfel_layer -1).
+  // here. kSurfelLayerWeightWithSpread: the weight mgsr_solve gives it where the initial disks
+  // are spread (--lambda_surfel_layer -1), which with masks is its default.
   double lambda_surfel_layer = 0.0;
   static constexpr double kSurfelLayerWeightWithSpread = 10.0;
   int multiview_from_iteration = 7000;
@@ -194,9 +194,10 @@ struct SolverOptions {
   // Spread the initial points over their own surfaces until the 2DGS branch has max_surfels disks
   // (SpreadPointsOverTheirSurfaces; the 3DGS branch keeps one Gaussian per point). A disk starts
   // as wide as the gap to its neighbours, and from a sparse cloud that spans the grooves and slots
-  // of a detailed object, which the fit then keeps; smaller first disks recover them, but on flat
-  // and mirror-like faces they follow the photos' prints and reflections: docs/geometry.md, "How
-  // large the first disks are". Off by default for that reason.
+  // of a detailed object, which the fit then keeps; smaller first disks recover them. Without
+  // masks nothing holds a backdrop's small disks in one layer: docs/geometry.md, "How large the
+  // first disks are". Off here (the reference); mgsr_solve turns it on where every view has a
+  // mask or alpha (ReconstructionPipelineOptions::spread_from_scene).
   bool spread_initial_surfels = false;
   // Per-view exposure compensation (mgsr/loss/exposure_compensation.h): an affine colour model per
   // training view in front of every comparison with a photo, learned at its own rate with a weak
